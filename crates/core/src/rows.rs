@@ -1,0 +1,153 @@
+//! Sparse constraint rows: the values `g_i` and gradients `∇g_i` of the assembled constraints.
+
+/// A stable identity of one constraint across steps (a pair of bodies, a body and a wall, a
+/// bound index), used to warm-start multipliers from the previous step.
+pub type ConstraintKey = u64;
+
+/// The constraints assembled near a state, stored row by row (compressed sparse rows).
+///
+/// Row `i` holds `g_i` and the nonzeros of `∇g_i`; the feasible side is `g_i ≥ 0`. The buffers
+/// are reused from step to step: [`ConstraintRows::clear`] keeps their capacity.
+#[derive(Debug, Clone, Default)]
+pub struct ConstraintRows {
+    dim: usize,
+    keys: Vec<ConstraintKey>,
+    values: Vec<f64>,
+    row_start: Vec<usize>,
+    cols: Vec<usize>,
+    coefs: Vec<f64>,
+}
+
+impl ConstraintRows {
+    /// Empty rows for unknowns of dimension `dim`.
+    pub fn new(dim: usize) -> Self {
+        Self {
+            dim,
+            row_start: vec![0],
+            ..Self::default()
+        }
+    }
+
+    /// Forgets all rows, keeps the memory, and sets the dimension of the unknowns.
+    pub fn clear(&mut self, dim: usize) {
+        self.dim = dim;
+        self.keys.clear();
+        self.values.clear();
+        self.row_start.clear();
+        self.row_start.push(0);
+        self.cols.clear();
+        self.coefs.clear();
+    }
+
+    /// Appends one constraint `g ≥ 0` with gradient entries `(column, coefficient)`.
+    ///
+    /// # Panics
+    /// If a column is out of range (a bug in the caller, not bad input).
+    pub fn push(
+        &mut self,
+        key: ConstraintKey,
+        g: f64,
+        gradient: impl IntoIterator<Item = (usize, f64)>,
+    ) {
+        for (c, a) in gradient {
+            assert!(
+                c < self.dim,
+                "constraint column {c} out of range for dimension {}",
+                self.dim
+            );
+            self.cols.push(c);
+            self.coefs.push(a);
+        }
+        self.keys.push(key);
+        self.values.push(g);
+        self.row_start.push(self.cols.len());
+    }
+
+    /// Number of rows (assembled constraints).
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// True when no constraint is assembled.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// Dimension of the unknowns (number of columns).
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The constraint values `g_i`.
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// The constraint identities.
+    pub fn keys(&self) -> &[ConstraintKey] {
+        &self.keys
+    }
+
+    /// Row `i` of the Jacobian: its columns and coefficients.
+    pub fn row(&self, i: usize) -> (&[usize], &[f64]) {
+        let (a, b) = (self.row_start[i], self.row_start[i + 1]);
+        (&self.cols[a..b], &self.coefs[a..b])
+    }
+
+    /// Number of stored gradient entries.
+    pub fn nnz(&self) -> usize {
+        self.cols.len()
+    }
+
+    /// `out = J x`.
+    pub fn mul(&self, x: &[f64], out: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.dim);
+        for (i, o) in out.iter_mut().enumerate().take(self.len()) {
+            let (c, a) = self.row(i);
+            *o = c.iter().zip(a).map(|(&c, &a)| a * x[c]).sum();
+        }
+    }
+
+    /// `out += Jᵀ y`.
+    pub fn mul_transpose_add(&self, y: &[f64], out: &mut [f64]) {
+        debug_assert_eq!(out.len(), self.dim);
+        for (i, &yi) in y.iter().enumerate().take(self.len()) {
+            if yi == 0.0 {
+                continue;
+            }
+            let (c, a) = self.row(i);
+            for (&c, &a) in c.iter().zip(a) {
+                out[c] += a * yi;
+            }
+        }
+    }
+
+    /// `|∇g_i|²` for row `i`.
+    pub fn row_norm_sq(&self, i: usize) -> f64 {
+        self.row(i).1.iter().map(|a| a * a).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn products_match_dense() {
+        let mut r = ConstraintRows::new(3);
+        r.push(7, 1.0, [(0, 1.0), (2, -2.0)]);
+        r.push(8, -0.5, []);
+        r.push(9, 0.0, [(1, 3.0)]);
+        let x = [1.0, 2.0, 3.0];
+        let mut jx = [0.0; 3];
+        r.mul(&x, &mut jx);
+        assert_eq!(jx, [1.0 - 6.0, 0.0, 6.0]);
+        let mut jty = [0.0; 3];
+        r.mul_transpose_add(&[1.0, 5.0, 2.0], &mut jty);
+        assert_eq!(jty, [1.0, 6.0, -2.0]);
+        assert_eq!(r.keys(), &[7, 8, 9]);
+        assert_eq!(r.row_norm_sq(0), 5.0);
+        r.clear(3);
+        assert!(r.is_empty());
+    }
+}

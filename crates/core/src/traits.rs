@@ -1,0 +1,104 @@
+//! The traits a problem implements: field, constraint set, convex part, convex set.
+
+use crate::rows::ConstraintRows;
+
+/// The single-valued part of the right-hand side, `F(t, q)` (desired velocities for a crowd).
+pub trait Field {
+    /// Dimension of the state.
+    fn dim(&self) -> usize;
+    /// Writes `F(t, q)` into `out`.
+    fn eval(&self, t: f64, q: &[f64], out: &mut [f64]);
+}
+
+/// A [`Field`] from a closure, for small problems and tests.
+pub struct FnField<F> {
+    dim: usize,
+    f: F,
+}
+
+impl<F: Fn(f64, &[f64], &mut [f64])> FnField<F> {
+    /// Wraps `f(t, q, out)` acting on states of dimension `dim`.
+    pub fn new(dim: usize, f: F) -> Self {
+        Self { dim, f }
+    }
+}
+
+impl<F> std::fmt::Debug for FnField<F> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FnField")
+            .field("dim", &self.dim)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<F: Fn(f64, &[f64], &mut [f64])> Field for FnField<F> {
+    fn dim(&self) -> usize {
+        self.dim
+    }
+    fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
+        (self.f)(t, q, out)
+    }
+}
+
+/// A feasible set `Q(t) = ∩_i {q : g_i(t, q) ≥ 0}` with each `g_i` smooth and convex in `q`,
+/// reported near a state as sparse rows.
+pub trait ConstraintSet {
+    /// Dimension of the state.
+    fn dim(&self) -> usize;
+
+    /// Appends to `rows` (cleared by the caller) every constraint with `g_i(t, q) ≤ margin`,
+    /// with its gradient `∇_q g_i(t, q)` and a key that names it across steps.
+    fn assemble(&mut self, t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows);
+
+    /// After a step: how many constraints that were *not* assembled are violated at `(t, q)`
+    /// by more than `tol`. A nonzero answer means the step must be redone with a wider margin.
+    ///
+    /// The default assembles everything below `-tol` and compares keys; a set that can do it
+    /// faster (a crowd with a broad phase) overrides it.
+    fn crossed_outside(
+        &mut self,
+        t: f64,
+        q: &[f64],
+        assembled: &ConstraintRows,
+        tol: f64,
+    ) -> usize {
+        let mut violated = ConstraintRows::new(self.dim());
+        self.assemble(t, q, -tol, &mut violated);
+        let mut known: Vec<_> = assembled.keys().to_vec();
+        known.sort_unstable();
+        violated
+            .keys()
+            .iter()
+            .zip(violated.values())
+            .filter(|&(k, &g)| g < -tol && known.binary_search(k).is_err())
+            .count()
+    }
+}
+
+/// A convex, lower semicontinuous `ψ` whose subdifferential `G = ∂ψ` is the set-valued
+/// regular part of the right-hand side (dry friction, for example).
+pub trait ConvexPart {
+    /// Writes the element of minimal norm of `f − ∂ψ(x)` into `out` (the explicit selection
+    /// of the catching-up scheme, `seeds/002` Definition 4.3).
+    fn min_norm_selection(&self, x: &[f64], f: &[f64], out: &mut [f64]);
+    /// Writes `prox_{τψ}(x) = argmin_z τψ(z) + ½|z − x|²` into `out`.
+    fn prox(&self, tau: f64, x: &[f64], out: &mut [f64]);
+}
+
+/// A closed convex set with an exact Euclidean projection.
+pub trait ConvexSet {
+    /// Dimension of the ambient space.
+    fn dim(&self) -> usize;
+    /// Writes the projection of `y` onto the set into `out`.
+    fn project(&self, y: &[f64], out: &mut [f64]);
+    /// Euclidean distance from `y` to the set.
+    fn distance(&self, y: &[f64]) -> f64 {
+        let mut p = vec![0.0; y.len()];
+        self.project(y, &mut p);
+        y.iter()
+            .zip(&p)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt()
+    }
+}

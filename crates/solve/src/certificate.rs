@@ -1,0 +1,73 @@
+//! The certificate of a primal–dual pair: duality gap and violation, computed from the data.
+
+use crate::problem::ProjectionProblem;
+
+/// What a pair `(v, λ)` proves about the projection problem.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Certificate {
+    /// `P(v) − D(λ)` for the problem whose offsets are relaxed by the violation, so that `v`
+    /// is feasible for it: an upper bound on `½|v − w|² − ½|v* − w|²` there.
+    pub gap: f64,
+    /// `max_i (−s_i)⁺` with `s = b + J v`.
+    pub violation: f64,
+    /// Rows with `λ_i > 0`.
+    pub active: usize,
+}
+
+/// Certifies `(v, λ)`: `λ` is clamped to `λ ≥ 0` first (a dual point must be dual feasible).
+///
+/// With `b' = b + (−s)⁺` the pair is primal and dual feasible for offsets `b'`, and
+/// `gap = ½|v − w|² + ½|Jᵀλ|² + λᵀ(b' + J w)`. For `v = w + Jᵀλ` this is `Σ λ_i max(s_i, 0)`.
+/// `scratch` must have one entry per row and `scratch_n` one per unknown.
+pub fn certify(
+    problem: &ProjectionProblem<'_>,
+    v: &[f64],
+    lambda: &[f64],
+    scratch: &mut [f64],
+    scratch_n: &mut [f64],
+) -> Certificate {
+    let j = problem.jacobian;
+    // s = b + J v
+    j.mul(v, scratch);
+    let mut violation: f64 = 0.0;
+    let mut lam_bprime = 0.0;
+    let mut active = 0;
+    for i in 0..problem.rows() {
+        let s = problem.b[i] + scratch[i];
+        let relax = (-s).max(0.0);
+        violation = violation.max(relax);
+        let l = lambda[i].max(0.0);
+        if l > 0.0 {
+            active += 1;
+        }
+        lam_bprime += l * (problem.b[i] + relax);
+    }
+    // J w
+    j.mul(problem.w, scratch);
+    let lam_jw: f64 = (0..problem.rows())
+        .map(|i| lambda[i].max(0.0) * scratch[i])
+        .sum();
+    // Jᵀλ
+    scratch_n.iter_mut().for_each(|x| *x = 0.0);
+    let clamped = lambda.iter().map(|l| l.max(0.0));
+    for (i, l) in clamped.enumerate() {
+        if l > 0.0 {
+            let (c, a) = j.row(i);
+            for (&c, &a) in c.iter().zip(a) {
+                scratch_n[c] += a * l;
+            }
+        }
+    }
+    let jtl_sq: f64 = scratch_n.iter().map(|x| x * x).sum();
+    let dv_sq: f64 = v
+        .iter()
+        .zip(problem.w)
+        .map(|(v, w)| (v - w) * (v - w))
+        .sum();
+    let gap = 0.5 * dv_sq + 0.5 * jtl_sq + lam_bprime + lam_jw;
+    Certificate {
+        gap: gap.max(0.0),
+        violation,
+        active,
+    }
+}

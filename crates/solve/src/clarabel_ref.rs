@@ -1,0 +1,133 @@
+//! Clarabel's interior-point method on the same QP: the reference answer and the fallback.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use moreau_core::SolveStatus;
+
+use crate::certificate::certify;
+use crate::error::SolveError;
+use crate::problem::{
+    ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
+};
+
+/// Settings of [`ClarabelReference`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClarabelSettings {
+    /// Clarabel's absolute and relative gap and feasibility tolerances.
+    pub tolerance: f64,
+    /// Clarabel's iteration budget.
+    pub max_iterations: u32,
+}
+
+impl Default for ClarabelSettings {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-10,
+            max_iterations: 200,
+        }
+    }
+}
+
+/// Clarabel on `min ½vᵀv − wᵀv  s.t. (−J)v + s = b, s ≥ 0`; its dual `z` is `λ`.
+///
+/// Its answer is certified by [`certify`] like any other: Clarabel's own status decides
+/// nothing but infeasibility.
+#[derive(Debug, Clone, Default)]
+pub struct ClarabelReference {
+    settings: ClarabelSettings,
+}
+
+impl ClarabelReference {
+    /// A reference solver with `settings`.
+    pub fn new(settings: ClarabelSettings) -> Self {
+        Self { settings }
+    }
+}
+
+impl ProjectionSolver for ClarabelReference {
+    fn name(&self) -> &'static str {
+        "clarabel"
+    }
+
+    fn solve(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        sol: &mut ProjectionSolution,
+    ) -> Result<SolveReport, SolveError> {
+        p.validate()?;
+        let (m, n) = (p.rows(), p.dim());
+        sol.resize_for(p);
+        if m == 0 {
+            sol.v.copy_from_slice(p.w);
+            return Ok(SolveReport {
+                status: SolveStatus::Converged,
+                ..SolveReport::default()
+            });
+        }
+        // −J in compressed columns.
+        let mut count = vec![0usize; n + 1];
+        for i in 0..m {
+            for &c in p.jacobian.row(i).0 {
+                count[c + 1] += 1;
+            }
+        }
+        for c in 0..n {
+            count[c + 1] += count[c];
+        }
+        let nnz = count[n];
+        let mut next = count.clone();
+        let (mut rowval, mut nzval) = (vec![0usize; nnz], vec![0.0; nnz]);
+        for i in 0..m {
+            let (cols, coefs) = p.jacobian.row(i);
+            for (&c, &a) in cols.iter().zip(coefs) {
+                rowval[next[c]] = i;
+                nzval[next[c]] = -a;
+                next[c] += 1;
+            }
+        }
+        let a = CscMatrix::new(m, n, count, rowval, nzval);
+        let identity = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), vec![1.0; n]);
+        let q: Vec<f64> = p.w.iter().map(|w| -w).collect();
+        let tol = self.settings.tolerance;
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .max_iter(self.settings.max_iterations)
+            .tol_gap_abs(tol)
+            .tol_gap_rel(tol)
+            .tol_feas(tol)
+            .presolve_enable(false)
+            .build()
+            .map_err(|e| SolveError::Clarabel(e.to_string()))?;
+        let cones = [SupportedConeT::NonnegativeConeT(m)];
+        let mut solver = DefaultSolver::new(&identity, &q, &a, p.b, &cones, settings)
+            .map_err(|e| SolveError::Clarabel(e.to_string()))?;
+        solver.solve();
+        let out = &solver.solution;
+        sol.v.copy_from_slice(&out.x);
+        for (l, z) in sol.lambda.iter_mut().zip(&out.z) {
+            *l = z.max(0.0);
+        }
+        let (mut sm, mut sn) = (vec![0.0; m], vec![0.0; n]);
+        let cert = certify(p, &sol.v, &sol.lambda, &mut sm, &mut sn);
+        let status = match out.status {
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                SolveStatus::Infeasible
+            }
+            _ if cert.gap <= target.gap && cert.violation <= target.violation => {
+                SolveStatus::Converged
+            }
+            SolverStatus::MaxIterations | SolverStatus::MaxTime => SolveStatus::MaxIterations,
+            _ => SolveStatus::NumericalError,
+        };
+        Ok(SolveReport {
+            status,
+            gap: cert.gap,
+            violation: cert.violation,
+            iterations: out.iterations as usize,
+            active: cert.active,
+        })
+    }
+}

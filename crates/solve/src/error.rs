@@ -1,0 +1,39 @@
+//! The one error type of the solver crate. How a solve *ended* is a status, not an error.
+
+/// Errors that prevent a solve from starting or finishing.
+#[derive(Debug, thiserror::Error)]
+pub enum SolveError {
+    /// Inputs of inconsistent sizes.
+    #[error("{what}: expected length {expected}, got {got}")]
+    DimensionMismatch {
+        /// Which input.
+        what: &'static str,
+        /// The length the problem needs.
+        expected: usize,
+        /// The length given.
+        got: usize,
+    },
+    /// A non-finite value in the problem data.
+    #[error("non-finite {what} at index {index}: {value}")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+        /// Where.
+        index: usize,
+        /// The value.
+        value: f64,
+    },
+    /// A setting out of its domain.
+    #[error("invalid setting {field} = {value}: {reason}")]
+    InvalidSetting {
+        /// The setting's name.
+        field: &'static str,
+        /// Its value, printed.
+        value: String,
+        /// Why it is rejected.
+        reason: &'static str,
+    },
+    /// The reference interior-point solver refused the problem.
+    #[error("clarabel: {0}")]
+    Clarabel(String),
+}

@@ -1,0 +1,128 @@
+//! The problem format, the solution buffers, the report and the solver trait.
+
+use moreau_core::{ConstraintRows, SolveStatus};
+
+use crate::error::SolveError;
+
+/// `min ½|v − w|²  s.t.  s = b + J v ≥ 0`, with dual
+/// `min_{λ≥0} ½ λᵀ(J Jᵀ)λ + λᵀ(b + J w)` and `v = w + Jᵀλ`.
+#[derive(Debug, Clone, Copy)]
+pub struct ProjectionProblem<'a> {
+    /// The unconstrained velocity `w`.
+    pub w: &'a [f64],
+    /// The rows of `J` (their values `g` are not used: `b` carries them).
+    pub jacobian: &'a ConstraintRows,
+    /// The offsets `b` (for the scheme, `g_i / μ`).
+    pub b: &'a [f64],
+}
+
+impl ProjectionProblem<'_> {
+    /// Number of unknowns.
+    pub fn dim(&self) -> usize {
+        self.w.len()
+    }
+
+    /// Number of constraints.
+    pub fn rows(&self) -> usize {
+        self.b.len()
+    }
+
+    /// Checks sizes and finiteness; every solver calls it first.
+    pub fn validate(&self) -> Result<(), SolveError> {
+        if self.jacobian.dim() != self.w.len() {
+            return Err(SolveError::DimensionMismatch {
+                what: "jacobian columns",
+                expected: self.w.len(),
+                got: self.jacobian.dim(),
+            });
+        }
+        if self.jacobian.len() != self.b.len() {
+            return Err(SolveError::DimensionMismatch {
+                what: "b",
+                expected: self.jacobian.len(),
+                got: self.b.len(),
+            });
+        }
+        for (what, v) in [("w", self.w), ("b", self.b)] {
+            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                return Err(SolveError::NonFinite { what, index, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a solve must reach: a duality gap and a violation of `b + J v ≥ 0`, both in the
+/// units of the velocity-form problem.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    /// Largest accepted duality gap `½|v − w|² − ½|v* − w|²` bound.
+    pub gap: f64,
+    /// Largest accepted `max_i (−s_i)⁺`.
+    pub violation: f64,
+}
+
+/// Caller-owned buffers for the answer; reused across solves.
+#[derive(Debug, Clone, Default)]
+pub struct ProjectionSolution {
+    /// The velocity `v`.
+    pub v: Vec<f64>,
+    /// The multipliers `λ ≥ 0` (contact forces), one per row.
+    pub lambda: Vec<f64>,
+}
+
+impl ProjectionSolution {
+    /// Sizes the buffers for `problem`, keeping `lambda` when its length already matches
+    /// (a warm start set by the caller).
+    pub fn resize_for(&mut self, problem: &ProjectionProblem<'_>) {
+        self.v.resize(problem.dim(), 0.0);
+        if self.lambda.len() != problem.rows() {
+            self.lambda.clear();
+            self.lambda.resize(problem.rows(), 0.0);
+        }
+    }
+}
+
+/// How a solve ended and what it proved.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SolveReport {
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// The certified duality gap of the returned pair (velocity units squared).
+    pub gap: f64,
+    /// The largest violation `max_i (−s_i)⁺` of the returned `v`.
+    pub violation: f64,
+    /// Iterations spent.
+    pub iterations: usize,
+    /// Rows with `λ_i > 0`.
+    pub active: usize,
+}
+
+/// A solver of [`ProjectionProblem`]s.
+///
+/// `solution.lambda`, when it has one entry per row on entry, is the warm start.
+pub trait ProjectionSolver {
+    /// A short name for reports.
+    fn name(&self) -> &'static str;
+    /// Solves `problem` to `target`; the report's status says whether the target was met.
+    fn solve(
+        &mut self,
+        problem: &ProjectionProblem<'_>,
+        target: Target,
+        solution: &mut ProjectionSolution,
+    ) -> Result<SolveReport, SolveError>;
+}
+
+impl<S: ProjectionSolver + ?Sized> ProjectionSolver for Box<S> {
+    fn name(&self) -> &'static str {
+        (**self).name()
+    }
+    fn solve(
+        &mut self,
+        problem: &ProjectionProblem<'_>,
+        target: Target,
+        solution: &mut ProjectionSolution,
+    ) -> Result<SolveReport, SolveError> {
+        (**self).solve(problem, target, solution)
+    }
+}

@@ -1,0 +1,395 @@
+//! Projection solvers against the KKT conditions and against an exact active-set enumeration.
+
+use moreau_core::{ConstraintRows, SolveStatus};
+use moreau_solve::{
+    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, ProjectionProblem, ProjectionSolution,
+    ProjectionSolver, Target, certify,
+};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+struct Instance {
+    w: Vec<f64>,
+    rows: ConstraintRows,
+    b: Vec<f64>,
+}
+
+/// A feasible random problem: `b = s0 − J v0` with `s0 ≥ 0` (some exactly 0).
+/// `kind` adds degeneracy: 1 duplicated rows, 2 more rows than unknowns, 3 zero rows,
+/// 4 all of them.
+fn random_instance(rng: &mut ChaCha8Rng, kind: u32) -> Instance {
+    let n = rng.random_range(2..7);
+    let mut m = rng.random_range(1..=n);
+    if kind == 2 || kind == 4 {
+        m = n + rng.random_range(1..5);
+    }
+    let mut dense: Vec<Vec<f64>> = (0..m)
+        .map(|_| {
+            (0..n)
+                .map(|_| {
+                    if rng.random_bool(0.6) {
+                        rng.random_range(-2.0..2.0)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    if kind == 1 || kind == 4 {
+        let k = rng.random_range(0..m);
+        dense.push(dense[k].clone());
+        let scaled: Vec<f64> = dense[k].iter().map(|a| 2.5 * a).collect();
+        dense.push(scaled);
+    }
+    if kind == 3 || kind == 4 {
+        dense.push(vec![0.0; n]);
+    }
+    let m = dense.len();
+    let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let mut rows = ConstraintRows::new(n);
+    let mut b = Vec::with_capacity(m);
+    for (i, r) in dense.iter().enumerate() {
+        let s0 = if rng.random_bool(0.3) {
+            0.0
+        } else {
+            rng.random_range(0.0..1.0)
+        };
+        let jv: f64 = r.iter().zip(&v0).map(|(a, v)| a * v).sum();
+        b.push(s0 - jv);
+        rows.push(
+            i as u64,
+            0.0,
+            r.iter()
+                .enumerate()
+                .filter(|(_, a)| **a != 0.0)
+                .map(|(c, &a)| (c, a)),
+        );
+    }
+    // The unconstrained optimum is pushed away from v0 so that constraints bind.
+    let w = v0.iter().map(|v| v + rng.random_range(-3.0..3.0)).collect();
+    Instance { w, rows, b }
+}
+
+fn dense_row(rows: &ConstraintRows, i: usize) -> Vec<f64> {
+    let mut r = vec![0.0; rows.dim()];
+    let (c, a) = rows.row(i);
+    for (&c, &a) in c.iter().zip(a) {
+        r[c] = a;
+    }
+    r
+}
+
+/// Solves the square system `a x = y` by Gaussian elimination; `None` when singular.
+fn solve_dense(mut a: Vec<Vec<f64>>, mut y: Vec<f64>) -> Option<Vec<f64>> {
+    let k = y.len();
+    for col in 0..k {
+        let piv = (col..k).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
+        if a[piv][col].abs() < 1e-10 {
+            return None;
+        }
+        a.swap(col, piv);
+        y.swap(col, piv);
+        for r in col + 1..k {
+            let f = a[r][col] / a[col][col];
+            for c in col..k {
+                a[r][c] -= f * a[col][c];
+            }
+            y[r] -= f * y[col];
+        }
+    }
+    let mut x = vec![0.0; k];
+    for r in (0..k).rev() {
+        let s: f64 = (r + 1..k).map(|c| a[r][c] * x[c]).sum();
+        x[r] = (y[r] - s) / a[r][r];
+    }
+    Some(x)
+}
+
+/// The exact projection by enumerating active sets: returns `(v*, λ*)` of least objective
+/// among all KKT points with a nonsingular active Gram matrix.
+fn exact_projection(inst: &Instance) -> (Vec<f64>, Vec<f64>) {
+    let (n, m) = (inst.w.len(), inst.b.len());
+    let j: Vec<Vec<f64>> = (0..m).map(|i| dense_row(&inst.rows, i)).collect();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
+    for mask in 0u32..(1 << m) {
+        let act: Vec<usize> = (0..m).filter(|i| mask >> i & 1 == 1).collect();
+        if act.len() > n {
+            continue;
+        }
+        let gram: Vec<Vec<f64>> = act
+            .iter()
+            .map(|&a| act.iter().map(|&c| dot(&j[a], &j[c])).collect())
+            .collect();
+        let rhs: Vec<f64> = act
+            .iter()
+            .map(|&a| -inst.b[a] - dot(&j[a], &inst.w))
+            .collect();
+        let Some(la) = solve_dense(gram, rhs) else {
+            continue;
+        };
+        if la.iter().any(|&l| l < -1e-9) {
+            continue;
+        }
+        let mut v = inst.w.clone();
+        for (k, &a) in act.iter().enumerate() {
+            for c in 0..n {
+                v[c] += j[a][c] * la[k];
+            }
+        }
+        if (0..m).any(|i| inst.b[i] + dot(&j[i], &v) < -1e-9) {
+            continue;
+        }
+        let obj = 0.5
+            * v.iter()
+                .zip(&inst.w)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>();
+        if best.as_ref().is_none_or(|(o, _, _)| obj < *o) {
+            let mut lam = vec![0.0; m];
+            for (k, &a) in act.iter().enumerate() {
+                lam[a] = la[k].max(0.0);
+            }
+            best = Some((obj, v, lam));
+        }
+    }
+    let (_, v, l) = best.expect("a feasible strictly convex QP has a KKT point");
+    (v, l)
+}
+
+/// Checks `(v, λ)` against the KKT conditions computed here from the data, and against the
+/// exact projection: the certificate must bound the true suboptimality.
+fn check_kkt(inst: &Instance, name: &str, sol: &ProjectionSolution, gap: f64, violation: f64) {
+    let p = ProjectionProblem {
+        w: &inst.w,
+        jacobian: &inst.rows,
+        b: &inst.b,
+    };
+    let (m, n) = (p.rows(), p.dim());
+    let tol = 1e-6;
+    // Dual feasibility.
+    assert!(
+        sol.lambda.iter().all(|&l| l >= 0.0),
+        "{name}: negative multiplier {:?}",
+        sol.lambda
+    );
+    // Primal feasibility and complementarity, from s computed here.
+    let s: Vec<f64> = (0..m)
+        .map(|i| {
+            inst.b[i]
+                + dense_row(&inst.rows, i)
+                    .iter()
+                    .zip(&sol.v)
+                    .map(|(a, v)| a * v)
+                    .sum::<f64>()
+        })
+        .collect();
+    let viol = s.iter().fold(0.0_f64, |a, &s| a.max(-s));
+    assert!(viol <= tol, "{name}: violation {viol}");
+    assert!(
+        (viol - violation).abs() <= 1e-12,
+        "{name}: reported violation {violation} but it is {viol}"
+    );
+    for i in 0..m {
+        assert!(
+            (sol.lambda[i] * s[i]).abs() <= tol,
+            "{name}: complementarity λ{i}·s{i} = {}",
+            sol.lambda[i] * s[i]
+        );
+    }
+    // Stationarity v = w + Jᵀλ.
+    let mut jtl = vec![0.0; n];
+    inst.rows.mul_transpose_add(&sol.lambda, &mut jtl);
+    for c in 0..n {
+        assert!(
+            (sol.v[c] - inst.w[c] - jtl[c]).abs() <= 1e-4,
+            "{name}: stationarity at {c}"
+        );
+    }
+    // Honest certificate: P(v) − P(v*) ≤ gap + |λ*|₁ · violation.
+    let (vstar, lstar) = exact_projection(inst);
+    let obj = |v: &[f64]| {
+        0.5 * v
+            .iter()
+            .zip(&inst.w)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+    };
+    let excess = obj(&sol.v) - obj(&vstar);
+    let l1: f64 = lstar.iter().sum();
+    assert!(
+        excess <= gap + l1 * violation + 1e-12,
+        "{name}: certificate {gap} does not bound the excess {excess}"
+    );
+    // And strong convexity: ½|v − v*|² ≤ P(v) − P(v*) + |λ*|₁·violation.
+    let dist_sq: f64 = sol
+        .v
+        .iter()
+        .zip(&vstar)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum();
+    assert!(
+        0.5 * dist_sq <= gap + l1 * violation + 1e-10,
+        "{name}: |v − v*|² = {dist_sq} vs gap {gap}"
+    );
+}
+
+fn run_all(kind: u32, cases: usize, seed: u64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let target = Target {
+        gap: 1e-10,
+        violation: 1e-9,
+    };
+    let mut apgd = Apgd::new(ApgdSettings::default()).unwrap();
+    let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
+    for case in 0..cases {
+        let inst = random_instance(&mut rng, kind);
+        let p = ProjectionProblem {
+            w: &inst.w,
+            jacobian: &inst.rows,
+            b: &inst.b,
+        };
+        for solver in [&mut apgd as &mut dyn ProjectionSolver, &mut clarabel] {
+            let mut sol = ProjectionSolution::default();
+            let rep = solver
+                .solve(
+                    &p,
+                    Target {
+                        gap: 1e-8,
+                        ..target
+                    },
+                    &mut sol,
+                )
+                .unwrap();
+            let name = format!("{} kind {kind} case {case}", solver.name());
+            assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+            check_kkt(&inst, &name, &sol, rep.gap, rep.violation);
+            // The report is the certificate of what was returned.
+            let (mut sm, mut sn) = (vec![0.0; p.rows()], vec![0.0; p.dim()]);
+            let c = certify(&p, &sol.v, &sol.lambda, &mut sm, &mut sn);
+            assert!(
+                (c.gap - rep.gap).abs() <= 1e-9 + 1e-6 * rep.gap,
+                "{name}: certify {} vs report {}",
+                c.gap,
+                rep.gap
+            );
+        }
+    }
+}
+
+#[test]
+fn random_feasible_problems_meet_kkt() {
+    run_all(0, 60, 1);
+}
+
+#[test]
+fn duplicated_constraints_meet_kkt() {
+    run_all(1, 40, 2);
+}
+
+#[test]
+fn more_constraints_than_unknowns_meet_kkt() {
+    run_all(2, 40, 3);
+}
+
+#[test]
+fn zero_rows_meet_kkt() {
+    run_all(3, 40, 4);
+}
+
+#[test]
+fn all_degeneracies_together_meet_kkt() {
+    run_all(4, 40, 5);
+}
+
+#[test]
+fn a_violated_zero_row_is_reported_infeasible_by_both() {
+    let mut rows = ConstraintRows::new(2);
+    rows.push(0, 0.0, [(0, 1.0)]);
+    rows.push(1, 0.0, []);
+    let p = ProjectionProblem {
+        w: &[1.0, 1.0],
+        jacobian: &rows,
+        b: &[0.0, -1.0],
+    };
+    let t = Target {
+        gap: 1e-10,
+        violation: 1e-9,
+    };
+    let mut sol = ProjectionSolution::default();
+    assert_eq!(
+        Apgd::default().solve(&p, t, &mut sol).unwrap().status,
+        SolveStatus::Infeasible
+    );
+    let mut sol = ProjectionSolution::default();
+    assert_eq!(
+        ClarabelReference::default()
+            .solve(&p, t, &mut sol)
+            .unwrap()
+            .status,
+        SolveStatus::Infeasible
+    );
+}
+
+#[test]
+fn warm_start_from_the_answer_needs_no_iteration_and_cold_start_does() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let t = Target {
+        gap: 1e-9,
+        violation: 1e-9,
+    };
+    let mut solver = Apgd::new(ApgdSettings::default()).unwrap();
+    // The first instance whose unconstrained velocity is infeasible.
+    let (inst, mut sol, cold) = loop {
+        let inst = random_instance(&mut rng, 2);
+        let p = ProjectionProblem {
+            w: &inst.w,
+            jacobian: &inst.rows,
+            b: &inst.b,
+        };
+        let mut sol = ProjectionSolution::default();
+        let cold = solver.solve(&p, t, &mut sol).unwrap();
+        if cold.active > 0 {
+            break (inst, sol, cold);
+        }
+    };
+    let p = ProjectionProblem {
+        w: &inst.w,
+        jacobian: &inst.rows,
+        b: &inst.b,
+    };
+    let warm = solver.solve(&p, t, &mut sol).unwrap();
+    assert!(
+        cold.iterations > 0 && warm.iterations == 0,
+        "cold {cold:?} warm {warm:?}"
+    );
+}
+
+#[test]
+fn settings_are_validated() {
+    assert!(ApgdSettings::builder().max_iterations(0).build().is_err());
+    let e = ApgdSettings::builder()
+        .power_iterations(0)
+        .build()
+        .unwrap_err();
+    assert!(e.to_string().contains("power_iterations"), "{e}");
+    let mut rows = ConstraintRows::new(1);
+    rows.push(0, 0.0, [(0, 1.0)]);
+    let p = ProjectionProblem {
+        w: &[f64::NAN],
+        jacobian: &rows,
+        b: &[0.0],
+    };
+    let e = Apgd::default()
+        .solve(
+            &p,
+            Target {
+                gap: 1.0,
+                violation: 1.0,
+            },
+            &mut ProjectionSolution::default(),
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("non-finite w at index 0"), "{e}");
+}
