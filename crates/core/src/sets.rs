@@ -136,14 +136,14 @@ pub struct HalfSpaces {
 impl HalfSpaces {
     /// The intersection of `faces`, all of the same dimension.
     pub fn new(faces: Vec<HalfSpace>) -> Result<Self, CoreError> {
-        if let Some(first) = faces.first() {
-            if let Some(f) = faces.iter().find(|f| f.a.len() != first.a.len()) {
-                return Err(CoreError::DimensionMismatch {
-                    what: "half-space normal",
-                    expected: first.a.len(),
-                    got: f.a.len(),
-                });
-            }
+        if let Some(first) = faces.first()
+            && let Some(f) = faces.iter().find(|f| f.a.len() != first.a.len())
+        {
+            return Err(CoreError::DimensionMismatch {
+                what: "half-space normal",
+                expected: first.a.len(),
+                got: f.a.len(),
+            });
         }
         Ok(Self { faces })
     }

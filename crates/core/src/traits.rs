@@ -50,6 +50,15 @@ pub trait ConstraintSet {
     /// with its gradient `∇_q g_i(t, q)` and a key that names it across steps.
     fn assemble(&mut self, t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows);
 
+    /// The margin `ρ` for a step of size `mu` from `q` with predicted velocity `w`: every
+    /// constraint that can become active within the step must have `g_i ≤ ρ`. The default
+    /// assembles everything; a set with many far-away constraints (a crowd) derives `ρ` from
+    /// the speeds, and the check after the step ([`ConstraintSet::crossed_outside`]) catches
+    /// what the estimate missed.
+    fn margin(&self, _q: &[f64], _w: &[f64], _mu: f64) -> f64 {
+        f64::INFINITY
+    }
+
     /// After a step: how many constraints that were *not* assembled are violated at `(t, q)`
     /// by more than `tol`. A nonzero answer means the step must be redone with a wider margin.
     ///

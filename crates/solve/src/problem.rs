@@ -101,7 +101,7 @@ pub struct SolveReport {
 /// A solver of [`ProjectionProblem`]s.
 ///
 /// `solution.lambda`, when it has one entry per row on entry, is the warm start.
-pub trait ProjectionSolver {
+pub trait ProjectionSolver: std::fmt::Debug + Send {
     /// A short name for reports.
     fn name(&self) -> &'static str;
     /// Solves `problem` to `target`; the report's status says whether the target was met.

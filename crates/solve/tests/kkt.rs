@@ -8,6 +8,9 @@ use moreau_solve::{
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+#[path = "../../../tests/support/mod.rs"]
+mod support;
+
 struct Instance {
     w: Vec<f64>,
     rows: ConstraintRows,
@@ -80,82 +83,12 @@ fn dense_row(rows: &ConstraintRows, i: usize) -> Vec<f64> {
     r
 }
 
-/// Solves the square system `a x = y` by Gaussian elimination; `None` when singular.
-fn solve_dense(mut a: Vec<Vec<f64>>, mut y: Vec<f64>) -> Option<Vec<f64>> {
-    let k = y.len();
-    for col in 0..k {
-        let piv = (col..k).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[piv][col].abs() < 1e-10 {
-            return None;
-        }
-        a.swap(col, piv);
-        y.swap(col, piv);
-        for r in col + 1..k {
-            let f = a[r][col] / a[col][col];
-            for c in col..k {
-                a[r][c] -= f * a[col][c];
-            }
-            y[r] -= f * y[col];
-        }
-    }
-    let mut x = vec![0.0; k];
-    for r in (0..k).rev() {
-        let s: f64 = (r + 1..k).map(|c| a[r][c] * x[c]).sum();
-        x[r] = (y[r] - s) / a[r][r];
-    }
-    Some(x)
-}
-
-/// The exact projection by enumerating active sets: returns `(v*, λ*)` of least objective
-/// among all KKT points with a nonsingular active Gram matrix.
+/// The exact projection, by the independent enumerator of the workspace's test support.
 fn exact_projection(inst: &Instance) -> (Vec<f64>, Vec<f64>) {
-    let (n, m) = (inst.w.len(), inst.b.len());
-    let j: Vec<Vec<f64>> = (0..m).map(|i| dense_row(&inst.rows, i)).collect();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
-    for mask in 0u32..(1 << m) {
-        let act: Vec<usize> = (0..m).filter(|i| mask >> i & 1 == 1).collect();
-        if act.len() > n {
-            continue;
-        }
-        let gram: Vec<Vec<f64>> = act
-            .iter()
-            .map(|&a| act.iter().map(|&c| dot(&j[a], &j[c])).collect())
-            .collect();
-        let rhs: Vec<f64> = act
-            .iter()
-            .map(|&a| -inst.b[a] - dot(&j[a], &inst.w))
-            .collect();
-        let Some(la) = solve_dense(gram, rhs) else {
-            continue;
-        };
-        if la.iter().any(|&l| l < -1e-9) {
-            continue;
-        }
-        let mut v = inst.w.clone();
-        for (k, &a) in act.iter().enumerate() {
-            for c in 0..n {
-                v[c] += j[a][c] * la[k];
-            }
-        }
-        if (0..m).any(|i| inst.b[i] + dot(&j[i], &v) < -1e-9) {
-            continue;
-        }
-        let obj = 0.5
-            * v.iter()
-                .zip(&inst.w)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>();
-        if best.as_ref().is_none_or(|(o, _, _)| obj < *o) {
-            let mut lam = vec![0.0; m];
-            for (k, &a) in act.iter().enumerate() {
-                lam[a] = la[k].max(0.0);
-            }
-            best = Some((obj, v, lam));
-        }
-    }
-    let (_, v, l) = best.expect("a feasible strictly convex QP has a KKT point");
-    (v, l)
+    let j: Vec<Vec<f64>> = (0..inst.b.len())
+        .map(|i| dense_row(&inst.rows, i))
+        .collect();
+    support::exact_qp(&inst.w, &j, &inst.b)
 }
 
 /// Checks `(v, λ)` against the KKT conditions computed here from the data, and against the

@@ -1,0 +1,283 @@
+//! The correction step: an ε-projection of the prediction onto the feasible set.
+
+use std::time::Instant;
+
+use moreau_core::{
+    ConstraintKey, ConstraintRows, ConstraintSet, ConvexSet, SolveStatus, StepReport,
+};
+use moreau_solve::{ProjectionProblem, ProjectionSolution, ProjectionSolver, Target};
+
+use crate::error::IntegrateError;
+
+/// Computes `q_next ∈ proj^ε(q + μ w)` onto the feasible set at `t_next` and records in the
+/// report what it proved (ε, violation) and what it cost.
+pub trait Correction {
+    /// Computes `q_next`. `report.step`, `report.t` and `report.mu` are already set.
+    fn correct(
+        &mut self,
+        q: &[f64],
+        w: &[f64],
+        eps_target: f64,
+        q_next: &mut [f64],
+        report: &mut StepReport,
+    ) -> Result<(), IntegrateError>;
+}
+
+/// No constraint: `q_next = q + μ w`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Unconstrained;
+
+impl Correction for Unconstrained {
+    fn correct(
+        &mut self,
+        q: &[f64],
+        w: &[f64],
+        _eps: f64,
+        q_next: &mut [f64],
+        report: &mut StepReport,
+    ) -> Result<(), IntegrateError> {
+        for i in 0..q.len() {
+            q_next[i] = q[i] + report.mu * w[i];
+        }
+        report.solver = "none";
+        Ok(())
+    }
+}
+
+/// A fixed convex set with an exact projection (ε = 0).
+#[derive(Debug, Clone)]
+pub struct ExactProjection<S> {
+    set: S,
+    y: Vec<f64>,
+}
+
+impl<S: ConvexSet> ExactProjection<S> {
+    /// Projects onto `set`.
+    pub fn new(set: S) -> Self {
+        Self { set, y: Vec::new() }
+    }
+}
+
+impl<S: ConvexSet> Correction for ExactProjection<S> {
+    fn correct(
+        &mut self,
+        q: &[f64],
+        w: &[f64],
+        _eps: f64,
+        q_next: &mut [f64],
+        report: &mut StepReport,
+    ) -> Result<(), IntegrateError> {
+        let start = Instant::now();
+        self.y.clear();
+        self.y
+            .extend(q.iter().zip(w).map(|(q, w)| q + report.mu * w));
+        self.set.project(&self.y, q_next);
+        report.solver = "exact";
+        report.timings.solve = start.elapsed().as_secs_f64();
+        Ok(())
+    }
+}
+
+/// Settings of [`LinearizedProjection`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearizedSettings {
+    /// Largest accepted violation of a linearized constraint, as a length (units of `g`).
+    pub max_violation: f64,
+    /// How often a step may be redone with a doubled margin when a constraint outside the
+    /// assembled set was crossed.
+    pub max_redo: usize,
+}
+
+impl Default for LinearizedSettings {
+    fn default() -> Self {
+        Self {
+            max_violation: 1e-9,
+            max_redo: 8,
+        }
+    }
+}
+
+/// The projection onto the linearized inner set
+/// `Q~ = {z : g_i(t_{k+1}, q_k) + ∇g_i·(z − q_k) ≥ 0, g_i ≤ ρ}` solved in velocity form.
+///
+/// Multipliers are warm-started from the previous step by constraint key. A solve that
+/// misses its target goes to the fallback solver, if any, then fails the step.
+#[derive(Debug)]
+pub struct LinearizedProjection<C, S> {
+    constraints: C,
+    solver: S,
+    fallback: Option<Box<dyn ProjectionSolver>>,
+    settings: LinearizedSettings,
+    rows: ConstraintRows,
+    b: Vec<f64>,
+    solution: ProjectionSolution,
+    previous: Vec<(ConstraintKey, f64)>,
+}
+
+impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
+    /// Projects onto the linearization of `constraints` with `solver`.
+    pub fn new(
+        constraints: C,
+        solver: S,
+        settings: LinearizedSettings,
+    ) -> Result<Self, IntegrateError> {
+        if !(settings.max_violation > 0.0) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "max_violation",
+                value: settings.max_violation.to_string(),
+                reason: "must be > 0",
+            });
+        }
+        let dim = constraints.dim();
+        Ok(Self {
+            constraints,
+            solver,
+            fallback: None,
+            settings,
+            rows: ConstraintRows::new(dim),
+            b: Vec::new(),
+            solution: ProjectionSolution::default(),
+            previous: Vec::new(),
+        })
+    }
+
+    /// Uses `fallback` when the main solver misses its target.
+    pub fn with_fallback(mut self, fallback: Box<dyn ProjectionSolver>) -> Self {
+        self.fallback = Some(fallback);
+        self
+    }
+
+    /// The constraint set.
+    pub fn constraints(&self) -> &C {
+        &self.constraints
+    }
+
+    /// The constraint set, mutably (a scene change between steps).
+    pub fn constraints_mut(&mut self) -> &mut C {
+        &mut self.constraints
+    }
+
+    /// The rows assembled in the last step.
+    pub fn rows(&self) -> &ConstraintRows {
+        &self.rows
+    }
+
+    /// The multipliers of the last step, one per assembled row.
+    pub fn multipliers(&self) -> &[f64] {
+        &self.solution.lambda
+    }
+
+    fn warm_start(&mut self) {
+        let lam = &mut self.solution.lambda;
+        lam.clear();
+        lam.extend(self.rows.keys().iter().map(|k| {
+            match self.previous.binary_search_by_key(k, |e| e.0) {
+                Ok(j) => self.previous[j].1,
+                Err(_) => 0.0,
+            }
+        }));
+    }
+
+    fn remember(&mut self) {
+        self.previous.clear();
+        self.previous.extend(
+            self.rows
+                .keys()
+                .iter()
+                .copied()
+                .zip(self.solution.lambda.iter().copied()),
+        );
+        self.previous.sort_unstable_by_key(|e| e.0);
+    }
+}
+
+impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<C, S> {
+    fn correct(
+        &mut self,
+        q: &[f64],
+        w: &[f64],
+        eps_target: f64,
+        q_next: &mut [f64],
+        report: &mut StepReport,
+    ) -> Result<(), IntegrateError> {
+        let (mu, t_next) = (report.mu, report.t);
+        // ε = 2μ²·gap and violation (length) = μ·max(−s)⁺.
+        let target = Target {
+            gap: eps_target / (2.0 * mu * mu),
+            violation: self.settings.max_violation / mu,
+        };
+        let mut margin = self.constraints.margin(q, w, mu);
+        loop {
+            let start = Instant::now();
+            self.rows.clear(q.len());
+            self.constraints.assemble(t_next, q, margin, &mut self.rows);
+            self.b.clear();
+            self.b.extend(self.rows.values().iter().map(|g| g / mu));
+            self.warm_start();
+            let solve_start = Instant::now();
+            report.timings.assemble += (solve_start - start).as_secs_f64();
+
+            let problem = ProjectionProblem {
+                w,
+                jacobian: &self.rows,
+                b: &self.b,
+            };
+            let mut rep = self.solver.solve(&problem, target, &mut self.solution)?;
+            report.solver = self.solver.name();
+            if !rep.status.is_converged()
+                && let Some(fb) = self.fallback.as_mut()
+            {
+                report.iterations += rep.iterations;
+                rep = fb.solve(&problem, target, &mut self.solution)?;
+                report.solver = fb.name();
+            }
+            report.timings.solve += solve_start.elapsed().as_secs_f64();
+            report.iterations += rep.iterations;
+            report.status = rep.status;
+            report.eps = 2.0 * mu * mu * rep.gap;
+            report.violation = mu * rep.violation;
+            report.assembled = self.rows.len();
+            report.active = rep.active;
+            if rep.status != SolveStatus::Converged {
+                return Err(IntegrateError::NotCertified {
+                    step: report.step,
+                    t: t_next,
+                    status: rep.status,
+                    eps: report.eps,
+                    eps_target,
+                    violation: report.violation,
+                    max_violation: self.settings.max_violation,
+                });
+            }
+            for i in 0..q.len() {
+                q_next[i] = q[i] + mu * self.solution.v[i];
+            }
+            let verify_start = Instant::now();
+            let crossed = if margin.is_finite() {
+                self.constraints.crossed_outside(
+                    t_next,
+                    q_next,
+                    &self.rows,
+                    self.settings.max_violation,
+                )
+            } else {
+                0
+            };
+            report.timings.verify += verify_start.elapsed().as_secs_f64();
+            if crossed == 0 {
+                self.remember();
+                return Ok(());
+            }
+            if report.redone == self.settings.max_redo {
+                return Err(IntegrateError::CrossedOutside {
+                    step: report.step,
+                    t: t_next,
+                    crossed,
+                    redone: report.redone,
+                });
+            }
+            report.redone += 1;
+            margin *= 2.0;
+        }
+    }
+}

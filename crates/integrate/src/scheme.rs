@@ -1,0 +1,267 @@
+//! The catching-up scheme: prediction, correction, the ε policy and the step sequence.
+
+use std::time::Instant;
+
+use moreau_core::{ConvexPart, Field, StepReport};
+
+use crate::correction::Correction;
+use crate::error::IntegrateError;
+
+/// How the set-valued part `∂ψ` enters the prediction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Selection {
+    /// `w = ` the element of minimal norm of `F(t, q) − ∂ψ(q)` (`seeds/002` Definition 4.3).
+    #[default]
+    Explicit,
+    /// `y = prox_{μψ}(q + μ F(t, q))`: implicit in `ψ`, explicit in `F`.
+    SemiImplicit,
+}
+
+/// The projection accuracy per step, `ε_k = κ μ_k^p` with `p > 2` so that `ε_k/μ_k² → 0`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpsPolicy {
+    /// The factor `κ > 0`.
+    pub kappa: f64,
+    /// The power `p > 2`.
+    pub power: f64,
+}
+
+impl Default for EpsPolicy {
+    fn default() -> Self {
+        Self {
+            kappa: 1.0,
+            power: 3.0,
+        }
+    }
+}
+
+impl EpsPolicy {
+    /// `ε_k = κ μ^p`, checked.
+    pub fn new(kappa: f64, power: f64) -> Result<Self, IntegrateError> {
+        if !(kappa > 0.0 && kappa.is_finite()) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "eps kappa",
+                value: kappa.to_string(),
+                reason: "must be finite and > 0",
+            });
+        }
+        if !(power > 2.0 && power.is_finite()) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "eps power",
+                value: power.to_string(),
+                reason: "must be > 2 so that ε/μ² → 0",
+            });
+        }
+        Ok(Self { kappa, power })
+    }
+
+    /// `ε` for a step `mu`.
+    pub fn eps(&self, mu: f64) -> f64 {
+        self.kappa * mu.powf(self.power)
+    }
+}
+
+/// The steps `μ_k` of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StepSequence {
+    /// Equal steps `h` from `t0` to `t_end` (the last one shortened if `h` does not divide).
+    Fixed {
+        /// The step.
+        h: f64,
+        /// The end time.
+        t_end: f64,
+    },
+    /// The given steps, in order.
+    Given(Vec<f64>),
+}
+
+impl StepSequence {
+    /// The steps starting from `t0`, checked: positive and finite.
+    pub fn steps(&self, t0: f64) -> Result<Vec<f64>, IntegrateError> {
+        let steps = match self {
+            StepSequence::Fixed { h, t_end } => {
+                if !(*h > 0.0 && h.is_finite()) {
+                    return Err(IntegrateError::InvalidSetting {
+                        field: "step",
+                        value: h.to_string(),
+                        reason: "must be finite and > 0",
+                    });
+                }
+                let span = t_end - t0;
+                if !(span >= 0.0 && span.is_finite()) {
+                    return Err(IntegrateError::InvalidSetting {
+                        field: "t_end",
+                        value: t_end.to_string(),
+                        reason: "must be finite and ≥ t0",
+                    });
+                }
+                let n = (span / h - 1e-9).ceil().max(0.0) as usize;
+                (0..n)
+                    .map(|k| {
+                        if k + 1 < n {
+                            *h
+                        } else {
+                            span - h * (n - 1) as f64
+                        }
+                    })
+                    .collect()
+            }
+            StepSequence::Given(v) => v.clone(),
+        };
+        if let Some(m) = steps.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "step",
+                value: m.to_string(),
+                reason: "must be finite and > 0",
+            });
+        }
+        Ok(steps)
+    }
+}
+
+/// The catching-up scheme for `q' ∈ F(t, q) − ∂ψ(q) − N(Q(t), q)`.
+pub struct Scheme<F, C> {
+    field: F,
+    convex: Option<Box<dyn ConvexPart>>,
+    selection: Selection,
+    correction: C,
+    eps: EpsPolicy,
+    f: Vec<f64>,
+    w: Vec<f64>,
+    q_next: Vec<f64>,
+}
+
+impl<F, C> std::fmt::Debug for Scheme<F, C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Scheme")
+            .field("selection", &self.selection)
+            .field("eps", &self.eps)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<F: Field, C: Correction> Scheme<F, C> {
+    /// The scheme for field `field` with correction `correction`.
+    pub fn new(field: F, correction: C, eps: EpsPolicy) -> Self {
+        Self {
+            field,
+            convex: None,
+            selection: Selection::Explicit,
+            correction,
+            eps,
+            f: Vec::new(),
+            w: Vec::new(),
+            q_next: Vec::new(),
+        }
+    }
+
+    /// Adds the set-valued part `∂ψ` and how the prediction treats it.
+    pub fn with_convex_part(mut self, psi: Box<dyn ConvexPart>, selection: Selection) -> Self {
+        self.convex = Some(psi);
+        self.selection = selection;
+        self
+    }
+
+    /// The correction (to reach its constraint set or multipliers).
+    pub fn correction(&self) -> &C {
+        &self.correction
+    }
+
+    /// The correction, mutably.
+    pub fn correction_mut(&mut self) -> &mut C {
+        &mut self.correction
+    }
+
+    /// The field.
+    pub fn field(&self) -> &F {
+        &self.field
+    }
+
+    /// The field, mutably (an input changed between steps).
+    pub fn field_mut(&mut self) -> &mut F {
+        &mut self.field
+    }
+
+    /// The prediction velocity `w_k` of the last step.
+    pub fn prediction(&self) -> &[f64] {
+        &self.w
+    }
+
+    /// One step of size `mu` from `(t, q)`; `q` becomes `q_{k+1}`. `step` indexes the report.
+    pub fn step(
+        &mut self,
+        step: usize,
+        t: f64,
+        q: &mut [f64],
+        mu: f64,
+    ) -> Result<StepReport, IntegrateError> {
+        let start = Instant::now();
+        let n = q.len();
+        if let Some(index) = q.iter().position(|x| !x.is_finite()) {
+            return Err(IntegrateError::NonFinite {
+                step,
+                t,
+                what: "state",
+                index,
+            });
+        }
+        self.f.resize(n, 0.0);
+        self.w.resize(n, 0.0);
+        self.q_next.resize(n, 0.0);
+        self.field.eval(t, q, &mut self.f);
+        match (&self.convex, self.selection) {
+            (None, _) => self.w.copy_from_slice(&self.f),
+            (Some(psi), Selection::Explicit) => psi.min_norm_selection(q, &self.f, &mut self.w),
+            (Some(psi), Selection::SemiImplicit) => {
+                // y = prox_{μψ}(q + μF), w = (y − q)/μ.
+                for i in 0..n {
+                    self.q_next[i] = q[i] + mu * self.f[i];
+                }
+                psi.prox(mu, &self.q_next, &mut self.w);
+                for i in 0..n {
+                    self.w[i] = (self.w[i] - q[i]) / mu;
+                }
+            }
+        }
+        if let Some(index) = self.w.iter().position(|x| !x.is_finite()) {
+            return Err(IntegrateError::NonFinite {
+                step,
+                t,
+                what: "field",
+                index,
+            });
+        }
+        let eps_target = self.eps.eps(mu);
+        let mut report = StepReport {
+            step,
+            t: t + mu,
+            mu,
+            eps_target,
+            ..StepReport::default()
+        };
+        report.timings.predict = start.elapsed().as_secs_f64();
+        self.correction
+            .correct(q, &self.w, eps_target, &mut self.q_next, &mut report)?;
+        q.copy_from_slice(&self.q_next);
+        report.timings.total = start.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// Runs from `(t0, q)` through `steps`; `observe(report, q)` sees every accepted step.
+    /// Returns the final time.
+    pub fn run(
+        &mut self,
+        t0: f64,
+        q: &mut [f64],
+        steps: &StepSequence,
+        mut observe: impl FnMut(&StepReport, &[f64]),
+    ) -> Result<f64, IntegrateError> {
+        let mut t = t0;
+        for (k, mu) in steps.steps(t0)?.into_iter().enumerate() {
+            let report = self.step(k, t, q, mu)?;
+            t = report.t;
+            observe(&report, q);
+        }
+        Ok(t)
+    }
+}

@@ -1,0 +1,214 @@
+//! `seeds/003` Theorem 2: for monotone `f` and polyhedral `C`, catching-up, the projected
+//! system (PDS) and the complementarity system (CDS) have the same solution and multipliers.
+//!
+//! Catching-up runs through the library (APGD on the linearized set); PDS and CDS steps are
+//! built here from the independent exact enumerator of `support`.
+
+mod support;
+
+use moreau::core::{FnField, HalfSpace, HalfSpaces};
+use moreau::integrate::{
+    EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepSequence,
+};
+use moreau::solve::{Apgd, ApgdSettings};
+
+/// `f(x) = M x + c`, monotone: the symmetric part of `M` is diag(1, 0.5).
+const M: [[f64; 2]; 2] = [[1.0, 2.0], [-2.0, 0.5]];
+const C: [f64; 2] = [-3.1, 2.6];
+/// `C = {x : H x ≤ d}`.
+const H: [[f64; 2]; 3] = [[1.0, 0.0], [1.0, 1.0], [0.0, -1.0]];
+const D: [f64; 3] = [1.0, 1.5, 0.5];
+const X0: [f64; 2] = [-1.0, 0.0];
+const T_END: f64 = 4.0;
+
+fn f(x: &[f64]) -> [f64; 2] {
+    [
+        M[0][0] * x[0] + M[0][1] * x[1] + C[0],
+        M[1][0] * x[0] + M[1][1] * x[1] + C[1],
+    ]
+}
+
+struct Trajectory {
+    x: Vec<[f64; 2]>,
+    lambda: Vec<[f64; 3]>,
+}
+
+fn catching_up(h: f64) -> Trajectory {
+    let field = FnField::new(2, |_t, x: &[f64], out: &mut [f64]| {
+        let fx = f(x);
+        out[0] = -fx[0];
+        out[1] = -fx[1];
+    });
+    let faces = H
+        .iter()
+        .zip(D)
+        .map(|(a, d)| HalfSpace::new(a.to_vec(), d).unwrap())
+        .collect();
+    let correction = LinearizedProjection::new(
+        HalfSpaces::new(faces).unwrap(),
+        Apgd::new(ApgdSettings::default()).unwrap(),
+        LinearizedSettings {
+            max_violation: 1e-12,
+            max_redo: 0,
+        },
+    )
+    .unwrap();
+    let mut scheme = Scheme::new(field, correction, EpsPolicy::new(1e-6, 3.0).unwrap());
+    let mut x = X0;
+    let mut traj = Trajectory {
+        x: vec![X0],
+        lambda: Vec::new(),
+    };
+    let steps = StepSequence::Fixed { h, t_end: T_END }.steps(0.0).unwrap();
+    for (k, mu) in steps.into_iter().enumerate() {
+        scheme.step(k, k as f64 * h, &mut x, mu).unwrap();
+        // The rows are all three faces (margin ∞), keyed by face index, in order.
+        let corr = scheme.correction();
+        assert_eq!(corr.rows().keys(), &[0, 1, 2]);
+        let l = corr.multipliers();
+        traj.x.push(x);
+        traj.lambda.push([l[0], l[1], l[2]]);
+    }
+    traj
+}
+
+/// Rows of `J` for `g = d − H x ≥ 0` are `−H`.
+fn minus_h() -> Vec<Vec<f64>> {
+    H.iter().map(|r| r.iter().map(|a| -a).collect()).collect()
+}
+
+/// CDS, time-discretized: `x_{k+1} = x_k − h(f(x_k) + Hᵀλ)` with the LCP
+/// `0 ≤ λ ⟂ d − H x_{k+1} ≥ 0`, solved exactly by enumeration.
+fn cds(h: f64) -> Trajectory {
+    let mut x = X0;
+    let mut traj = Trajectory {
+        x: vec![X0],
+        lambda: Vec::new(),
+    };
+    let n = (T_END / h).round() as usize;
+    for _ in 0..n {
+        let fx = f(&x);
+        let w = [-fx[0], -fx[1]];
+        // In velocity form: b_i = (d_i − H_i x)/h, J = −H; the LCP's λ is the QP's multiplier.
+        let b: Vec<f64> = (0..3)
+            .map(|i| (D[i] - H[i][0] * x[0] - H[i][1] * x[1]) / h)
+            .collect();
+        let (v, l) = support::exact_qp(&w, &minus_h(), &b);
+        // Check it is the LCP's solution: complementarity of λ with d − H x_{k+1}.
+        let xn = [x[0] + h * v[0], x[1] + h * v[1]];
+        for i in 0..3 {
+            let slack = D[i] - H[i][0] * xn[0] - H[i][1] * xn[1];
+            assert!(slack >= -1e-9 && (l[i] * slack).abs() < 1e-9);
+        }
+        x = xn;
+        traj.x.push(x);
+        traj.lambda.push([l[0], l[1], l[2]]);
+    }
+    traj
+}
+
+/// PDS: `x_{k+1} = proj_C(x_k + h proj_{T_C(x_k)}(−f(x_k)))`, with `T_C(x) = {d : H_A d ≤ 0}`
+/// over the faces active at `x_k`; its multiplier is that of the tangent-cone projection.
+fn pds(h: f64) -> Trajectory {
+    let mut x = X0;
+    let mut traj = Trajectory {
+        x: vec![X0],
+        lambda: Vec::new(),
+    };
+    let n = (T_END / h).round() as usize;
+    for _ in 0..n {
+        let fx = f(&x);
+        let active: Vec<usize> = (0..3)
+            .filter(|&i| D[i] - H[i][0] * x[0] - H[i][1] * x[1] <= 1e-9)
+            .collect();
+        let jt: Vec<Vec<f64>> = active.iter().map(|&i| vec![-H[i][0], -H[i][1]]).collect();
+        let (d, la) = support::exact_qp(&[-fx[0], -fx[1]], &jt, &vec![0.0; active.len()]);
+        let mut lambda = [0.0; 3];
+        for (k, &i) in active.iter().enumerate() {
+            lambda[i] = la[k];
+        }
+        let y = [x[0] + h * d[0], x[1] + h * d[1]];
+        // proj_C(y): the QP with w = y in position form (b = d − 0, J = −H).
+        let (p, _) = support::exact_qp(&y, &minus_h(), &D);
+        x = [p[0], p[1]];
+        traj.x.push(x);
+        traj.lambda.push(lambda);
+    }
+    traj
+}
+
+fn max_distance(a: &Trajectory, b: &Trajectory) -> f64 {
+    a.x.iter()
+        .zip(&b.x)
+        .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
+        .fold(0.0, f64::max)
+}
+
+/// `∫ |λ_a − λ_b| dt` over the run.
+fn multiplier_distance(a: &Trajectory, b: &Trajectory, h: f64) -> f64 {
+    a.lambda
+        .iter()
+        .zip(&b.lambda)
+        .map(|(p, q)| h * (0..3).map(|i| (p[i] - q[i]).abs()).sum::<f64>())
+        .sum()
+}
+
+#[test]
+fn the_trajectory_reaches_and_slides_on_faces() {
+    // The test is only meaningful if constraints are active: check the reference does.
+    let t = cds(0.01);
+    let active_steps = t
+        .lambda
+        .iter()
+        .filter(|l| l.iter().any(|&v| v > 1e-6))
+        .count();
+    assert!(active_steps > 50, "only {active_steps} steps with contact");
+    let faces: Vec<usize> = (0..3)
+        .filter(|&i| t.lambda.iter().any(|l| l[i] > 1e-6))
+        .collect();
+    assert!(faces.len() >= 2, "only faces {faces:?} are ever active");
+}
+
+#[test]
+fn catching_up_and_cds_agree_in_states_and_multipliers() {
+    // For a polyhedron the linearized set is the set itself, so catching-up and the
+    // discretized CDS solve the same LCP: they agree to solver accuracy at every h.
+    for h in [0.05, 0.01] {
+        let (a, b) = (catching_up(h), cds(h));
+        assert!(
+            max_distance(&a, &b) < 1e-6,
+            "h = {h}: {}",
+            max_distance(&a, &b)
+        );
+        let worst = a
+            .lambda
+            .iter()
+            .zip(&b.lambda)
+            .map(|(p, q)| (0..3).map(|i| (p[i] - q[i]).abs()).fold(0.0, f64::max))
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "h = {h}: multipliers differ by {worst}");
+    }
+}
+
+#[test]
+fn pds_and_catching_up_converge_to_each_other_as_h_shrinks() {
+    let hs = [0.04, 0.02, 0.01, 0.005, 0.0025];
+    let mut dx = Vec::new();
+    let mut dl = Vec::new();
+    for &h in &hs {
+        let (a, p) = (catching_up(h), pds(h));
+        dx.push(max_distance(&a, &p));
+        dl.push(multiplier_distance(&a, &p, h));
+    }
+    let (ox, _) = support::fit_order(&hs, &dx);
+    let (ol, _) = support::fit_order(&hs, &dl);
+    assert!(
+        ox > 0.8,
+        "state distance does not shrink like h: order {ox}, {dx:?}"
+    );
+    assert!(
+        ol > 0.8,
+        "multiplier distance does not shrink like h: order {ol}, {dl:?}"
+    );
+    assert!(dx[4] < 0.01 && dl[4] < 0.05, "{dx:?} {dl:?}");
+}
