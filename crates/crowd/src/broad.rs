@@ -1,0 +1,211 @@
+//! Broad phase: every pair of disks whose gap `|q_i − q_j| − r_i − r_j` is at most a margin.
+
+use parry2d_f64::bounding_volume::Aabb;
+use parry2d_f64::math::Vector;
+use parry2d_f64::partitioning::{Bvh, BvhBuildStrategy, BvhWorkspace};
+
+/// Finds candidate contacts. Every backend returns exactly the pairs `(i, j)`, `i < j`, with
+/// `|q_i − q_j| − r_i − r_j ≤ margin`, sorted, so that backends are interchangeable.
+pub trait BroadPhase: std::fmt::Debug + Send {
+    /// A short name for reports.
+    fn name(&self) -> &'static str;
+    /// Writes the pairs into `out` (cleared first). `pos` is `[x0, y0, x1, y1, ...]`.
+    fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>);
+}
+
+/// The exact gap test shared by every backend (the same arithmetic, so the same answers).
+#[inline]
+fn close(pos: &[f64], radius: &[f64], i: usize, j: usize, margin: f64) -> bool {
+    let dx = pos[2 * i] - pos[2 * j];
+    let dy = pos[2 * i + 1] - pos[2 * j + 1];
+    (dx * dx + dy * dy).sqrt() - radius[i] - radius[j] <= margin
+}
+
+/// All pairs, O(N²): the reference for tests.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BruteForce;
+
+impl BroadPhase for BruteForce {
+    fn name(&self) -> &'static str {
+        "brute-force"
+    }
+    fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        let n = radius.len();
+        for i in 0..n {
+            for j in i + 1..n {
+                if close(pos, radius, i, j, margin) {
+                    out.push((i as u32, j as u32));
+                }
+            }
+        }
+    }
+}
+
+/// A uniform grid of square cells of side `2 r_max + margin`: fast when radii are similar.
+#[derive(Debug, Clone, Default)]
+pub struct CellGrid {
+    cell_start: Vec<u32>,
+    sorted: Vec<u32>,
+    cell_of: Vec<u32>,
+}
+
+impl BroadPhase for CellGrid {
+    fn name(&self) -> &'static str {
+        "grid"
+    }
+    fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        let n = radius.len();
+        if n < 2 {
+            return;
+        }
+        let rmax = radius.iter().cloned().fold(0.0, f64::max);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for i in 0..n {
+            for k in 0..2 {
+                lo[k] = lo[k].min(pos[2 * i + k]);
+                hi[k] = hi[k].max(pos[2 * i + k]);
+            }
+        }
+        // Pairs within the margin are at most one cell apart; cap the cell count at ~4N.
+        let mut cell = (2.0 * rmax + margin.max(0.0)).max(1e-12);
+        let span = [(hi[0] - lo[0]).max(0.0), (hi[1] - lo[1]).max(0.0)];
+        let budget = (4 * n + 16) as f64;
+        if (span[0] / cell + 1.0) * (span[1] / cell + 1.0) > budget {
+            cell = cell.max(((span[0] + cell) * (span[1] + cell) / budget).sqrt());
+        }
+        let nx = (span[0] / cell) as usize + 1;
+        let ny = (span[1] / cell) as usize + 1;
+        // Counting sort of the disks by cell.
+        self.cell_start.clear();
+        self.cell_start.resize(nx * ny + 1, 0);
+        self.cell_of.clear();
+        for i in 0..n {
+            let cx = (((pos[2 * i] - lo[0]) / cell) as usize).min(nx - 1);
+            let cy = (((pos[2 * i + 1] - lo[1]) / cell) as usize).min(ny - 1);
+            let c = (cy * nx + cx) as u32;
+            self.cell_of.push(c);
+            self.cell_start[c as usize + 1] += 1;
+        }
+        for c in 0..nx * ny {
+            self.cell_start[c + 1] += self.cell_start[c];
+        }
+        self.sorted.clear();
+        self.sorted.resize(n, 0);
+        let mut fill = self.cell_start.clone();
+        for i in 0..n {
+            let c = self.cell_of[i] as usize;
+            self.sorted[fill[c] as usize] = i as u32;
+            fill[c] += 1;
+        }
+        // Each disk against its own cell (later entries) and four forward neighbours.
+        for cy in 0..ny {
+            for cx in 0..nx {
+                let c = cy * nx + cx;
+                let own =
+                    &self.sorted[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
+                for (a, &i) in own.iter().enumerate() {
+                    for &j in &own[a + 1..] {
+                        if close(pos, radius, i as usize, j as usize, margin) {
+                            out.push((i.min(j), i.max(j)));
+                        }
+                    }
+                }
+                for (dx, dy) in [(1i64, 0i64), (-1, 1), (0, 1), (1, 1)] {
+                    let (ox, oy) = (cx as i64 + dx, cy as i64 + dy);
+                    if ox < 0 || oy < 0 || ox >= nx as i64 || oy >= ny as i64 {
+                        continue;
+                    }
+                    let o = oy as usize * nx + ox as usize;
+                    let other =
+                        &self.sorted[self.cell_start[o] as usize..self.cell_start[o + 1] as usize];
+                    for &i in own {
+                        for &j in other {
+                            if close(pos, radius, i as usize, j as usize, margin) {
+                                out.push((i.min(j), i.max(j)));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out.sort_unstable();
+    }
+}
+
+/// parry's bounding-volume hierarchy over the disks' boxes: robust when radii differ a lot.
+#[derive(Default)]
+pub struct TreeBroadPhase {
+    leaves: Vec<Aabb>,
+    workspace: BvhWorkspace,
+}
+
+impl std::fmt::Debug for TreeBroadPhase {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TreeBroadPhase")
+            .field("leaves", &self.leaves.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl BroadPhase for TreeBroadPhase {
+    fn name(&self) -> &'static str {
+        "bvh"
+    }
+    fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        let n = radius.len();
+        if n < 2 {
+            return;
+        }
+        // Boxes grown by half the margin each: overlapping boxes ⇐ gap ≤ margin.
+        let grow = 0.5 * margin.max(0.0);
+        self.leaves.clear();
+        self.leaves.extend((0..n).map(|i| {
+            let e = radius[i] + grow;
+            Aabb::new(
+                Vector::new(pos[2 * i] - e, pos[2 * i + 1] - e),
+                Vector::new(pos[2 * i] + e, pos[2 * i + 1] + e),
+            )
+        }));
+        let bvh = Bvh::from_leaves(BvhBuildStrategy::Binned, &self.leaves);
+        bvh.traverse_bvtt_single_tree::<false>(&mut self.workspace, &mut |a, b| {
+            let (i, j) = (a.min(b), a.max(b));
+            if i != j && close(pos, radius, i as usize, j as usize, margin) {
+                out.push((i, j));
+            }
+        });
+        out.sort_unstable();
+        out.dedup();
+    }
+}
+
+/// Which backend a scene gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BroadPhaseKind {
+    /// [`CellGrid`].
+    Grid,
+    /// [`TreeBroadPhase`].
+    Bvh,
+}
+
+/// The grid when radii are within a factor 4 of each other, the tree otherwise: a grid cell
+/// sized for the largest disk holds many small ones.
+pub fn choose_broad_phase(min_radius: f64, max_radius: f64) -> BroadPhaseKind {
+    if max_radius <= 4.0 * min_radius {
+        BroadPhaseKind::Grid
+    } else {
+        BroadPhaseKind::Bvh
+    }
+}
+
+impl BroadPhaseKind {
+    /// A fresh backend of this kind.
+    pub fn build(self) -> Box<dyn BroadPhase> {
+        match self {
+            BroadPhaseKind::Grid => Box::new(CellGrid::default()),
+            BroadPhaseKind::Bvh => Box::new(TreeBroadPhase::default()),
+        }
+    }
+}

@@ -1,0 +1,237 @@
+//! Desired velocities: geodesic distance to each goal (fast marching) and its descent direction.
+
+use moreau_core::Field;
+use ndarray::Array2;
+
+use crate::geometry::Segment;
+
+/// The geodesic distance to a goal around walls and obstacles, on a grid of square cells, with
+/// the unit descent direction at every cell centre.
+#[derive(Debug, Clone)]
+pub struct DistanceField {
+    origin: [f64; 2],
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    dist: Vec<f64>,
+    dir: Vec<[f64; 2]>,
+}
+
+impl DistanceField {
+    /// Solves the eikonal equation `|∇D| = 1` on the cells of `[lo, hi]` whose centres are
+    /// `walkable`, with `D = 0` on the walkable cells whose centres satisfy `goal`.
+    /// Returns `None` when no walkable cell is in the goal.
+    pub fn build(
+        lo: [f64; 2],
+        hi: [f64; 2],
+        cell: f64,
+        walkable: impl Fn([f64; 2]) -> bool,
+        goal: impl Fn([f64; 2]) -> bool,
+    ) -> Option<Self> {
+        let nx = ((hi[0] - lo[0]) / cell).ceil().max(1.0) as usize;
+        let ny = ((hi[1] - lo[1]) / cell).ceil().max(1.0) as usize;
+        let center = |ix: usize, iy: usize| {
+            [
+                lo[0] + (ix as f64 + 0.5) * cell,
+                lo[1] + (iy as f64 + 0.5) * cell,
+            ]
+        };
+        let mut blocked = Array2::from_elem((ny, nx), true);
+        let mut sources = Vec::new();
+        for iy in 0..ny {
+            for ix in 0..nx {
+                let c = center(ix, iy);
+                if walkable(c) {
+                    blocked[[iy, ix]] = false;
+                    if goal(c) {
+                        sources.push((iy, ix));
+                    }
+                }
+            }
+        }
+        if sources.is_empty() {
+            return None;
+        }
+        let cost = eikonal::CostField::with_obstacles(&blocked);
+        let solved = eikonal::solve_multi(&cost, &sources).ok()?;
+        let d = solved.distance();
+        let dist: Vec<f64> = (0..ny * nx).map(|k| d[[k / nx, k % nx]] * cell).collect();
+        let at = |ix: i64, iy: i64| -> f64 {
+            if ix < 0 || iy < 0 || ix >= nx as i64 || iy >= ny as i64 {
+                f64::INFINITY
+            } else {
+                dist[iy as usize * nx + ix as usize]
+            }
+        };
+        // Descent direction: central differences where both neighbours are walkable,
+        // one-sided towards the walkable one otherwise (so it never points into a wall cell).
+        let slope = |here: f64, minus: f64, plus: f64| -> f64 {
+            match (minus.is_finite(), plus.is_finite()) {
+                (true, true) => (plus - minus) / (2.0 * cell),
+                (true, false) => (here - minus) / cell,
+                (false, true) => (plus - here) / cell,
+                (false, false) => 0.0,
+            }
+        };
+        let mut dir = vec![[0.0; 2]; nx * ny];
+        for iy in 0..ny as i64 {
+            for ix in 0..nx as i64 {
+                let here = at(ix, iy);
+                if !here.is_finite() {
+                    continue;
+                }
+                let gx = slope(here, at(ix - 1, iy), at(ix + 1, iy));
+                let gy = slope(here, at(ix, iy - 1), at(ix, iy + 1));
+                let norm = (gx * gx + gy * gy).sqrt();
+                if norm > 0.0 {
+                    dir[iy as usize * nx + ix as usize] = [-gx / norm, -gy / norm];
+                }
+            }
+        }
+        Some(Self {
+            origin: lo,
+            cell,
+            nx,
+            ny,
+            dist,
+            dir,
+        })
+    }
+
+    fn cell_of(&self, p: [f64; 2]) -> Option<(usize, usize)> {
+        let fx = ((p[0] - self.origin[0]) / self.cell).floor();
+        let fy = ((p[1] - self.origin[1]) / self.cell).floor();
+        if fx < 0.0 || fy < 0.0 || fx >= self.nx as f64 || fy >= self.ny as f64 {
+            None
+        } else {
+            Some((fx as usize, fy as usize))
+        }
+    }
+
+    /// The distance at the cell containing `p` (∞ outside the walkable cells).
+    pub fn distance(&self, p: [f64; 2]) -> f64 {
+        self.cell_of(p)
+            .map_or(f64::INFINITY, |(ix, iy)| self.dist[iy * self.nx + ix])
+    }
+
+    /// The descent direction at `p`: bilinear blend of the four nearest cell directions
+    /// (walkable cells only), normalized; zero where no walkable cell is near.
+    pub fn direction(&self, p: [f64; 2]) -> [f64; 2] {
+        let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
+        let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - x0, fy - y0);
+        let mut acc = [0.0; 2];
+        for (dx, dy, w) in [
+            (0, 0, (1.0 - tx) * (1.0 - ty)),
+            (1, 0, tx * (1.0 - ty)),
+            (0, 1, (1.0 - tx) * ty),
+            (1, 1, tx * ty),
+        ] {
+            let (ix, iy) = (x0 as i64 + dx, y0 as i64 + dy);
+            if ix < 0 || iy < 0 || ix >= self.nx as i64 || iy >= self.ny as i64 {
+                continue;
+            }
+            let d = self.dir[iy as usize * self.nx + ix as usize];
+            acc[0] += w * d[0];
+            acc[1] += w * d[1];
+        }
+        let n = (acc[0] * acc[0] + acc[1] * acc[1]).sqrt();
+        if n > 1e-12 {
+            [acc[0] / n, acc[1] / n]
+        } else {
+            [0.0, 0.0]
+        }
+    }
+}
+
+/// The desired velocity `U(q)` of every person: speed × descent direction of the distance to
+/// the person's current goal, slid along any wall the person is touching so that it never
+/// points into a wall. Persons without a goal stand still.
+#[derive(Debug, Clone)]
+pub struct DesiredVelocity {
+    pub(crate) fields: Vec<DistanceField>,
+    pub(crate) walls: Vec<Segment>,
+    pub(crate) speed: Vec<f64>,
+    pub(crate) radius: Vec<f64>,
+    /// Index into `fields`, or `None` for a person who has arrived.
+    pub(crate) goal: Vec<Option<usize>>,
+    /// Multiplies every desired speed (an input of co-simulation).
+    pub speed_factor: f64,
+}
+
+impl DesiredVelocity {
+    /// How close to a wall (beyond the radius) the sliding starts.
+    const WALL_RANGE: f64 = 0.05;
+
+    /// The desired velocity of person `i` at `p`.
+    pub fn velocity(&self, i: usize, p: [f64; 2]) -> [f64; 2] {
+        let Some(g) = self.goal[i] else {
+            return [0.0, 0.0];
+        };
+        let mut d = self.fields[g].direction(p);
+        for wall in &self.walls {
+            let c = wall.closest(p);
+            let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
+            let dist = (ex * ex + ey * ey).sqrt();
+            if dist > self.radius[i] + Self::WALL_RANGE || dist == 0.0 {
+                continue;
+            }
+            let n = [ex / dist, ey / dist];
+            let into = d[0] * n[0] + d[1] * n[1];
+            if into < 0.0 {
+                d = [d[0] - into * n[0], d[1] - into * n[1]];
+            }
+        }
+        let s = self.speed[i] * self.speed_factor;
+        [s * d[0], s * d[1]]
+    }
+}
+
+impl Field for DesiredVelocity {
+    fn dim(&self) -> usize {
+        2 * self.speed.len()
+    }
+    fn eval(&self, _t: f64, q: &[f64], out: &mut [f64]) {
+        for i in 0..self.speed.len() {
+            let v = self.velocity(i, [q[2 * i], q[2 * i + 1]]);
+            out[2 * i] = v[0];
+            out[2 * i + 1] = v[1];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distance_goes_around_an_obstacle_and_direction_descends() {
+        // A 10 × 10 room, goal on the right edge, a wall from y = 0 to y = 8 at x = 5.
+        let wall = |p: [f64; 2]| (4.8..=5.2).contains(&p[0]) && p[1] < 8.0;
+        let f = DistanceField::build([0.0, 0.0], [10.0, 10.0], 0.1, |p| !wall(p), |p| p[0] > 9.9)
+            .unwrap();
+        // Straight line from (1, 1) would be 8.9; around the wall's end it is longer.
+        let around =
+            ((4.0f64).powi(2) + 7.0f64.powi(2)).sqrt() + (4.9f64.powi(2) + 7.0f64.powi(2)).sqrt();
+        let d = f.distance([1.0, 1.0]);
+        assert!(
+            d > 12.0 && (d - around).abs() < 0.1 * around,
+            "d = {d}, around = {around}"
+        );
+        // From below the wall's end the direction points up (towards the gap), not into it.
+        let dir = f.direction([4.0, 4.0]);
+        assert!(dir[1] > 0.5, "{dir:?}");
+        // Directions are unit vectors and descend the distance.
+        let p = [2.0, 9.0];
+        let dir = f.direction(p);
+        assert!(((dir[0] * dir[0] + dir[1] * dir[1]).sqrt() - 1.0).abs() < 1e-12);
+        let q2 = [p[0] + 0.3 * dir[0], p[1] + 0.3 * dir[1]];
+        assert!(
+            f.distance(q2) < f.distance(p) - 0.2,
+            "{} vs {}",
+            f.distance(q2),
+            f.distance(p)
+        );
+    }
+}

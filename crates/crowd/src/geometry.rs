@@ -1,0 +1,145 @@
+//! Polygons and segments: containment, distances and closest points.
+
+/// A segment `[a, b]` (a wall, or an exit line).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// First end.
+    pub a: [f64; 2],
+    /// Second end.
+    pub b: [f64; 2],
+}
+
+impl Segment {
+    /// The closest point of the segment to `p`.
+    pub fn closest(&self, p: [f64; 2]) -> [f64; 2] {
+        let d = [self.b[0] - self.a[0], self.b[1] - self.a[1]];
+        let len2 = d[0] * d[0] + d[1] * d[1];
+        let t = if len2 > 0.0 {
+            (((p[0] - self.a[0]) * d[0] + (p[1] - self.a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        [self.a[0] + t * d[0], self.a[1] + t * d[1]]
+    }
+
+    /// Euclidean distance from `p`.
+    pub fn distance(&self, p: [f64; 2]) -> f64 {
+        let c = self.closest(p);
+        ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt()
+    }
+
+    /// The unit normal on the left of `a → b` (the walkable side of a wall).
+    pub fn left_normal(&self) -> [f64; 2] {
+        let d = [self.b[0] - self.a[0], self.b[1] - self.a[1]];
+        let l = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        [-d[1] / l, d[0] / l]
+    }
+}
+
+/// A simple polygon given by its vertices (no repeated closing vertex).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Polygon {
+    /// Vertices in order.
+    pub vertices: Vec<[f64; 2]>,
+}
+
+impl Polygon {
+    /// Twice the signed area (positive when counter-clockwise).
+    pub fn signed_area2(&self) -> f64 {
+        let v = &self.vertices;
+        (0..v.len())
+            .map(|i| {
+                let (p, q) = (v[i], v[(i + 1) % v.len()]);
+                p[0] * q[1] - q[0] * p[1]
+            })
+            .sum()
+    }
+
+    /// The area.
+    pub fn area(&self) -> f64 {
+        0.5 * self.signed_area2().abs()
+    }
+
+    /// The same polygon, counter-clockwise if `ccw`, clockwise otherwise.
+    pub fn oriented(mut self, ccw: bool) -> Self {
+        if (self.signed_area2() > 0.0) != ccw {
+            self.vertices.reverse();
+        }
+        self
+    }
+
+    /// Point in polygon (even–odd rule).
+    pub fn contains(&self, p: [f64; 2]) -> bool {
+        let v = &self.vertices;
+        let mut inside = false;
+        let mut j = v.len() - 1;
+        for i in 0..v.len() {
+            let (a, b) = (v[i], v[j]);
+            if (a[1] > p[1]) != (b[1] > p[1])
+                && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
+            {
+                inside = !inside;
+            }
+            j = i;
+        }
+        inside
+    }
+
+    /// The edges `v_i → v_{i+1}`.
+    pub fn edges(&self) -> impl Iterator<Item = Segment> + '_ {
+        let v = &self.vertices;
+        (0..v.len()).map(move |i| Segment {
+            a: v[i],
+            b: v[(i + 1) % v.len()],
+        })
+    }
+
+    /// Bounding box `(min, max)`.
+    pub fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for p in &self.vertices {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Distance from `p` to the boundary.
+    pub fn boundary_distance(&self, p: [f64; 2]) -> f64 {
+        self.edges()
+            .map(|e| e.distance(p))
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn square_containment_distance_and_orientation() {
+        let sq = Polygon {
+            vertices: vec![[0.0, 0.0], [0.0, 2.0], [2.0, 2.0], [2.0, 0.0]],
+        };
+        assert!(sq.signed_area2() < 0.0);
+        let sq = sq.oriented(true);
+        assert!(sq.signed_area2() > 0.0 && (sq.area() - 4.0).abs() < 1e-15);
+        assert!(sq.contains([1.0, 1.0]) && !sq.contains([3.0, 1.0]));
+        assert!((sq.boundary_distance([0.5, 1.0]) - 0.5).abs() < 1e-15);
+        // CCW: the left normal of every edge points inside.
+        for e in sq.edges() {
+            let m = [(e.a[0] + e.b[0]) / 2.0, (e.a[1] + e.b[1]) / 2.0];
+            let n = e.left_normal();
+            assert!(sq.contains([m[0] + 0.1 * n[0], m[1] + 0.1 * n[1]]));
+        }
+        let s = Segment {
+            a: [0.0, 0.0],
+            b: [1.0, 0.0],
+        };
+        assert_eq!(s.closest([2.0, 1.0]), [1.0, 0.0]);
+        assert!((s.distance([0.5, -2.0]) - 2.0).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,490 @@
+//! Scene files: the whole input of a crowd run, read from TOML and validated field by field.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::CrowdError;
+use crate::geometry::{Polygon, Segment};
+
+/// A number, or a uniform distribution `{ min, max }` to draw it from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Quantity {
+    /// The same value for everyone.
+    Fixed(f64),
+    /// Drawn uniformly in `[min, max]`.
+    Uniform {
+        /// Lower end.
+        min: f64,
+        /// Upper end.
+        max: f64,
+    },
+}
+
+impl Quantity {
+    fn check(&self, field: &str, positive: bool) -> Result<(), CrowdError> {
+        let ok = |x: f64| x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
+        let need = if positive {
+            "must be finite and > 0"
+        } else {
+            "must be finite and ≥ 0"
+        };
+        match *self {
+            Quantity::Fixed(x) if !ok(x) => Err(CrowdError::invalid(field, x, need)),
+            Quantity::Uniform { min, .. } if !ok(min) => {
+                Err(CrowdError::invalid(format!("{field}.min"), min, need))
+            }
+            Quantity::Uniform { max, .. } if !ok(max) => {
+                Err(CrowdError::invalid(format!("{field}.max"), max, need))
+            }
+            Quantity::Uniform { min, max } if min > max => Err(CrowdError::invalid(
+                format!("{field}.min"),
+                min,
+                format!("greater than max = {max}"),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// The largest value it can take.
+    pub fn max(&self) -> f64 {
+        match *self {
+            Quantity::Fixed(x) => x,
+            Quantity::Uniform { max, .. } => max,
+        }
+    }
+
+    /// The smallest value it can take.
+    pub fn min(&self) -> f64 {
+        match *self {
+            Quantity::Fixed(x) => x,
+            Quantity::Uniform { min, .. } => min,
+        }
+    }
+}
+
+/// The walkable area: an outer polygon with holes (obstacles); walls are their edges.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Area {
+    /// Outer boundary.
+    pub outer: Vec<[f64; 2]>,
+    /// Obstacles inside it.
+    #[serde(default)]
+    pub holes: Vec<Vec<[f64; 2]>>,
+}
+
+/// What happens to a person who reaches an exit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExitAction {
+    /// The person leaves the simulation.
+    Remove,
+    /// The person keeps walking to the exit's target area (the state keeps its size).
+    Continue,
+}
+
+/// An exit: an area (polygon) or a line (segment) and what happens there.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Exit {
+    /// Its name, used by groups as their destination.
+    pub name: String,
+    /// The exit area: reaching it (center inside) counts as passing the exit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub area: Option<Vec<[f64; 2]>>,
+    /// Or the exit line: coming within one radius of it counts as passing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub segment: Option<[[f64; 2]; 2]>,
+    /// What happens there.
+    pub action: ExitAction,
+    /// For `continue`: the area to walk to afterwards (people stop inside it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<Vec<[f64; 2]>>,
+}
+
+/// A group of people.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Group {
+    /// Its name.
+    pub name: String,
+    /// How many, placed at random without overlap in `spawn` (or give `positions`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count: Option<usize>,
+    /// The spawn region.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spawn: Option<Vec<[f64; 2]>>,
+    /// Fixed initial positions instead of `count` and `spawn`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub positions: Option<Vec<[f64; 2]>>,
+    /// Radius in metres.
+    pub radius: Quantity,
+    /// Desired speed in m/s.
+    pub speed: Quantity,
+    /// The name of the exit they walk to.
+    pub destination: String,
+}
+
+/// Time stepping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Time {
+    /// End time (s).
+    pub horizon: f64,
+    /// Step `μ` (s).
+    pub step: f64,
+    /// Interval between recorded frames (s).
+    pub output_interval: f64,
+}
+
+/// Which projection solver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverKind {
+    /// Accelerated projected gradient, with Clarabel as fallback.
+    #[default]
+    Apgd,
+    /// Clarabel's interior point only (reference).
+    Clarabel,
+}
+
+/// Which broad phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum BroadPhaseChoice {
+    /// Chosen from the spread of radii.
+    #[default]
+    Auto,
+    /// The uniform cell grid.
+    Grid,
+    /// parry's bounding-volume hierarchy.
+    Bvh,
+}
+
+fn default_kappa() -> f64 {
+    1e-2
+}
+fn default_violation() -> f64 {
+    1e-6
+}
+fn default_cell() -> f64 {
+    0.1
+}
+
+/// Solver settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSettings {
+    /// The projection solver.
+    #[serde(default)]
+    pub kind: SolverKind,
+    /// `κ` in `ε_k = κ μ_k³` (m²/s³).
+    #[serde(default = "default_kappa")]
+    pub eps_kappa: f64,
+    /// Largest accepted overlap of the linearized constraints (m).
+    #[serde(default = "default_violation")]
+    pub max_violation: f64,
+    /// Cell size of the geodesic-distance grid (m).
+    #[serde(default = "default_cell")]
+    pub grid_cell: f64,
+    /// The broad phase.
+    #[serde(default)]
+    pub broad_phase: BroadPhaseChoice,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        Self {
+            kind: SolverKind::Apgd,
+            eps_kappa: default_kappa(),
+            max_violation: default_violation(),
+            grid_cell: default_cell(),
+            broad_phase: BroadPhaseChoice::Auto,
+        }
+    }
+}
+
+/// A whole scene, as read from TOML; [`Scene::validate`] checks it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// A name for reports.
+    #[serde(default)]
+    pub name: String,
+    /// The random seed (initial positions, distributions).
+    pub seed: u64,
+    /// The walkable area.
+    pub area: Area,
+    /// The exits.
+    pub exits: Vec<Exit>,
+    /// The groups of people.
+    pub groups: Vec<Group>,
+    /// Time stepping.
+    pub time: Time,
+    /// Solver settings.
+    #[serde(default)]
+    pub solver: SolverSettings,
+}
+
+fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
+    if v.len() < 3 {
+        return Err(CrowdError::invalid(
+            field,
+            format!("{} vertices", v.len()),
+            "a polygon needs at least 3 vertices",
+        ));
+    }
+    if let Some((i, p)) = v
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p[0].is_finite() || !p[1].is_finite())
+    {
+        return Err(CrowdError::invalid(
+            format!("{field}[{i}]"),
+            format!("{p:?}"),
+            "coordinates must be finite",
+        ));
+    }
+    let poly = Polygon {
+        vertices: v.to_vec(),
+    };
+    if poly.area() <= 0.0 {
+        return Err(CrowdError::invalid(
+            field,
+            format!("{v:?}"),
+            "polygon has zero area",
+        ));
+    }
+    Ok(poly)
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self, CrowdError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| CrowdError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates a scene from TOML text; `origin` names it in errors.
+    pub fn from_toml(text: &str, origin: &str) -> Result<Self, CrowdError> {
+        let scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
+            path: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// The scene as TOML (it round-trips through [`Scene::from_toml`]).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("a scene serializes")
+    }
+
+    /// Checks every value that can be checked without building the scene.
+    pub fn validate(&self) -> Result<(), CrowdError> {
+        let outer = check_polygon("area.outer", &self.area.outer)?;
+        for (h, hole) in self.area.holes.iter().enumerate() {
+            let poly = check_polygon(&format!("area.holes[{h}]"), hole)?;
+            if let Some(p) = poly.vertices.iter().find(|p| !outer.contains(**p)) {
+                return Err(CrowdError::invalid(
+                    format!("area.holes[{h}]"),
+                    format!("{p:?}"),
+                    "hole vertex outside the outer polygon",
+                ));
+            }
+        }
+        let t = &self.time;
+        for (f, v) in [
+            ("time.horizon", t.horizon),
+            ("time.step", t.step),
+            ("time.output_interval", t.output_interval),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
+            }
+        }
+        let s = &self.solver;
+        for (f, v) in [
+            ("solver.eps_kappa", s.eps_kappa),
+            ("solver.max_violation", s.max_violation),
+            ("solver.grid_cell", s.grid_cell),
+        ] {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
+            }
+        }
+        if self.exits.is_empty() {
+            return Err(CrowdError::invalid(
+                "exits",
+                "[]",
+                "a scene needs at least one exit",
+            ));
+        }
+        for (e, exit) in self.exits.iter().enumerate() {
+            let f = format!("exits[{e}]");
+            if self.exits[..e].iter().any(|x| x.name == exit.name) {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    &exit.name,
+                    "duplicate exit name",
+                ));
+            }
+            match (&exit.area, &exit.segment) {
+                (Some(a), None) => {
+                    check_polygon(&format!("{f}.area"), a)?;
+                }
+                (None, Some(s)) => {
+                    if s.iter().flatten().any(|x| !x.is_finite()) || s[0] == s[1] {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.segment"),
+                            format!("{s:?}"),
+                            "needs two distinct finite points",
+                        ));
+                    }
+                }
+                _ => {
+                    return Err(CrowdError::invalid(
+                        &f,
+                        &exit.name,
+                        "give exactly one of `area` and `segment`",
+                    ));
+                }
+            }
+            match (exit.action, &exit.target) {
+                (ExitAction::Continue, Some(t)) => {
+                    check_polygon(&format!("{f}.target"), t)?;
+                }
+                (ExitAction::Continue, None) => {
+                    return Err(CrowdError::invalid(
+                        format!("{f}.target"),
+                        "missing",
+                        "action = \"continue\" needs a target area",
+                    ));
+                }
+                (ExitAction::Remove, Some(_)) => {
+                    return Err(CrowdError::invalid(
+                        format!("{f}.target"),
+                        "given",
+                        "only action = \"continue\" has a target",
+                    ));
+                }
+                _ => {}
+            }
+        }
+        if self.groups.is_empty() {
+            return Err(CrowdError::invalid(
+                "groups",
+                "[]",
+                "the scene has no people",
+            ));
+        }
+        for (g, group) in self.groups.iter().enumerate() {
+            let f = format!("groups[{g}]");
+            group.radius.check(&format!("{f}.radius"), true)?;
+            group.speed.check(&format!("{f}.speed"), false)?;
+            if !self.exits.iter().any(|e| e.name == group.destination) {
+                return Err(CrowdError::invalid(
+                    format!("{f}.destination"),
+                    &group.destination,
+                    "no exit has this name",
+                ));
+            }
+            match (&group.positions, group.count, &group.spawn) {
+                (Some(p), None, None) => {
+                    if p.is_empty() {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.positions"),
+                            "[]",
+                            "a group needs at least one person",
+                        ));
+                    }
+                    if let Some((i, q)) = p
+                        .iter()
+                        .enumerate()
+                        .find(|(_, q)| !q[0].is_finite() || !q[1].is_finite())
+                    {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.positions[{i}]"),
+                            format!("{q:?}"),
+                            "coordinates must be finite",
+                        ));
+                    }
+                }
+                (None, Some(n), Some(region)) => {
+                    if n == 0 {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.count"),
+                            0,
+                            "a group needs at least one person",
+                        ));
+                    }
+                    check_polygon(&format!("{f}.spawn"), region)?;
+                }
+                _ => {
+                    return Err(CrowdError::invalid(
+                        &f,
+                        &group.name,
+                        "give either `positions`, or `count` and `spawn`",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The walls: edges of the outer polygon (counter-clockwise) and of the holes (clockwise),
+    /// so that the walkable side is on the left of every wall.
+    pub fn walls(&self) -> Vec<Segment> {
+        let outer = Polygon {
+            vertices: self.area.outer.clone(),
+        }
+        .oriented(true);
+        let mut walls: Vec<Segment> = outer.edges().collect();
+        for h in &self.area.holes {
+            walls.extend(
+                Polygon {
+                    vertices: h.clone(),
+                }
+                .oriented(false)
+                .edges(),
+            );
+        }
+        walls
+    }
+
+    /// True when `p` is inside the walkable area.
+    pub fn walkable(&self, p: [f64; 2]) -> bool {
+        Polygon {
+            vertices: self.area.outer.clone(),
+        }
+        .contains(p)
+            && !self.area.holes.iter().any(|h| {
+                Polygon {
+                    vertices: h.clone(),
+                }
+                .contains(p)
+            })
+    }
+
+    /// The smallest radius any person can have.
+    pub fn min_radius(&self) -> f64 {
+        self.groups
+            .iter()
+            .map(|g| g.radius.min())
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The largest radius any person can have.
+    pub fn max_radius(&self) -> f64 {
+        self.groups
+            .iter()
+            .map(|g| g.radius.max())
+            .fold(0.0, f64::max)
+    }
+}

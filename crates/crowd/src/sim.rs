@@ -1,0 +1,503 @@
+//! A crowd run: people placed from the scene, stepped by the catching-up scheme, exits applied.
+
+use std::collections::HashMap;
+
+use moreau_core::StepReport;
+use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme};
+use moreau_solve::{Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, ProjectionSolver};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::broad::{BroadPhaseKind, choose_broad_phase};
+use crate::constraints::CrowdConstraints;
+use crate::error::CrowdError;
+use crate::field::{DesiredVelocity, DistanceField};
+use crate::geometry::{Polygon, Segment};
+use crate::scene::{BroadPhaseChoice, ExitAction, Quantity, Scene, SolverKind};
+
+/// Where a person is headed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    /// Walking to exit `e`.
+    ToExit(usize),
+    /// Passed exit `e`, walking to its target area.
+    ToTarget(usize),
+    /// Inside the target area of exit `e`: standing.
+    Arrived(usize),
+}
+
+/// An exit as the run uses it.
+#[derive(Debug, Clone)]
+struct ExitRuntime {
+    area: Option<Polygon>,
+    segment: Option<Segment>,
+    action: ExitAction,
+    field: usize,
+    target: Option<(Polygon, usize)>,
+}
+
+impl ExitRuntime {
+    fn reached(&self, p: [f64; 2], r: f64) -> bool {
+        match (&self.area, &self.segment) {
+            (Some(a), _) => a.contains(p),
+            (None, Some(s)) => s.distance(p) <= r,
+            _ => false,
+        }
+    }
+}
+
+/// One recorded configuration.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a> {
+    /// Time.
+    pub t: f64,
+    /// Ids of the people present.
+    pub ids: &'a [u32],
+    /// Their positions `[x0, y0, x1, y1, ...]`.
+    pub positions: &'a [f64],
+    /// Their radii.
+    pub radii: &'a [f64],
+}
+
+type CrowdScheme =
+    Scheme<DesiredVelocity, LinearizedProjection<CrowdConstraints, Box<dyn ProjectionSolver>>>;
+
+/// A crowd run built from a [`Scene`].
+pub struct Simulation {
+    scene: Scene,
+    exits: Vec<ExitRuntime>,
+    scheme: CrowdScheme,
+    q: Vec<f64>,
+    stage: Vec<Stage>,
+    t: f64,
+    steps: usize,
+    exit_times: Vec<(u32, f64)>,
+    total: usize,
+    broad: BroadPhaseKind,
+}
+
+impl std::fmt::Debug for Simulation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Simulation")
+            .field("t", &self.t)
+            .field("people", &self.stage.len())
+            .finish_non_exhaustive()
+    }
+}
+
+fn draw(q: &Quantity, rng: &mut ChaCha8Rng) -> f64 {
+    match *q {
+        Quantity::Fixed(x) => x,
+        Quantity::Uniform { min, max } => {
+            if max > min {
+                rng.random_range(min..=max)
+            } else {
+                min
+            }
+        }
+    }
+}
+
+/// Overlap test against people already placed, through a hash of cells of side `2 r_max`.
+struct Placed {
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<usize>>,
+    pos: Vec<[f64; 2]>,
+    radius: Vec<f64>,
+}
+
+impl Placed {
+    fn key(&self, p: [f64; 2]) -> (i64, i64) {
+        (
+            (p[0] / self.cell).floor() as i64,
+            (p[1] / self.cell).floor() as i64,
+        )
+    }
+    fn overlaps(&self, p: [f64; 2], r: f64) -> Option<usize> {
+        let (cx, cy) = self.key(p);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for &j in self
+                    .cells
+                    .get(&(cx + dx, cy + dy))
+                    .map_or(&[][..], |v| v.as_slice())
+                {
+                    let q = self.pos[j];
+                    if ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt() < r + self.radius[j] {
+                        return Some(j);
+                    }
+                }
+            }
+        }
+        None
+    }
+    fn insert(&mut self, p: [f64; 2], r: f64) {
+        let k = self.key(p);
+        self.cells.entry(k).or_default().push(self.pos.len());
+        self.pos.push(p);
+        self.radius.push(r);
+    }
+}
+
+impl Simulation {
+    /// Builds the run: distance fields, initial positions, solver. Every failure names the
+    /// scene field at fault.
+    pub fn new(scene: Scene) -> Result<Self, CrowdError> {
+        scene.validate()?;
+        let walls = scene.walls();
+        let outer = Polygon {
+            vertices: scene.area.outer.clone(),
+        };
+        let (lo, hi) = outer.bounds();
+        let cell = scene.solver.grid_cell;
+        let walkable = |p: [f64; 2]| scene.walkable(p);
+
+        // One distance field per exit, one per target area.
+        let mut fields = Vec::new();
+        let mut exits = Vec::new();
+        for (e, exit) in scene.exits.iter().enumerate() {
+            let area = exit.area.as_ref().map(|a| Polygon {
+                vertices: a.clone(),
+            });
+            let segment = exit.segment.map(|s| Segment { a: s[0], b: s[1] });
+            let goal = |p: [f64; 2]| match (&area, &segment) {
+                (Some(a), _) => a.contains(p),
+                (None, Some(s)) => s.distance(p) <= 0.75 * cell,
+                _ => false,
+            };
+            let f = DistanceField::build(lo, hi, cell, walkable, goal).ok_or_else(|| {
+                CrowdError::invalid(
+                    format!("exits[{e}]"),
+                    &exit.name,
+                    "no walkable cell of the distance grid lies in the exit",
+                )
+            })?;
+            fields.push(f);
+            let field = fields.len() - 1;
+            let target = match &exit.target {
+                Some(t) => {
+                    let poly = Polygon {
+                        vertices: t.clone(),
+                    };
+                    let f = DistanceField::build(lo, hi, cell, walkable, |p| poly.contains(p))
+                        .ok_or_else(|| {
+                            CrowdError::invalid(
+                                format!("exits[{e}].target"),
+                                format!("{t:?}"),
+                                "no walkable cell of the distance grid lies in the target",
+                            )
+                        })?;
+                    fields.push(f);
+                    Some((poly, fields.len() - 1))
+                }
+                None => None,
+            };
+            exits.push(ExitRuntime {
+                area,
+                segment,
+                action: exit.action,
+                field,
+                target,
+            });
+        }
+
+        // People.
+        let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
+        let mut placed = Placed {
+            cell: (2.0 * scene.max_radius()).max(1e-9),
+            cells: HashMap::new(),
+            pos: Vec::new(),
+            radius: Vec::new(),
+        };
+        let (mut speed, mut stage) = (Vec::new(), Vec::new());
+        let clear_of_walls = |p: [f64; 2], r: f64| walls.iter().all(|w| w.distance(p) >= r);
+        for (g, group) in scene.groups.iter().enumerate() {
+            let exit = scene
+                .exits
+                .iter()
+                .position(|e| e.name == group.destination)
+                .expect("validated");
+            let first = placed.pos.len();
+            match (&group.positions, group.count, &group.spawn) {
+                (Some(list), _, _) => {
+                    for (k, &p) in list.iter().enumerate() {
+                        let r = draw(&group.radius, &mut rng);
+                        let field = format!("groups[{g}].positions[{k}]");
+                        if !scene.walkable(p) || !clear_of_walls(p, r) {
+                            return Err(CrowdError::invalid(
+                                field,
+                                format!("{p:?}"),
+                                format!(
+                                    "a disk of radius {r} there is not inside the walkable area"
+                                ),
+                            ));
+                        }
+                        if let Some(j) = placed.overlaps(p, r) {
+                            return Err(CrowdError::invalid(
+                                field,
+                                format!("{p:?}"),
+                                format!("overlaps the person at {:?}", placed.pos[j]),
+                            ));
+                        }
+                        placed.insert(p, r);
+                    }
+                }
+                (None, Some(n), Some(region)) => {
+                    let region = Polygon {
+                        vertices: region.clone(),
+                    };
+                    let (rlo, rhi) = region.bounds();
+                    let budget = 2000 * n + 10_000;
+                    let (mut made, mut tries) = (0, 0);
+                    let mut r = draw(&group.radius, &mut rng);
+                    while made < n && tries < budget {
+                        tries += 1;
+                        let p = [
+                            rng.random_range(rlo[0]..=rhi[0]),
+                            rng.random_range(rlo[1]..=rhi[1]),
+                        ];
+                        if region.contains(p)
+                            && scene.walkable(p)
+                            && clear_of_walls(p, r)
+                            && placed.overlaps(p, r).is_none()
+                        {
+                            placed.insert(p, r);
+                            made += 1;
+                            r = draw(&group.radius, &mut rng);
+                        }
+                    }
+                    if made < n {
+                        return Err(CrowdError::invalid(
+                            format!("groups[{g}].count"),
+                            n,
+                            format!(
+                                "only {made} people fit in the spawn region ({:.2} m²) after {tries} random tries",
+                                region.area()
+                            ),
+                        ));
+                    }
+                }
+                _ => unreachable!("validated"),
+            }
+            for k in first..placed.pos.len() {
+                let p = placed.pos[k];
+                if !fields[exits[exit].field].distance(p).is_finite() {
+                    return Err(CrowdError::invalid(
+                        format!("groups[{g}].destination"),
+                        &group.destination,
+                        format!("unreachable from {p:?} (no walkable path on the distance grid)"),
+                    ));
+                }
+                speed.push(draw(&group.speed, &mut rng));
+                stage.push(Stage::ToExit(exit));
+            }
+        }
+        let n = placed.pos.len();
+        if n >= (1 << 31) {
+            return Err(CrowdError::invalid("groups", n, "at most 2³¹ − 1 people"));
+        }
+        let q: Vec<f64> = placed.pos.iter().flat_map(|p| *p).collect();
+        let ids: Vec<u32> = (0..n as u32).collect();
+        let radius = placed.radius;
+
+        let broad = match scene.solver.broad_phase {
+            BroadPhaseChoice::Grid => BroadPhaseKind::Grid,
+            BroadPhaseChoice::Bvh => BroadPhaseKind::Bvh,
+            BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
+        };
+        let goal = stage.iter().map(|s| match *s {
+            Stage::ToExit(e) => Some(exits[e].field),
+            _ => None,
+        });
+        let field = DesiredVelocity {
+            fields,
+            walls: walls.clone(),
+            speed,
+            radius: radius.clone(),
+            goal: goal.collect(),
+            speed_factor: 1.0,
+        };
+        let constraints = CrowdConstraints::new(walls, radius, ids, broad.build());
+        let settings = LinearizedSettings {
+            max_violation: scene.solver.max_violation,
+            max_redo: 8,
+        };
+        let solver: Box<dyn ProjectionSolver> = match scene.solver.kind {
+            SolverKind::Apgd => Box::new(
+                Apgd::new(ApgdSettings::default())
+                    .map_err(moreau_integrate::IntegrateError::from)?,
+            ),
+            SolverKind::Clarabel => Box::new(ClarabelReference::new(ClarabelSettings::default())),
+        };
+        let mut correction = LinearizedProjection::new(constraints, solver, settings)?;
+        if scene.solver.kind == SolverKind::Apgd {
+            correction = correction.with_fallback(Box::new(ClarabelReference::new(
+                ClarabelSettings::default(),
+            )));
+        }
+        let eps = EpsPolicy::new(scene.solver.eps_kappa, 3.0)?;
+        let scheme = Scheme::new(field, correction, eps);
+        Ok(Self {
+            scene,
+            exits,
+            scheme,
+            q,
+            stage,
+            t: 0.0,
+            steps: 0,
+            exit_times: Vec::new(),
+            total: n,
+            broad,
+        })
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Current time.
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// People at the start.
+    pub fn total_people(&self) -> usize {
+        self.total
+    }
+
+    /// The current configuration.
+    pub fn frame(&self) -> Frame<'_> {
+        let c = self.scheme.correction().constraints();
+        Frame {
+            t: self.t,
+            ids: &c.ids,
+            positions: &self.q,
+            radii: &c.radius,
+        }
+    }
+
+    /// `(id, time)` of everyone who passed an exit so far.
+    pub fn exit_times(&self) -> &[(u32, f64)] {
+        &self.exit_times
+    }
+
+    /// The broad phase in use.
+    pub fn broad_phase(&self) -> BroadPhaseKind {
+        self.broad
+    }
+
+    /// The scheme (its correction holds the last step's rows and multipliers, its field the
+    /// desired velocities).
+    pub fn scheme(&self) -> &CrowdScheme {
+        &self.scheme
+    }
+
+    /// The factor on every desired speed.
+    pub fn set_speed_factor(&mut self, factor: f64) {
+        self.scheme.field_mut().speed_factor = factor;
+    }
+
+    /// One step of size `mu`; then applies exits.
+    pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
+        let report = self.scheme.step(self.steps, self.t, &mut self.q, mu)?;
+        self.t = report.t;
+        self.steps += 1;
+        self.apply_exits();
+        Ok(report)
+    }
+
+    /// Runs to the scene's horizon with its step, calling `on_frame` at the start and at
+    /// every output interval, and `on_step` after every step.
+    pub fn run(
+        &mut self,
+        mut on_step: impl FnMut(&StepReport),
+        mut on_frame: impl FnMut(Frame<'_>),
+    ) -> Result<(), CrowdError> {
+        let time = self.scene.time;
+        let n_steps = (time.horizon / time.step - 1e-9).ceil() as usize;
+        let every = ((time.output_interval / time.step).round() as usize).max(1);
+        on_frame(self.frame());
+        for k in 0..n_steps {
+            let mu = if k + 1 < n_steps {
+                time.step
+            } else {
+                time.horizon - time.step * (n_steps - 1) as f64
+            };
+            let report = self.step(mu)?;
+            on_step(&report);
+            if (k + 1) % every == 0 || k + 1 == n_steps {
+                on_frame(self.frame());
+            }
+        }
+        Ok(())
+    }
+
+    fn apply_exits(&mut self) {
+        let mut keep = Vec::with_capacity(self.stage.len());
+        let mut changed = false;
+        for i in 0..self.stage.len() {
+            let p = [self.q[2 * i], self.q[2 * i + 1]];
+            let r = self.scheme.correction().constraints().radius[i];
+            let id = self.scheme.correction().constraints().ids[i];
+            let mut stays = true;
+            match self.stage[i] {
+                Stage::ToExit(e) if self.exits[e].reached(p, r) => {
+                    self.exit_times.push((id, self.t));
+                    changed = true;
+                    match (&self.exits[e].action, &self.exits[e].target) {
+                        (ExitAction::Continue, Some(_)) => self.stage[i] = Stage::ToTarget(e),
+                        _ => stays = false,
+                    }
+                }
+                Stage::ToTarget(e)
+                    if self.exits[e]
+                        .target
+                        .as_ref()
+                        .is_some_and(|(t, _)| t.contains(p)) =>
+                {
+                    self.stage[i] = Stage::Arrived(e);
+                    changed = true;
+                }
+                _ => {}
+            }
+            keep.push(stays);
+        }
+        if !changed {
+            return;
+        }
+        let exits = &self.exits;
+        let goal: Vec<Option<usize>> = self
+            .stage
+            .iter()
+            .map(|s| match *s {
+                Stage::ToExit(e) => Some(exits[e].field),
+                Stage::ToTarget(e) => exits[e].target.as_ref().map(|t| t.1),
+                Stage::Arrived(_) => None,
+            })
+            .collect();
+        let field = self.scheme.field_mut();
+        field.goal = goal;
+        if keep.iter().all(|&k| k) {
+            return;
+        }
+        fn retain<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut k = keep.iter();
+            v.retain(|_| *k.next().unwrap());
+        }
+        retain(&mut field.speed, &keep);
+        retain(&mut field.radius, &keep);
+        retain(&mut field.goal, &keep);
+        retain(&mut self.stage, &keep);
+        let c = self.scheme.correction_mut().constraints_mut();
+        retain(&mut c.radius, &keep);
+        retain(&mut c.ids, &keep);
+        let mut k = keep.iter().flat_map(|&b| [b, b]);
+        self.q.retain(|_| k.next().unwrap());
+    }
+}
