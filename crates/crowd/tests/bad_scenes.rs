@@ -1,0 +1,100 @@
+//! Every bad scene in `tests/bad-scenes/` fails with a clear error naming the field and value.
+
+use moreau_crowd::{Scene, Simulation};
+
+/// Reads, validates and builds a scene; the first error, as text.
+fn error_of(file: &str) -> String {
+    let path = format!(
+        "{}/../../tests/bad-scenes/{file}",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    match Scene::from_file(&path).and_then(Simulation::new) {
+        Ok(_) => panic!("{file} was accepted"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_scenes_give_errors_that_name_the_field_and_value() {
+    let cases = [
+        (
+            "negative-radius.toml",
+            &["groups[0].radius", "-0.2", "> 0"][..],
+        ),
+        ("nan-speed.toml", &["groups[0].speed", "NaN"]),
+        (
+            "overlapping-positions.toml",
+            &[
+                "groups[0].positions[1]",
+                "[1.3, 1.0]",
+                "overlaps the person at [1.0, 1.0]",
+            ],
+        ),
+        (
+            "group-cannot-fit.toml",
+            &["groups[0].count", "500", "people fit in the spawn region"],
+        ),
+        (
+            "person-outside.toml",
+            &["groups[0].positions[0]", "[7.0, 1.0]", "walkable area"],
+        ),
+        (
+            "person-in-wall.toml",
+            &["groups[0].positions[0]", "[0.1, 3.0]", "walkable area"],
+        ),
+        ("zero-step.toml", &["time.step", "0", "> 0"]),
+        (
+            "unknown-destination.toml",
+            &["groups[0].destination", "window", "no exit"],
+        ),
+        (
+            "unreachable-destination.toml",
+            &["groups[0].destination", "door", "unreachable"],
+        ),
+        ("unknown-key.toml", &["unknown field", "colour"]),
+        ("empty-polygon.toml", &["area.outer", "0 vertices"]),
+        ("no-groups.toml", &["groups", "no people"]),
+    ];
+    let on_disk = std::fs::read_dir(format!(
+        "{}/../../tests/bad-scenes",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap()
+    .count();
+    assert_eq!(on_disk, cases.len(), "every bad scene file has a case");
+    for (file, needles) in cases {
+        let msg = error_of(file);
+        for n in needles {
+            assert!(
+                msg.contains(n),
+                "{file}: error does not mention {n:?}: {msg}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_reference_scenes_are_valid_and_round_trip() {
+    for name in ["room-150", "dense-2000"] {
+        let path = format!(
+            "{}/../../data/scenes/{name}.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let scene = Scene::from_file(&path).unwrap();
+        let again = Scene::from_toml(&scene.to_toml(), "<round trip>").unwrap();
+        assert_eq!(scene, again);
+    }
+}
+
+#[test]
+fn dense_scene_is_dense_and_has_a_bottleneck() {
+    let path = format!(
+        "{}/../../data/scenes/dense-2000.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let sim = Simulation::new(Scene::from_file(&path).unwrap()).unwrap();
+    let n = sim.total_people();
+    assert_eq!(n, 2000);
+    // 2,000 people in the 40 m × 20 m hall.
+    assert!(n as f64 / 800.0 >= 2.5);
+}

@@ -1,0 +1,62 @@
+//! Both broad-phase backends return exactly the brute-force pair set on random scenes.
+
+use moreau_crowd::{BroadPhase, BruteForce, CellGrid, TreeBroadPhase};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+#[test]
+fn grid_and_tree_match_brute_force_on_random_scenes() {
+    let mut rng = ChaCha8Rng::seed_from_u64(99);
+    let (mut grid, mut tree, mut brute) =
+        (CellGrid::default(), TreeBroadPhase::default(), BruteForce);
+    let mut total_pairs = 0;
+    for scene in 0..120 {
+        let n = rng.random_range(2..400);
+        // Every third scene has radii spread over 1:100.
+        let (rmin, rmax): (f64, f64) = if scene % 3 == 0 {
+            (0.01, 1.0)
+        } else {
+            (0.18, 0.22)
+        };
+        let side = rng.random_range(2.0..30.0);
+        let pos: Vec<f64> = (0..2 * n).map(|_| rng.random_range(0.0..side)).collect();
+        let radius: Vec<f64> = (0..n)
+            .map(|_| {
+                if rmax / rmin > 10.0 {
+                    rmin * (rmax / rmin).powf(rng.random_range(0.0..1.0))
+                } else {
+                    rng.random_range(rmin..rmax)
+                }
+            })
+            .collect();
+        let margin = [0.0, 0.05, 0.5, -0.01][scene % 4];
+        let (mut a, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+        brute.pairs(&pos, &radius, margin, &mut a);
+        grid.pairs(&pos, &radius, margin, &mut b);
+        tree.pairs(&pos, &radius, margin, &mut c);
+        assert_eq!(a, b, "grid differs on scene {scene} (n = {n})");
+        assert_eq!(a, c, "tree differs on scene {scene} (n = {n})");
+        total_pairs += a.len();
+    }
+    // The scenes are not trivially empty.
+    assert!(total_pairs > 1000, "{total_pairs}");
+}
+
+#[test]
+fn one_huge_disk_among_tiny_ones_is_found_by_both() {
+    // Radii 1:100 with every small disk touching the big one.
+    let mut pos = vec![0.0, 0.0];
+    let mut radius = vec![1.0];
+    for k in 0..50 {
+        let a = k as f64 * 0.125;
+        pos.extend([1.01 * a.cos(), 1.01 * a.sin()]);
+        radius.push(0.01);
+    }
+    let (mut a, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+    BruteForce.pairs(&pos, &radius, 1e-9, &mut a);
+    CellGrid::default().pairs(&pos, &radius, 1e-9, &mut b);
+    TreeBroadPhase::default().pairs(&pos, &radius, 1e-9, &mut c);
+    assert!(a.iter().filter(|p| p.0 == 0).count() == 50);
+    assert_eq!(a, b);
+    assert_eq!(a, c);
+}
