@@ -8,18 +8,20 @@ fn main() {
     let start = std::time::Instant::now();
     let (mut iters, mut steps, mut maxv, mut maxeps, mut solve) =
         (0usize, 0usize, 0.0f64, 0.0f64, 0.0f64);
-    sim.run(
-        |r| {
+    sim.run::<moreau_crowd::CrowdError>(
+        |_, r| {
             iters += r.iterations;
             steps += 1;
             maxv = maxv.max(r.violation);
             maxeps = maxeps.max(r.eps);
             solve += r.timings.solve;
+            Ok(())
         },
         |f| {
             if (f.t * 10.0).round() as i64 % 20 == 0 {
                 println!("t = {:5.2}  people {}", f.t, f.ids.len());
             }
+            Ok(())
         },
     )
     .unwrap_or_else(|e| panic!("{e}"));

@@ -458,6 +458,25 @@ impl Scene {
         walls
     }
 
+    /// The walkable area as WKT (`POLYGON ((outer), (hole), ...)`), the form the Pedestrian
+    /// Dynamics Data Archive and PedPy's `WalkableArea` read. Rings are closed; `{}` prints
+    /// the shortest text that reads back to the same `f64`.
+    pub fn wkt(&self) -> String {
+        fn ring(points: &[[f64; 2]]) -> String {
+            let mut out: Vec<String> = points.iter().map(|p| format!("{} {}", p[0], p[1])).collect();
+            if let (Some(a), Some(b)) = (points.first(), points.last())
+                && a != b
+            {
+                out.push(format!("{} {}", a[0], a[1]));
+            }
+            format!("({})", out.join(", "))
+        }
+        let rings: Vec<String> = std::iter::once(ring(&self.area.outer))
+            .chain(self.area.holes.iter().map(|h| ring(h)))
+            .collect();
+        format!("POLYGON ({})", rings.join(", "))
+    }
+
     /// True when `p` is inside the walkable area.
     pub fn walkable(&self, p: [f64; 2]) -> bool {
         Polygon {

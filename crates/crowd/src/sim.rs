@@ -412,27 +412,39 @@ impl Simulation {
         Ok(report)
     }
 
-    /// Runs to the scene's horizon with its step, calling `on_frame` at the start and at
-    /// every output interval, and `on_step` after every step.
-    pub fn run(
-        &mut self,
-        mut on_step: impl FnMut(&StepReport),
-        mut on_frame: impl FnMut(Frame<'_>),
-    ) -> Result<(), CrowdError> {
+    /// The steps [`run`](Self::run) takes: `(μ_k, frame after it?)`, the scene's step with the
+    /// last one shortened to land on the horizon, and a frame every output interval and at
+    /// the end.
+    pub fn schedule(&self) -> Vec<(f64, bool)> {
         let time = self.scene.time;
         let n_steps = (time.horizon / time.step - 1e-9).ceil() as usize;
         let every = ((time.output_interval / time.step).round() as usize).max(1);
-        on_frame(self.frame());
-        for k in 0..n_steps {
-            let mu = if k + 1 < n_steps {
-                time.step
-            } else {
-                time.horizon - time.step * (n_steps - 1) as f64
-            };
+        (0..n_steps)
+            .map(|k| {
+                let mu = if k + 1 < n_steps {
+                    time.step
+                } else {
+                    time.horizon - time.step * (n_steps - 1) as f64
+                };
+                (mu, (k + 1) % every == 0 || k + 1 == n_steps)
+            })
+            .collect()
+    }
+
+    /// Runs to the scene's horizon along [`schedule`](Self::schedule), calling `on_frame` at
+    /// the start and at every output frame, and `on_step` after every step. The first error,
+    /// of a step or of a callback, ends the run and is returned.
+    pub fn run<E: From<CrowdError>>(
+        &mut self,
+        mut on_step: impl FnMut(&Self, &StepReport) -> Result<(), E>,
+        mut on_frame: impl FnMut(Frame<'_>) -> Result<(), E>,
+    ) -> Result<(), E> {
+        on_frame(self.frame())?;
+        for (mu, frame) in self.schedule() {
             let report = self.step(mu)?;
-            on_step(&report);
-            if (k + 1) % every == 0 || k + 1 == n_steps {
-                on_frame(self.frame());
+            on_step(self, &report)?;
+            if frame {
+                on_frame(self.frame())?;
             }
         }
         Ok(())

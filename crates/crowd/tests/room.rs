@@ -49,8 +49,8 @@ fn the_room_runs_to_the_horizon_without_overlap() {
     let bound = scene.solver.max_violation;
     let (mut frames, mut worst, mut max_reported) = (0, 0.0f64, 0.0f64);
     let mut last_t = 0.0;
-    sim.run(
-        |r| {
+    sim.run::<moreau_crowd::CrowdError>(
+        |_, r| {
             assert!(r.status.is_converged());
             assert!(
                 r.eps <= r.eps_target * (1.0 + 1e-12),
@@ -60,6 +60,7 @@ fn the_room_runs_to_the_horizon_without_overlap() {
                 r.eps_target
             );
             max_reported = max_reported.max(r.violation);
+            Ok(())
         },
         |f| {
             assert!(f.positions.iter().all(|x| x.is_finite()));
@@ -74,6 +75,7 @@ fn the_room_runs_to_the_horizon_without_overlap() {
             worst = worst.max(d).max(w);
             frames += 1;
             last_t = f.t;
+            Ok(())
         },
     )
     .unwrap();

@@ -1,0 +1,279 @@
+//! `moreau run`: a scene (or the scene stored in a run file) to its horizon, to an HDF5 file.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use moreau_crowd::{Scene, Simulation};
+use moreau_io::{Overwrite, RunFile, RunHeader, RunWriter};
+use serde::Serialize;
+
+/// Arguments of `moreau run`.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// The scene file (TOML). Give this or --from.
+    #[arg(required_unless_present = "from", conflicts_with = "from")]
+    scene: Option<PathBuf>,
+    /// Take the scene stored in this run file: the run reproduces that file.
+    #[arg(long, value_name = "RUN.h5")]
+    from: Option<PathBuf>,
+    /// The HDF5 run file to write. Without it the run only prints its summary.
+    #[arg(short, long, value_name = "OUT.h5")]
+    output: Option<PathBuf>,
+    /// Replace the output file if it exists (without this, an existing file is an error).
+    #[arg(long)]
+    force: bool,
+    /// No progress bar and no summary line (errors still go to stderr).
+    #[arg(short, long)]
+    quiet: bool,
+    /// Write a JSON summary of the run to this file ('-' for stdout).
+    #[arg(long, value_name = "FILE")]
+    summary_json: Option<PathBuf>,
+}
+
+/// What a run reports at its end (the `--summary-json` object and the file's `summary`).
+#[derive(Debug, Serialize)]
+struct Summary {
+    scene: String,
+    output: Option<String>,
+    status: String,
+    people: usize,
+    passed_exit: usize,
+    not_yet_out: usize,
+    steps: usize,
+    frames: usize,
+    simulated_time: f64,
+    wall_seconds: f64,
+    ms_per_step: f64,
+    steps_per_second: f64,
+    iterations_per_step: f64,
+    max_eps: f64,
+    max_violation: f64,
+    steps_redone: usize,
+    broad_phase: String,
+    solvers: Vec<(String, usize)>,
+}
+
+fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
+    match (&args.scene, &args.from) {
+        (Some(path), None) => Ok((Scene::from_file(path)?, path.display().to_string())),
+        (None, Some(run)) => {
+            let file = RunFile::open(run)?;
+            let text = file.text("scene")?;
+            let origin = format!("{} (attribute 'scene')", run.display());
+            Ok((Scene::from_toml(&text, &origin)?, origin))
+        }
+        _ => bail!("give a scene file or --from RUN.h5"),
+    }
+}
+
+fn solver_text(sim: &Simulation) -> String {
+    let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
+    format!(
+        "{settings}# in force: ε_k = eps_kappa · μ³, projection by APGD with Clarabel as fallback \
+         (or Clarabel alone), broad phase {:?}, up to 8 redone steps per step\n",
+        sim.broad_phase()
+    )
+}
+
+fn command_line() -> String {
+    std::env::args().collect::<Vec<_>>().join(" ")
+}
+
+/// Runs `moreau run`. Errors before the run starts are returned (exit 2, nothing written);
+/// a failure during the run is reported, recorded in the file, and gives exit code 1.
+pub fn run(args: &RunArgs) -> Result<ExitCode> {
+    let overwrite = if args.force {
+        Overwrite::Allowed
+    } else {
+        Overwrite::Never
+    };
+    if let Some(path) = &args.output {
+        // Before the (possibly long) set-up: a bad path fails at once.
+        moreau_io::check_output(path, overwrite)?;
+    }
+    let (scene, origin) = load_scene(args)?;
+    let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
+    let people = sim.total_people();
+    let frame = sim.frame();
+    if frame.ids.iter().enumerate().any(|(k, &id)| id as usize != k) {
+        bail!("internal: people are not numbered 0..{people} at the start");
+    }
+    let mut writer = match &args.output {
+        Some(path) => {
+            let header = RunHeader {
+                version: env!("CARGO_PKG_VERSION").into(),
+                scene_name: sim.scene().name.clone(),
+                scene: sim.scene().to_toml(),
+                seed: sim.scene().seed,
+                solver: solver_text(&sim),
+                command: command_line(),
+                wkt_geometry: sim.scene().wkt(),
+                fps: 1.0 / sim.scene().time.output_interval,
+                radii: frame.radii.to_vec(),
+            };
+            Some(RunWriter::create(path, &header, overwrite)?)
+        }
+        None => None,
+    };
+
+    let schedule = sim.schedule();
+    let bar = if args.quiet || !std::io::stderr().is_terminal() {
+        ProgressBar::hidden()
+    } else {
+        let bar = ProgressBar::with_draw_target(
+            Some(schedule.len() as u64),
+            ProgressDrawTarget::stderr_with_hz(10),
+        );
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:30}] {msg}  {per_sec:>12}  ETA {eta}",
+            )
+            .expect("a valid template")
+            .progress_chars("=> "),
+        );
+        bar
+    };
+
+    let start = Instant::now();
+    let mut stats = Stats::default();
+    let outcome = drive(&mut sim, &schedule, writer.as_mut(), &bar, &mut stats);
+    bar.finish_and_clear();
+    let wall = start.elapsed().as_secs_f64();
+
+    let status = match &outcome {
+        Ok(()) => "complete".to_string(),
+        Err(e) => format!("failed: {e:#}"),
+    };
+    let summary = Summary {
+        scene: origin,
+        output: args.output.as_ref().map(|p| p.display().to_string()),
+        status: status.clone(),
+        people,
+        passed_exit: sim.exit_times().len(),
+        not_yet_out: people - sim.exit_times().len(),
+        steps: stats.steps,
+        frames: stats.frames,
+        simulated_time: sim.time(),
+        wall_seconds: wall,
+        ms_per_step: 1e3 * wall / stats.steps.max(1) as f64,
+        steps_per_second: stats.steps as f64 / wall.max(1e-12),
+        iterations_per_step: stats.iterations as f64 / stats.steps.max(1) as f64,
+        max_eps: stats.max_eps,
+        max_violation: stats.max_violation,
+        steps_redone: stats.redone,
+        broad_phase: format!("{:?}", sim.broad_phase()),
+        solvers: stats.solvers.clone(),
+    };
+    let json = serde_json::to_string_pretty(&summary).expect("plain data");
+    let mut failed = outcome.err();
+    if let Some(w) = writer
+        && let Err(e) = w.finish(&status, &json)
+    {
+        failed.get_or_insert(e.into());
+    }
+    if let Some(target) = &args.summary_json {
+        write_summary(target, &json)?;
+    }
+    if !args.quiet {
+        println!(
+            "{}: {people} people, {} steps in {wall:.2} s ({:.2} ms/step); {} passed an exit; \
+             {:.0} solver iterations/step; max certified ε {:.2e} m², max violation {:.2e} m{}",
+            summary.scene,
+            stats.steps,
+            summary.ms_per_step,
+            summary.passed_exit,
+            summary.iterations_per_step,
+            stats.max_eps,
+            stats.max_violation,
+            args.output
+                .as_ref()
+                .map_or(String::new(), |p| format!("; wrote {}", p.display())),
+        );
+    }
+    match failed {
+        None => Ok(ExitCode::SUCCESS),
+        Some(e) => {
+            eprintln!(
+                "moreau: error: the run stopped at t = {} s: {e:#}",
+                sim.time()
+            );
+            Ok(ExitCode::from(1))
+        }
+    }
+}
+
+#[derive(Debug, Default)]
+struct Stats {
+    steps: usize,
+    frames: usize,
+    iterations: usize,
+    max_eps: f64,
+    max_violation: f64,
+    redone: usize,
+    solvers: Vec<(String, usize)>,
+}
+
+/// The step loop: steps, records steps and exits, writes frames, moves the bar.
+fn drive(
+    sim: &mut Simulation,
+    schedule: &[(f64, bool)],
+    mut writer: Option<&mut RunWriter>,
+    bar: &ProgressBar,
+    stats: &mut Stats,
+) -> Result<()> {
+    let people = sim.total_people();
+    if let Some(w) = writer.as_deref_mut() {
+        let f = sim.frame();
+        w.frame(f.t, f.ids, f.positions)?;
+    }
+    stats.frames += 1;
+    let mut exits_seen = 0;
+    for &(mu, frame) in schedule {
+        let report = sim.step(mu)?;
+        stats.steps += 1;
+        stats.iterations += report.iterations;
+        stats.max_eps = stats.max_eps.max(report.eps);
+        stats.max_violation = stats.max_violation.max(report.violation);
+        stats.redone += report.redone;
+        match stats.solvers.iter_mut().find(|(s, _)| s == report.solver) {
+            Some((_, n)) => *n += 1,
+            None => stats.solvers.push((report.solver.to_string(), 1)),
+        }
+        let exits = sim.exit_times();
+        if let Some(w) = writer.as_deref_mut() {
+            w.step(&report);
+            for &(id, t) in &exits[exits_seen..] {
+                w.exit(id, t)?;
+            }
+        }
+        exits_seen = exits.len();
+        if frame {
+            if let Some(w) = writer.as_deref_mut() {
+                let f = sim.frame();
+                w.frame(f.t, f.ids, f.positions)?;
+            }
+            stats.frames += 1;
+        }
+        bar.inc(1);
+        bar.set_message(format!(
+            "t = {:7.2} s  {:>7} people left",
+            report.t,
+            people - exits_seen
+        ));
+    }
+    Ok(())
+}
+
+fn write_summary(target: &Path, json: &str) -> Result<()> {
+    if target.as_os_str() == "-" {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{json}")?;
+        return Ok(());
+    }
+    std::fs::write(target, format!("{json}\n"))
+        .with_context(|| format!("writing the summary to '{}'", target.display()))
+}

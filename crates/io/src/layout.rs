@@ -1,0 +1,141 @@
+//! The names and row types of the run file, shared by the writer and the reader.
+
+use hdf5::H5Type;
+use hdf5::types::FixedAscii;
+use moreau_core::StepReport;
+
+/// The value of the root attribute `format`; bumped when the layout changes.
+pub const FORMAT: &str = "moreau-run/1";
+
+pub(crate) const TRAJECTORY: &str = "trajectory";
+pub(crate) const FRAME_TIME: &str = "frames/time";
+pub(crate) const FRAME_COUNT: &str = "frames/count";
+pub(crate) const FRAME_POSITIONS: &str = "frames/positions";
+pub(crate) const PEOPLE_ID: &str = "people/id";
+pub(crate) const PEOPLE_RADIUS: &str = "people/radius";
+pub(crate) const PEOPLE_EXIT_TIME: &str = "people/exit_time";
+pub(crate) const EXITS: &str = "exits";
+pub(crate) const STEPS: &str = "steps";
+
+/// Rows per chunk of the appended tables (32 bytes a trajectory row: 256 KiB chunks).
+pub(crate) const ROWS_PER_CHUNK: usize = 8192;
+/// People per chunk of `frames/positions` (one frame, 16 bytes a person: 512 KiB chunks).
+pub(crate) const PEOPLE_PER_CHUNK: usize = 32768;
+/// Deflate level: shuffled float64 gain little above this and cost much more time.
+pub(crate) const DEFLATE: u8 = 3;
+
+/// One row of `/trajectory` (the Pedestrian Dynamics Data Archive columns).
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct TrajectoryRow {
+    /// Person id.
+    pub id: i64,
+    /// Output frame, from 0.
+    pub frame: i64,
+    /// Position (m).
+    pub x: f64,
+    /// Position (m).
+    pub y: f64,
+}
+
+/// One row of `/exits`.
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct ExitRow {
+    /// Person id.
+    pub id: i64,
+    /// Time the person passed an exit (s).
+    pub t: f64,
+}
+
+/// One row of `/steps`: a [`StepReport`] as stored.
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct StepRow {
+    /// Step index from 0.
+    pub step: i64,
+    /// Time at the end of the step (s).
+    pub t: f64,
+    /// Step size `μ` (s).
+    pub mu: f64,
+    /// The `ε_k` asked for (m²).
+    pub eps_target: f64,
+    /// The certified `ε` of the accepted projection (m²).
+    pub eps: f64,
+    /// The worst violation of the linearized constraints (m).
+    pub violation: f64,
+    /// Solver iterations, over all attempts.
+    pub iterations: i64,
+    /// Constraint rows assembled.
+    pub assembled: i64,
+    /// Rows active at the answer.
+    pub active: i64,
+    /// Times the step was redone with a wider margin.
+    pub redone: i64,
+    /// How the solve ended (`converged`, ...).
+    pub status: FixedAscii<16>,
+    /// The solver whose answer was accepted.
+    pub solver: FixedAscii<16>,
+    /// Stage wall times (s).
+    pub time_predict: f64,
+    /// Broad phase and assembly (s).
+    pub time_assemble: f64,
+    /// Projection solve (s).
+    pub time_solve: f64,
+    /// Certificate and post-step check (s).
+    pub time_verify: f64,
+    /// The whole step (s).
+    pub time_total: f64,
+}
+
+fn ascii16(s: &str) -> FixedAscii<16> {
+    let s: String = s.chars().filter(char::is_ascii).take(16).collect();
+    FixedAscii::from_ascii(&s).expect("ASCII, at most 16 bytes")
+}
+
+impl From<&StepReport> for StepRow {
+    fn from(r: &StepReport) -> Self {
+        Self {
+            step: r.step as i64,
+            t: r.t,
+            mu: r.mu,
+            eps_target: r.eps_target,
+            eps: r.eps,
+            violation: r.violation,
+            iterations: r.iterations as i64,
+            assembled: r.assembled as i64,
+            active: r.active as i64,
+            redone: r.redone as i64,
+            status: ascii16(r.status.as_str()),
+            solver: ascii16(r.solver),
+            time_predict: r.timings.predict,
+            time_assemble: r.timings.assemble,
+            time_solve: r.timings.solve,
+            time_verify: r.timings.verify,
+            time_total: r.timings.total,
+        }
+    }
+}
+
+/// What a run file says about its run, written when it is created.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunHeader {
+    /// `moreau_version`: the version of the program that wrote the file.
+    pub version: String,
+    /// `scene_name`.
+    pub scene_name: String,
+    /// `scene`: the whole scene (TOML); running it again reproduces the file.
+    pub scene: String,
+    /// `seed`: the seed of the random placement.
+    pub seed: u64,
+    /// `solver`: the solver settings in force (text).
+    pub solver: String,
+    /// `command`: the command line that made the file.
+    pub command: String,
+    /// `wkt_geometry`: the walkable area (WKT).
+    pub wkt_geometry: String,
+    /// `trajectory.fps`: output frames per second.
+    pub fps: f64,
+    /// `people/radius`: the radius of person `id`, for every id `0..n`.
+    pub radii: Vec<f64>,
+}

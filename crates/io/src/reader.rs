@@ -1,0 +1,232 @@
+//! Reading a run file back: its header, frames, steps and a description of what it holds.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use hdf5::types::VarLenUnicode;
+use hdf5::{Dataset, File, H5Type};
+
+use crate::error::{Context, IoError};
+use crate::layout::*;
+
+/// An open run file (read only).
+#[derive(Debug)]
+pub struct RunFile {
+    path: PathBuf,
+    file: File,
+}
+
+impl RunFile {
+    /// Opens `path`; fails unless it is a moreau run file.
+    pub fn open(path: &Path) -> Result<Self, IoError> {
+        if !path.is_file() {
+            return Err(IoError::Layout {
+                path: path.to_path_buf(),
+                what: "no such file".into(),
+            });
+        }
+        let file = File::open(path).at(path, || "opening".into())?;
+        let me = Self {
+            path: path.to_path_buf(),
+            file,
+        };
+        let format = me.text("format")?;
+        if format != FORMAT {
+            return Err(me.layout(format!(
+                "format '{format}', this moreau reads '{FORMAT}'"
+            )));
+        }
+        Ok(me)
+    }
+
+    fn layout(&self, what: String) -> IoError {
+        IoError::Layout {
+            path: self.path.clone(),
+            what,
+        }
+    }
+
+    /// A root text attribute.
+    pub fn text(&self, name: &str) -> Result<String, IoError> {
+        let attr = self
+            .file
+            .attr(name)
+            .map_err(|_| self.layout(format!("no root attribute '{name}'")))?;
+        let value: VarLenUnicode = attr
+            .read_scalar()
+            .at(&self.path, || format!("reading attribute '{name}'"))?;
+        Ok(value.as_str().to_string())
+    }
+
+    fn dataset(&self, name: &str) -> Result<Dataset, IoError> {
+        self.file
+            .dataset(name)
+            .map_err(|_| self.layout(format!("no dataset '{name}'")))
+    }
+
+    fn read<T: H5Type>(&self, name: &str) -> Result<Vec<T>, IoError> {
+        self.dataset(name)?
+            .read_raw()
+            .at(&self.path, || format!("reading '{name}'"))
+    }
+
+    /// The header the writer was given.
+    pub fn header(&self) -> Result<RunHeader, IoError> {
+        let seed = self
+            .file
+            .attr("seed")
+            .and_then(|a| a.read_scalar::<u64>())
+            .at(&self.path, || "reading attribute 'seed'".into())?;
+        let fps = self
+            .dataset(TRAJECTORY)?
+            .attr("fps")
+            .and_then(|a| a.read_scalar::<f64>())
+            .at(&self.path, || "reading attribute 'trajectory.fps'".into())?;
+        Ok(RunHeader {
+            version: self.text("moreau_version")?,
+            scene_name: self.text("scene_name")?,
+            scene: self.text("scene")?,
+            seed,
+            solver: self.text("solver")?,
+            command: self.text("command")?,
+            wkt_geometry: self.text("wkt_geometry")?,
+            fps,
+            radii: self.read(PEOPLE_RADIUS)?,
+        })
+    }
+
+    /// `running` (the writer has not finished: still going, or killed), `complete`, or
+    /// `failed: …`.
+    pub fn status(&self) -> Result<String, IoError> {
+        self.text("status")
+    }
+
+    /// The run's summary (JSON; `{}` until the run ends).
+    pub fn summary(&self) -> Result<String, IoError> {
+        self.text("summary")
+    }
+
+    /// The time of every output frame.
+    pub fn frame_times(&self) -> Result<Vec<f64>, IoError> {
+        self.read(FRAME_TIME)
+    }
+
+    /// The number of people present in every output frame.
+    pub fn frame_counts(&self) -> Result<Vec<i64>, IoError> {
+        self.read(FRAME_COUNT)
+    }
+
+    /// Positions `[x0, y0, x1, y1, ...]` by person id at output frame `frame` (NaN: absent).
+    pub fn positions(&self, frame: usize) -> Result<Vec<f64>, IoError> {
+        let ds = self.dataset(FRAME_POSITIONS)?;
+        let frames = ds.shape().first().copied().unwrap_or(0);
+        if frame >= frames {
+            return Err(self.layout(format!("frame {frame} of {frames}")));
+        }
+        let a = ds
+            .read_slice::<f64, _, ndarray::Ix2>((frame, .., ..))
+            .at(&self.path, || format!("reading frame {frame}"))?;
+        Ok(a.iter().copied().collect())
+    }
+
+    /// The `/trajectory` rows.
+    pub fn trajectory(&self) -> Result<Vec<TrajectoryRow>, IoError> {
+        self.read(TRAJECTORY)
+    }
+
+    /// The `/steps` rows.
+    pub fn steps(&self) -> Result<Vec<StepRow>, IoError> {
+        self.read(STEPS)
+    }
+
+    /// The `/exits` rows.
+    pub fn exits(&self) -> Result<Vec<ExitRow>, IoError> {
+        self.read(EXITS)
+    }
+
+    /// Every dataset with its shape, type, chunks and filters, then the root attributes
+    /// (long texts shortened), as `moreau inspect` prints it.
+    pub fn describe(&self) -> Result<String, IoError> {
+        let mut out = String::new();
+        let mut names = Vec::new();
+        collect(&self.file, "", &mut names).at(&self.path, || "listing".into())?;
+        let _ = writeln!(out, "datasets:");
+        for name in names {
+            let ds = self.dataset(&name)?;
+            let dtype = ds
+                .dtype()
+                .and_then(|t| t.to_descriptor())
+                .map(|d| describe_type(&d))
+                .unwrap_or_else(|_| "?".into());
+            let chunk = ds.chunk().map_or("contiguous".into(), |c| format!("chunks {c:?}"));
+            let filters: Vec<String> = ds.filters().iter().map(|f| format!("{f:?}")).collect();
+            let _ = writeln!(
+                out,
+                "  /{name:<20} {:<14} {dtype}  [{chunk}{}]",
+                format!("{:?}", ds.shape()),
+                if filters.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {}", filters.join(", "))
+                }
+            );
+            for attr in ds.attr_names().unwrap_or_default() {
+                let _ = writeln!(out, "      @{attr}");
+            }
+        }
+        let _ = writeln!(out, "attributes:");
+        let mut attrs = self.file.attr_names().at(&self.path, || "listing".into())?;
+        attrs.sort();
+        for name in attrs {
+            let value = match self.text(&name) {
+                Ok(v) => shorten(&v),
+                Err(_) => self
+                    .file
+                    .attr(&name)
+                    .and_then(|a| a.read_scalar::<u64>())
+                    .map_or("?".into(), |v| v.to_string()),
+            };
+            let _ = writeln!(out, "  @{name:<15} {value}");
+        }
+        Ok(out)
+    }
+}
+
+fn collect(group: &hdf5::Group, prefix: &str, out: &mut Vec<String>) -> hdf5::Result<()> {
+    let mut names = group.member_names()?;
+    names.sort();
+    for name in names {
+        let full = format!("{prefix}{name}");
+        if let Ok(g) = group.group(&name) {
+            collect(&g, &format!("{full}/"), out)?;
+        } else {
+            out.push(full);
+        }
+    }
+    Ok(())
+}
+
+fn describe_type(t: &hdf5::types::TypeDescriptor) -> String {
+    use hdf5::types::TypeDescriptor as T;
+    match t {
+        T::Compound(c) => {
+            let fields: Vec<String> = c
+                .fields
+                .iter()
+                .map(|f| format!("{}: {}", f.name, describe_type(&f.ty)))
+                .collect();
+            format!("{{{}}}", fields.join(", "))
+        }
+        other => format!("{other}"),
+    }
+}
+
+fn shorten(s: &str) -> String {
+    let one_line = s.replace('\n', " ⏎ ");
+    if one_line.chars().count() > 100 {
+        let head: String = one_line.chars().take(97).collect();
+        format!("{head}... ({} bytes)", s.len())
+    } else {
+        one_line
+    }
+}

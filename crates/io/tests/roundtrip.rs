@@ -1,0 +1,120 @@
+//! The run file reads back what was written, refuses to overwrite, and leaves nothing behind
+//! when it cannot be created.
+
+use std::path::PathBuf;
+
+use moreau_core::{SolveStatus, StepReport};
+use moreau_io::{IoError, Overwrite, RunFile, RunHeader, RunWriter};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("moreau-io-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    let _ = std::fs::remove_file(&p);
+    p
+}
+
+fn header(n: usize) -> RunHeader {
+    RunHeader {
+        version: "0.1.0".into(),
+        scene_name: "unit".into(),
+        scene: "name = \"unit\"\n# with a newline".into(),
+        seed: 42,
+        solver: "kind = \"apgd\"".into(),
+        command: "moreau run unit.toml".into(),
+        wkt_geometry: "POLYGON ((0 0, 1 0, 1 1, 0 1, 0 0))".into(),
+        fps: 10.0,
+        radii: (0..n).map(|i| 0.1 + 0.01 * i as f64).collect(),
+    }
+}
+
+fn report(step: usize, t: f64) -> StepReport {
+    StepReport {
+        step,
+        t,
+        mu: 0.05,
+        eps_target: 1e-6,
+        eps: 1e-7 * step as f64,
+        violation: 1e-9,
+        iterations: 10 + step,
+        assembled: 3,
+        active: 1,
+        redone: 0,
+        status: SolveStatus::Converged,
+        solver: "apgd",
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_run_file_reads_back_what_was_written() {
+    let path = scratch("roundtrip.h5");
+    let h = header(3);
+    let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+    w.frame(0.0, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6]).unwrap();
+    w.step(&report(0, 0.05));
+    w.step(&report(1, 0.1));
+    w.exit(1, 0.07).unwrap();
+    // Person 1 has left: frames hold the others, the dense array NaN in its place.
+    w.frame(0.1, &[0, 2], &[0.11, 0.21, 0.51, 0.61]).unwrap();
+    w.step(&report(2, 0.15));
+    w.finish("complete", "{\"steps\": 3}").unwrap();
+
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.header().unwrap(), h);
+    assert_eq!(f.status().unwrap(), "complete");
+    assert_eq!(f.summary().unwrap(), "{\"steps\": 3}");
+    assert_eq!(f.frame_times().unwrap(), vec![0.0, 0.1]);
+    assert_eq!(f.frame_counts().unwrap(), vec![3, 2]);
+    let p1 = f.positions(1).unwrap();
+    assert_eq!(p1[0..2], [0.11, 0.21]);
+    assert!(p1[2].is_nan() && p1[3].is_nan());
+    assert_eq!(p1[4..6], [0.51, 0.61]);
+    let traj = f.trajectory().unwrap();
+    assert_eq!(traj.len(), 5);
+    assert_eq!((traj[3].id, traj[3].frame, traj[3].x), (0, 1, 0.11));
+    let steps = f.steps().unwrap();
+    assert_eq!(steps.len(), 3);
+    assert_eq!(steps[2].iterations, 12);
+    assert_eq!(steps[1].status.as_str(), "converged");
+    assert_eq!(steps[1].solver.as_str(), "apgd");
+    let exits = f.exits().unwrap();
+    assert_eq!((exits.len(), exits[0].id, exits[0].t), (1, 1, 0.07));
+    let text = f.describe().unwrap();
+    assert!(text.contains("/trajectory") && text.contains("@fps") && text.contains("@wkt_geometry"));
+}
+
+#[test]
+fn an_existing_output_is_never_overwritten_without_permission() {
+    let path = scratch("exists.h5");
+    std::fs::write(&path, b"precious").unwrap();
+    let err = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap_err();
+    assert!(matches!(err, IoError::Exists { .. }), "{err}");
+    assert!(err.to_string().contains("--force"), "{err}");
+    assert_eq!(std::fs::read(&path).unwrap(), b"precious");
+    let w = RunWriter::create(&path, &header(2), Overwrite::Allowed).unwrap();
+    w.finish("complete", "{}").unwrap();
+    assert_eq!(RunFile::open(&path).unwrap().status().unwrap(), "complete");
+}
+
+#[test]
+fn a_bad_output_path_names_the_problem_and_creates_nothing() {
+    let dir = scratch("no-such-dir");
+    let path = dir.join("out.h5");
+    let err = RunWriter::create(&path, &header(2), Overwrite::Allowed).unwrap_err();
+    assert!(err.to_string().contains("does not exist"), "{err}");
+    assert!(!dir.exists());
+    let dir = scratch("a-directory");
+    std::fs::create_dir_all(&dir).unwrap();
+    let err = RunWriter::create(&dir, &header(2), Overwrite::Allowed).unwrap_err();
+    assert!(err.to_string().contains("is a directory"), "{err}");
+}
+
+#[test]
+fn a_frame_with_an_unknown_person_is_refused() {
+    let path = scratch("unknown.h5");
+    let mut w = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap();
+    let err = w.frame(0.0, &[0, 5], &[0.0, 0.0, 1.0, 1.0]).unwrap_err();
+    assert!(err.to_string().contains("person 5"), "{err}");
+    assert!(w.exit(7, 1.0).is_err());
+}
