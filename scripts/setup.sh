@@ -3,11 +3,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# System packages (HDF5 for the output writer, pkg-config to find it).
+# System packages (HDF5 for the output writer, pkg-config to find it, Python for analysis).
 missing=()
 for pkg in pkg-config libhdf5-dev; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
+command -v python3 >/dev/null 2>&1 || missing+=(python3)
+# Debian's python3 makes venvs only with python3-venv (ensurepip).
+if ! python3 -c "import ensurepip" >/dev/null 2>&1; then missing+=(python3-venv); fi
 if ((${#missing[@]})); then
   sudo=""
   [ "$(id -u)" = 0 ] || sudo="sudo"
@@ -23,3 +26,15 @@ fi
 
 # The Rust build (the binary ends up in target/release/moreau).
 cargo build --release --workspace --locked
+
+# The Python venv (h5py, PedPy, matplotlib, pytest), reinstalled when the requirements change.
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  python3 -m venv .venv
+fi
+want=$(sha256sum python/requirements.txt | cut -d' ' -f1)
+if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$want" ]; then
+  echo "setup: installing python/requirements.txt into .venv"
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check -r python/requirements.txt
+  echo "$want" > .venv/.requirements.sha256
+fi

@@ -97,7 +97,10 @@ pub fn check_output(path: &Path, overwrite: Overwrite) -> Result<(), IoError> {
 
 impl RunWriter {
     /// Creates the file, its datasets and its attributes, and flushes it (status `running`).
-    /// Nothing is created when this fails.
+    /// The file is laid out under a temporary name in the same directory and moved to `path`
+    /// only when complete, so `path` never holds a half-made file, and with
+    /// [`Overwrite::Allowed`] the old file stays whole until the new one replaces it.
+    /// Nothing is left behind when this fails.
     pub fn create(path: &Path, header: &RunHeader, overwrite: Overwrite) -> Result<Self, IoError> {
         check_output(path, overwrite)?;
         if !(header.fps > 0.0 && header.fps.is_finite()) {
@@ -106,22 +109,22 @@ impl RunWriter {
                 what: format!("fps must be > 0 and finite, got {}", header.fps),
             });
         }
-        let file = match overwrite {
-            Overwrite::Never => File::create_excl(path),
-            Overwrite::Allowed => File::create(path),
+        let name = path.file_name().map_or("run".into(), |n| n.to_string_lossy());
+        let partial = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+        let created = File::create_excl(&partial)
+            .map_err(|e| IoError::Create {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            })
+            .and_then(|file| Self::layout(path, file, header))
+            .and_then(|writer| {
+                publish(&partial, path, overwrite)?;
+                Ok(writer)
+            });
+        if created.is_err() {
+            let _ = std::fs::remove_file(&partial);
         }
-        .map_err(|e| IoError::Create {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        match Self::layout(path, file, header) {
-            Ok(w) => Ok(w),
-            Err(e) => {
-                // A half-made file is junk: remove it.
-                let _ = std::fs::remove_file(path);
-                Err(e)
-            }
-        }
+        created
     }
 
     fn layout(path: &Path, file: File, header: &RunHeader) -> Result<Self, IoError> {
@@ -341,6 +344,29 @@ impl RunWriter {
         } = self;
         drop((trajectory, frame_time, frame_count, positions, exits, steps));
         file.close().at(&path, || "closing".into())
+    }
+}
+
+/// Moves the laid-out file `from` to `to`: never over an existing file unless allowed.
+fn publish(from: &Path, to: &Path, overwrite: Overwrite) -> Result<(), IoError> {
+    let failed = |e: std::io::Error| IoError::Create {
+        path: to.to_path_buf(),
+        reason: e.to_string(),
+    };
+    match overwrite {
+        Overwrite::Allowed => std::fs::rename(from, to).map_err(failed),
+        // A hard link fails if `to` exists, atomically; then drop the temporary name.
+        Overwrite::Never => match std::fs::hard_link(from, to) {
+            Ok(()) => std::fs::remove_file(from).map_err(failed),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(IoError::Exists {
+                path: to.to_path_buf(),
+            }),
+            // File systems without hard links: check, then rename.
+            Err(_) if !to.exists() => std::fs::rename(from, to).map_err(failed),
+            Err(_) => Err(IoError::Exists {
+                path: to.to_path_buf(),
+            }),
+        },
     }
 }
 

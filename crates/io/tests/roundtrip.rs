@@ -80,6 +80,13 @@ fn a_run_file_reads_back_what_was_written() {
     assert_eq!(steps[1].solver.as_str(), "apgd");
     let exits = f.exits().unwrap();
     assert_eq!((exits.len(), exits[0].id, exits[0].t), (1, 1, 0.07));
+    // The temporary name used while laying out is gone.
+    let dir = path.parent().unwrap();
+    assert!(
+        std::fs::read_dir(dir)
+            .unwrap()
+            .all(|e| !e.unwrap().file_name().to_string_lossy().ends_with(".partial"))
+    );
     let text = f.describe().unwrap();
     assert!(text.contains("/trajectory") && text.contains("@fps") && text.contains("@wkt_geometry"));
 }

@@ -1,0 +1,123 @@
+"""Reading a moreau run file (HDF5) into numpy, and the scene geometry PedPy analyses need.
+
+The layout is written by `crates/io` (see its module documentation). `load` reads the dense
+arrays; PedPy reads the same file directly with `load_trajectory_from_ped_data_archive_hdf5`.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import tomllib
+from dataclasses import dataclass
+
+import h5py
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+@dataclass
+class Run:
+    """A run file read into memory."""
+
+    path: pathlib.Path
+    attrs: dict
+    scene: dict
+    time: np.ndarray  # (F,) time of each output frame
+    count: np.ndarray  # (F,) people present in each frame
+    positions: np.ndarray  # (F, N, 2) by person id, NaN when absent
+    radius: np.ndarray  # (N,)
+    steps: np.ndarray  # structured, one row per step
+    exits: np.ndarray  # structured (id, t), one row per exit passage
+    trajectory: np.ndarray  # structured (id, frame, x, y)
+
+    @property
+    def status(self) -> str:
+        return self.attrs["status"]
+
+    @property
+    def summary(self) -> dict:
+        return json.loads(self.attrs["summary"])
+
+    @property
+    def fps(self) -> float:
+        return float(self.attrs["fps"])
+
+
+def _text(value) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def load(path, *, locking: bool | None = None) -> Run:
+    """Reads the whole run file (`locking=False` to read a file another process writes)."""
+    path = pathlib.Path(path)
+    kwargs = {} if locking is None else {"locking": locking}
+    with h5py.File(path, "r", **kwargs) as f:
+        attrs = {k: (_text(v) if isinstance(v, (str, bytes)) else v) for k, v in f.attrs.items()}
+        attrs["fps"] = float(f["trajectory"].attrs["fps"])
+        frames = f["frames/time"].shape[0]
+        return Run(
+            path=path,
+            attrs=attrs,
+            scene=tomllib.loads(attrs["scene"]),
+            time=f["frames/time"][:],
+            count=f["frames/count"][:frames],
+            positions=f["frames/positions"][:frames],
+            radius=f["people/radius"][:],
+            steps=f["steps"][:],
+            exits=f["exits"][:],
+            trajectory=f["trajectory"][:],
+        )
+
+
+def exit_line(scene: dict, index: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A measurement line through exit `index`: its segment, or the mid-line of its area's
+    bounding box along the box's longer side."""
+    exit_ = scene["exits"][index]
+    if "segment" in exit_:
+        a, b = exit_["segment"]
+        return (tuple(a), tuple(b))
+    pts = np.asarray(exit_["area"], dtype=float)
+    (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
+    if y1 - y0 >= x1 - x0:
+        xm = 0.5 * (x0 + x1)
+        return ((xm, y0), (xm, y1))
+    ym = 0.5 * (y0 + y1)
+    return ((x0, ym), (x1, ym))
+
+
+def upstream_area(scene: dict, depth: float = 2.0, index: int = 0) -> list[tuple[float, float]]:
+    """A `depth` × `depth` square in front of exit `index`, on the side people start from
+    (the side of the first group's spawn region or positions)."""
+    (ax, ay), (bx, by) = exit_line(scene, index)
+    mid = np.array([(ax + bx) / 2, (ay + by) / 2])
+    tangent = np.array([bx - ax, by - ay])
+    tangent /= np.linalg.norm(tangent)
+    normal = np.array([-tangent[1], tangent[0]])
+    group = scene["groups"][0]
+    start = np.asarray(group.get("spawn") or group.get("positions"), dtype=float).mean(axis=0)
+    if np.dot(start - mid, normal) < 0:
+        normal = -normal
+    h = depth / 2
+    corners = [mid - h * tangent, mid + h * tangent, mid + h * tangent + depth * normal,
+               mid - h * tangent + depth * normal]
+    return [tuple(map(float, c)) for c in corners]
+
+
+def min_gaps(run: Run) -> np.ndarray:
+    """The smallest gap |x_i − x_j| − r_i − r_j between two people present, per frame
+    (+inf with fewer than two people). Found with a k-d tree, independently of moreau."""
+    out = np.full(len(run.time), np.inf)
+    reach = 2.0 * float(run.radius.max()) if len(run.radius) else 0.0
+    for k, frame in enumerate(run.positions):
+        present = np.flatnonzero(~np.isnan(frame[:, 0]))
+        if len(present) < 2:
+            continue
+        pts = frame[present]
+        pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
+        if len(pairs) == 0:
+            continue
+        i, j = present[pairs[:, 0]], present[pairs[:, 1]]
+        d = np.linalg.norm(frame[i] - frame[j], axis=1) - run.radius[i] - run.radius[j]
+        out[k] = d.min()
+    return out

@@ -1,0 +1,144 @@
+"""The driver binary from a script's point of view: exit codes, refusals that keep files
+intact, a run killed mid-way, `inspect` and `--help`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+
+import h5py
+import numpy as np
+import pedpy
+
+import moreau_run
+from conftest import DENSE, MOREAU, ROOM, moreau
+
+
+def test_an_existing_output_is_not_overwritten_without_force(tmp_path):
+    out = tmp_path / "taken.h5"
+    out.write_bytes(b"precious results")
+    proc = moreau("run", ROOM, "-o", out, "--quiet", check=False)
+    assert proc.returncode == 2
+    assert "already exists" in proc.stderr and "--force" in proc.stderr
+    assert out.read_bytes() == b"precious results"
+
+
+def test_force_replaces_an_existing_output(tmp_path):
+    out = tmp_path / "taken.h5"
+    out.write_bytes(b"old")
+    short = tmp_path / "short.toml"
+    short.write_text(ROOM.read_text().replace("horizon = 20.0", "horizon = 0.5"))
+    moreau("run", short, "-o", out, "--quiet", "--force")
+    assert moreau_run.load(out).status == "complete"
+
+
+def test_a_bad_output_path_is_a_clear_error_and_leaves_nothing(tmp_path):
+    missing = tmp_path / "no" / "such" / "dir" / "out.h5"
+    proc = moreau("run", ROOM, "-o", missing, "--quiet", check=False)
+    assert proc.returncode == 2
+    assert str(missing.parent) in proc.stderr and "does not exist" in proc.stderr
+    assert not (tmp_path / "no").exists()
+    proc = moreau("run", ROOM, "-o", tmp_path, "--quiet", check=False)
+    assert proc.returncode == 2 and "is a directory" in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_bad_scene_is_refused_before_any_output(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(ROOM.read_text().replace("radius = 0.2", "radius = -0.2"))
+    out = tmp_path / "out.h5"
+    proc = moreau("run", bad, "-o", out, check=False)
+    assert proc.returncode == 2
+    assert "radius" in proc.stderr and "-0.2" in proc.stderr
+    assert not out.exists()
+
+
+def test_a_run_killed_mid_way_leaves_a_readable_file(tmp_path):
+    out = tmp_path / "killed.h5"
+    proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    frames, deadline = 0, time.monotonic() + 300
+    try:
+        while frames < 5 and time.monotonic() < deadline:
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.2)
+            try:
+                with h5py.File(out, "r", locking=False) as f:
+                    frames = f["frames/time"].shape[0]
+            except (OSError, KeyError):
+                pass  # not created yet, or caught between two writes
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    assert frames >= 5, "no frames written in time"
+
+    run = moreau_run.load(out)
+    assert run.status == "running"
+    assert len(run.time) >= 5
+    per_frame = np.bincount(run.trajectory["frame"], minlength=len(run.time))
+    np.testing.assert_array_equal(per_frame, run.count)
+    assert len(run.steps) >= 2 * (len(run.time) - 1)  # 2 steps per frame (0.05 s, 10 fps)
+    assert not np.isnan(run.positions[-1][: run.count[-1]]).all()
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=out)
+    assert traj.data["frame"].max() == len(run.time) - 1
+    pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=out)
+    # inspect reads it too, and says the run did not finish.
+    assert "status: running" in moreau("inspect", out).stdout
+
+
+def test_inspect_describes_a_file(room_run):
+    text = moreau("inspect", room_run).stdout
+    for needle in ("room-150", "status: complete", "150 people", "201 frames", "/trajectory",
+                   "/frames/positions", "@wkt_geometry", "400 steps"):
+        assert needle in text, needle
+
+
+def test_inspect_refuses_a_file_that_is_not_a_run(tmp_path):
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f["x"] = [1, 2, 3]
+    proc = moreau("inspect", other, check=False)
+    assert proc.returncode == 2 and "format" in proc.stderr
+
+
+def test_help_is_complete():
+    top = moreau("--help").stdout
+    for needle in ("run", "inspect", "example81", "Exit codes"):
+        assert needle in top, needle
+    run_help = moreau("run", "--help").stdout
+    for flag in ("--output", "--force", "--from", "--quiet", "--summary-json", "Exit codes"):
+        assert flag in run_help, flag
+    assert moreau("--version").stdout.startswith("moreau ")
+
+
+def test_usage_errors_exit_2():
+    assert moreau("run", check=False).returncode == 2
+    assert moreau("frobnicate", check=False).returncode == 2
+
+
+def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
+    """SIGKILL at random moments (some during a frame's write): the file always opens and is
+    a whole number of frames."""
+    rng = np.random.default_rng(7)
+    for k in range(6):
+        out = tmp_path / f"kill-{k}.h5"
+        proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 300
+        try:
+            while not out.exists() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            time.sleep(float(rng.uniform(0.0, 1.5)))
+        finally:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+        run = moreau_run.load(out)
+        assert run.status == "running"
+        per_frame = np.bincount(run.trajectory["frame"], minlength=len(run.time))
+        np.testing.assert_array_equal(per_frame, run.count)
+        assert len(run.positions) == len(run.time)

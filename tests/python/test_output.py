@@ -1,0 +1,155 @@
+"""The HDF5 run file as Python users meet it: h5py and PedPy open it as is, its parts agree
+with each other, nobody overlaps, and the file reproduces its run."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pedpy
+import pytest
+import shapely
+
+import moreau_run
+from conftest import moreau
+
+
+def test_h5py_opens_the_layout_with_its_attributes(room_run):
+    with h5py.File(room_run, "r") as f:
+        for name in ("trajectory", "frames/time", "frames/count", "frames/positions",
+                     "people/id", "people/radius", "people/exit_time", "exits", "steps"):
+            assert name in f, name
+        assert f["trajectory"].dtype.names[:4] == ("id", "frame", "x", "y")
+        assert f["trajectory"].dtype["id"] == np.int64
+        assert f["trajectory"].dtype["x"] == np.float64
+        assert f["trajectory"].attrs["fps"] == pytest.approx(10.0)
+        for key in ("wkt_geometry", "scene", "solver", "moreau_version", "seed", "status",
+                    "summary", "command", "format"):
+            assert key in f.attrs, key
+        assert f.attrs["seed"] == 20130701
+        assert f.attrs["status"] == "complete"
+        assert f["frames/positions"].compression == "gzip"
+        assert f["frames/positions"].shuffle
+        assert f["frames/positions"].shape == (201, 150, 2)
+
+
+def test_frames_ids_and_trajectory_agree(room_run):
+    run = moreau_run.load(room_run)
+    frames = len(run.time)
+    assert frames == 201
+    np.testing.assert_allclose(run.time, np.arange(frames) / run.fps, atol=1e-9)
+    traj = run.trajectory
+    # Rows per frame are the people present, and frames run 0..F-1 in order.
+    per_frame = np.bincount(traj["frame"], minlength=frames)
+    np.testing.assert_array_equal(per_frame, run.count)
+    assert np.all(np.diff(traj["frame"]) >= 0)
+    assert set(np.unique(traj["id"])) <= set(range(len(run.radius)))
+    # Every trajectory row is the dense array at (frame, id); every other entry is NaN.
+    dense = run.positions[traj["frame"], traj["id"]]
+    np.testing.assert_array_equal(dense[:, 0], traj["x"])
+    np.testing.assert_array_equal(dense[:, 1], traj["y"])
+    assert np.isnan(run.positions).any(axis=2).sum() == frames * len(run.radius) - len(traj)
+    # The room keeps everyone (exits continue to a target area).
+    assert np.all(run.count == 150)
+
+
+def test_exit_records_agree_with_the_dense_exit_times(room_run):
+    run = moreau_run.load(room_run)
+    with h5py.File(room_run, "r") as f:
+        exit_time = f["people/exit_time"][:]
+    assert len(np.unique(run.exits["id"])) == len(run.exits)
+    np.testing.assert_array_equal(exit_time[run.exits["id"]], run.exits["t"])
+    assert np.isnan(exit_time).sum() == len(run.radius) - len(run.exits)
+    assert run.summary["passed_exit"] == len(run.exits) > 100
+
+
+def test_no_overlap_in_any_frame(room_run):
+    run = moreau_run.load(room_run)
+    bound = float(run.scene["solver"]["max_violation"])
+    worst_step = float(run.steps["violation"].max())
+    assert worst_step <= bound
+    gaps = moreau_run.min_gaps(run)
+    # Linearized gaps under-estimate the (convex) true gaps, so a frame overlaps by at most
+    # the worst certified violation of the steps (plus rounding).
+    assert gaps.min() >= -worst_step - 1e-12, gaps.min()
+    # And nobody crosses a wall: distance from each centre to the walls ≥ radius − bound.
+    walkable = shapely.from_wkt(run.attrs["wkt_geometry"])
+    boundary = walkable.boundary
+    for frame in run.positions[:: 10]:
+        pts = shapely.points(frame)
+        assert shapely.contains(walkable, pts).all()
+        d = shapely.distance(boundary, pts)
+        assert (d - run.radius).min() >= -bound - 1e-12
+
+
+def test_the_step_table_is_honest(room_run):
+    run = moreau_run.load(room_run)
+    s = run.steps
+    assert len(s) == 400
+    assert np.all(s["status"] == b"converged")
+    assert np.all(s["eps"] <= s["eps_target"] * (1 + 1e-12))
+    np.testing.assert_allclose(s["eps_target"], 1e-3 * s["mu"] ** 3, rtol=1e-12)
+    assert s["mu"].sum() == pytest.approx(20.0, abs=1e-9)
+    assert np.all(np.diff(s["t"]) > 0)
+    assert np.all(s["time_total"] >= s["time_solve"])
+    assert np.all(s["active"] <= s["assembled"])
+
+
+def test_pedpy_computes_classic_density_and_n_t(room_run):
+    run = moreau_run.load(room_run)
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=room_run)
+    walkable = pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=room_run)
+    assert walkable.polygon.area == pytest.approx(10 * 10 + 9.8 * 10 + 0.2 * 1.2)
+    assert traj.frame_rate == pytest.approx(10.0)
+
+    # Classic density in the 2 m x 2 m square in front of the door, against a count of the
+    # dense positions done here.
+    square = moreau_run.upstream_area(run.scene)
+    area = pedpy.MeasurementArea(square)
+    density = pedpy.compute_classic_density(traj_data=traj, measurement_area=area)
+    assert len(density) == len(run.time)
+    poly = shapely.Polygon(square)
+    inside = np.array([shapely.contains_xy(poly, f[:, 0], f[:, 1]).sum() for f in run.positions])
+    np.testing.assert_allclose(density["density"].to_numpy(), inside / poly.area, rtol=1e-12)
+    assert density["density"].max() > 1.5  # people queue at the door
+
+    # N–t at the door line: a person crosses it a few frames after entering the exit area.
+    line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene))
+    nt, crossing = pedpy.compute_n_t(traj_data=traj, measurement_line=line)
+    counted = nt["cumulative_pedestrians"].to_numpy()
+    t = nt["time"].to_numpy()
+    passed = np.searchsorted(np.sort(run.exits["t"]), t, side="right")
+    passed_1s_before = np.searchsorted(np.sort(run.exits["t"]), t - 1.0, side="right")
+    assert np.all(counted <= passed)
+    assert np.all(counted >= passed_1s_before)
+    assert counted[-1] >= len(run.exits) - 10
+
+
+def test_summary_json_matches_the_file(room_run):
+    summary = json.loads(room_run.with_suffix(".json").read_text())
+    run = moreau_run.load(room_run)
+    assert summary == run.summary
+    assert summary["status"] == "complete"
+    assert summary["steps"] == len(run.steps)
+    assert summary["frames"] == len(run.time)
+    assert summary["max_violation"] == pytest.approx(run.steps["violation"].max())
+
+
+def test_a_run_file_reproduces_its_run(room_run, tmp_path):
+    again = tmp_path / "again.h5"
+    moreau("run", "--from", room_run, "-o", again, "--quiet")
+    a, b = moreau_run.load(room_run), moreau_run.load(again)
+    assert a.attrs["scene"] == b.attrs["scene"]
+    np.testing.assert_array_equal(a.trajectory, b.trajectory)
+    np.testing.assert_array_equal(a.steps["eps"], b.steps["eps"])
+
+
+def test_the_plot_script_writes_its_pngs(room_run, tmp_path):
+    import plot_run
+
+    assert plot_run.main([str(room_run), "-o", str(tmp_path / "plots")]) == 0
+    for name in ("evacuation", "flow", "density", "speed", "solver", "overview"):
+        png = tmp_path / "plots" / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert png.stat().st_size > 10_000, name
