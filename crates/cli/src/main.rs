@@ -2,8 +2,10 @@
 //! papers' examples. It translates between the command line, the crates and the files; it
 //! does not simulate.
 
+mod converge;
 mod example;
 mod run;
+mod svg;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -36,6 +38,9 @@ enum Command {
     /// steps/s, people left, ETA) shows on a terminal.
     #[command(after_help = EXIT_CODES)]
     Run(run::RunArgs),
+    /// The convergence experiment of Bernicot & Venel §5: error (24) of each step size
+    /// against a fine reference, the fitted order, as JSON, Markdown and a log–log SVG.
+    Converge(converge::ConvergeArgs),
     /// Prints what a run file holds: the run, its status, datasets and attributes.
     #[command(after_help = EXIT_CODES)]
     Inspect {
@@ -100,6 +105,7 @@ fn run() -> Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => run::run(&args),
+        Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
         Command::Example81 { a, b, x0, h, t_end } => {
             example::example_8_1(a, b, x0, h, t_end).map(|()| ExitCode::SUCCESS)

@@ -130,7 +130,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         );
         bar.set_style(
             ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {msg}  {per_sec:>12}  ETA {eta}",
+                "{elapsed_precise} [{bar:30}] {msg}  ETA {eta}",
             )
             .expect("a valid template")
             .progress_chars("=> "),
@@ -259,11 +259,15 @@ fn drive(
             stats.frames += 1;
         }
         bar.inc(1);
-        bar.set_message(format!(
-            "t = {:7.2} s  {:>7} people left",
-            report.t,
-            people - exits_seen
-        ));
+        if !bar.is_hidden() {
+            let rate = bar.position() as f64 / bar.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!(
+                "t = {:7.2} s  {:>8.1} steps/s  {:>7} people left",
+                report.t,
+                rate,
+                people - exits_seen
+            ));
+        }
     }
     Ok(())
 }

@@ -1,0 +1,312 @@
+//! `moreau converge`: the convergence experiment of Bernicot & Venel §5 (error (24) against a
+//! fine reference, fitted order), written as JSON, Markdown and a log–log SVG.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail, ensure};
+use moreau_crowd::{Scene, Simulation};
+use serde::Serialize;
+
+use crate::svg::{LogLog, Series, fit_power};
+
+/// Arguments of `moreau converge`.
+#[derive(Debug, clap::Args)]
+pub struct ConvergeArgs {
+    /// The scene (its exits must keep everyone, `action = "continue"`).
+    scene: PathBuf,
+    /// The step sizes to measure (s).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.02,0.025,0.04,0.05,0.0625,0.08,0.1,0.2,0.5"
+    )]
+    steps: Vec<f64>,
+    /// The step of the reference run (s).
+    #[arg(long, default_value_t = 0.01)]
+    h_min: f64,
+    /// Compare at t_i = i T / samples, i = 1..samples (every step must divide T / samples).
+    #[arg(long, default_value_t = 10)]
+    samples: usize,
+    /// Override the horizon T of the scene (s).
+    #[arg(long)]
+    horizon: Option<f64>,
+    /// Override κ in ε_k = κ μ³ (default: the scene's).
+    #[arg(long)]
+    eps_kappa: Option<f64>,
+    /// Directory for converge.json, converge.md and converge.svg.
+    #[arg(short, long, default_value = "out/converge")]
+    out: PathBuf,
+    /// No progress lines.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Debug, Serialize)]
+struct Row {
+    h: f64,
+    steps: usize,
+    error: f64,
+    error_per_person_max: f64,
+    iterations_per_step: f64,
+    max_eps: f64,
+    max_violation: f64,
+    wall_seconds: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Fit {
+    points: String,
+    order: f64,
+    constant: f64,
+    r2: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    scene: String,
+    people: usize,
+    horizon: f64,
+    h_min: f64,
+    samples: usize,
+    eps_kappa: f64,
+    error_definition: String,
+    rows: Vec<Row>,
+    fits: Vec<Fit>,
+}
+
+/// One run with step `h`: the state at t_i = i T / samples, i = 0..=samples, and its stats.
+fn sample(
+    scene: &Scene,
+    h: f64,
+    samples: usize,
+) -> Result<(Vec<Vec<f64>>, usize, f64, f64, f64, f64)> {
+    let mut scene = scene.clone();
+    let interval = scene.time.horizon / samples as f64;
+    let per = interval / h;
+    ensure!(
+        (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
+        "step {h} does not divide the sampling interval {interval} (T / samples)"
+    );
+    scene.time.step = h;
+    scene.time.output_interval = interval;
+    let mut sim = Simulation::new(scene)?;
+    let n = sim.total_people();
+    let start = Instant::now();
+    let mut states = Vec::new();
+    let (mut steps, mut iterations, mut max_eps, mut max_violation) = (0usize, 0usize, 0.0f64, 0.0f64);
+    sim.run::<anyhow::Error>(
+        |_, r| {
+            steps += 1;
+            iterations += r.iterations;
+            max_eps = max_eps.max(r.eps);
+            max_violation = max_violation.max(r.violation);
+            Ok(())
+        },
+        |f| {
+            if f.ids.len() != n {
+                bail!(
+                    "exits: people left the scene at t = {}; the convergence study compares \
+                     everyone at every t_i: use action = \"continue\"",
+                    f.t
+                );
+            }
+            let mut q = vec![0.0; 2 * n];
+            for (k, &id) in f.ids.iter().enumerate() {
+                q[2 * id as usize] = f.positions[2 * k];
+                q[2 * id as usize + 1] = f.positions[2 * k + 1];
+            }
+            states.push(q);
+            Ok(())
+        },
+    )?;
+    ensure!(
+        states.len() == samples + 1,
+        "expected {} states, got {}",
+        samples + 1,
+        states.len()
+    );
+    let wall = start.elapsed().as_secs_f64();
+    Ok((
+        states,
+        steps,
+        iterations as f64 / steps.max(1) as f64,
+        max_eps,
+        max_violation,
+        wall,
+    ))
+}
+
+/// Runs `moreau converge`.
+pub fn converge(args: &ConvergeArgs) -> Result<()> {
+    let mut scene = Scene::from_file(&args.scene)?;
+    if let Some(t) = args.horizon {
+        scene.time.horizon = t;
+    }
+    if let Some(k) = args.eps_kappa {
+        scene.solver.eps_kappa = k;
+    }
+    ensure!(args.samples >= 1, "--samples must be ≥ 1");
+    if args.steps.iter().any(|&h| !(h > args.h_min)) {
+        bail!("every step must be larger than --h-min {}", args.h_min);
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating '{}'", args.out.display()))?;
+
+    let say = |s: String| {
+        if !args.quiet {
+            eprintln!("{s}");
+        }
+    };
+    say(format!("reference run, h_min = {} ...", args.h_min));
+    let (reference, ref_steps, ..) = sample(&scene, args.h_min, args.samples)
+        .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
+    say(format!("  {ref_steps} steps"));
+    let n = reference[0].len() / 2;
+    let mut rows = Vec::new();
+    for &h in &args.steps {
+        let (states, steps, it, max_eps, max_violation, wall) =
+            sample(&scene, h, args.samples).with_context(|| format!("run with h = {h}"))?;
+        // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates.
+        let (mut error, mut per_person) = (0.0f64, 0.0f64);
+        for (a, b) in reference.iter().zip(&states).skip(1) {
+            let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+            error = error.max(d2.sqrt());
+            for i in 0..n {
+                let d = ((a[2 * i] - b[2 * i]).powi(2) + (a[2 * i + 1] - b[2 * i + 1]).powi(2)).sqrt();
+                per_person = per_person.max(d);
+            }
+        }
+        say(format!(
+            "  h = {h:<7} e_h = {error:.4e}  ({steps} steps, {it:.0} iterations/step, {wall:.1} s)"
+        ));
+        rows.push(Row {
+            h,
+            steps,
+            error,
+            error_per_person_max: per_person,
+            iterations_per_step: it,
+            max_eps,
+            max_violation,
+            wall_seconds: wall,
+        });
+    }
+
+    let all: Vec<(f64, f64)> = rows.iter().map(|r| (r.h, r.error)).collect();
+    let far: Vec<(f64, f64)> = all
+        .iter()
+        .copied()
+        .filter(|(h, _)| *h >= 4.0 * args.h_min)
+        .collect();
+    let mut fits = Vec::new();
+    for (label, pts) in [("all steps", &all), ("h ≥ 4 h_min", &far)] {
+        if let Some((order, constant, r2)) = fit_power(pts) {
+            fits.push(Fit {
+                points: label.into(),
+                order,
+                constant,
+                r2,
+            });
+        }
+    }
+    let report = Report {
+        scene: args.scene.display().to_string(),
+        people: n,
+        horizon: scene.time.horizon,
+        h_min: args.h_min,
+        samples: args.samples,
+        eps_kappa: scene.solver.eps_kappa,
+        error_definition: "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2, t_i = i T / samples (Bernicot & Venel (24))".into(),
+        rows,
+        fits,
+    };
+    write(&args.out, &report)?;
+    for f in &report.fits {
+        println!(
+            "observed order ({}): {:.3} (R² = {:.3})",
+            f.points, f.order, f.r2
+        );
+    }
+    println!(
+        "wrote {}/converge.json, converge.md, converge.svg",
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn write(dir: &Path, report: &Report) -> Result<()> {
+    std::fs::write(
+        dir.join("converge.json"),
+        serde_json::to_string_pretty(report)? + "\n",
+    )?;
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "Convergence on `{}` ({} people, T = {} s, h_min = {}, ε_k = {:e} μ³), error (24) at t_i = iT/{}:\n",
+        report.scene, report.people, report.horizon, report.h_min, report.eps_kappa, report.samples
+    );
+    let _ = writeln!(
+        md,
+        "| h (s) | steps | e_h (m) | worst person (m) | iterations/step | max ε (m²) | max violation (m) | wall (s) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    for r in &report.rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4e} | {:.4e} | {:.0} | {:.2e} | {:.2e} | {:.2} |",
+            r.h,
+            r.steps,
+            r.error,
+            r.error_per_person_max,
+            r.iterations_per_step,
+            r.max_eps,
+            r.max_violation,
+            r.wall_seconds
+        );
+    }
+    let _ = writeln!(md);
+    for f in &report.fits {
+        let _ = writeln!(
+            md,
+            "Fitted order ({}): **{:.3}**, R² = {:.3}.",
+            f.points, f.order, f.r2
+        );
+    }
+    std::fs::write(dir.join("converge.md"), md)?;
+
+    let measured: Vec<(f64, f64)> = report.rows.iter().map(|r| (r.h, r.error)).collect();
+    let mut series = vec![Series {
+        name: "e_h (measured)".into(),
+        points: measured.clone(),
+        dashed: false,
+    }];
+    if let Some(f) = report.fits.first() {
+        series.push(Series {
+            name: format!("fit: order {:.2}", f.order),
+            points: measured
+                .iter()
+                .map(|&(h, _)| (h, f.constant.exp() * h.powf(f.order)))
+                .collect(),
+            dashed: true,
+        });
+        // Order 1/2 through the middle point, for comparison with the paper.
+        let (hm, em) = measured[measured.len() / 2];
+        series.push(Series {
+            name: "order 1/2 (paper)".into(),
+            points: measured
+                .iter()
+                .map(|&(h, _)| (h, em * (h / hm).sqrt()))
+                .collect(),
+            dashed: true,
+        });
+    }
+    let plot = LogLog {
+        title: format!("Convergence, {} ({} people)", report.scene, report.people),
+        x_label: "step h (s)".into(),
+        y_label: "error e_h (m)".into(),
+        series,
+    };
+    std::fs::write(dir.join("converge.svg"), plot.render())?;
+    Ok(())
+}
