@@ -76,12 +76,18 @@ struct Report {
     fits: Vec<Fit>,
 }
 
+/// One run: the states at the sampling times and what the run cost.
+struct Sampled {
+    states: Vec<Vec<f64>>,
+    steps: usize,
+    iterations_per_step: f64,
+    max_eps: f64,
+    max_violation: f64,
+    wall: f64,
+}
+
 /// One run with step `h`: the state at t_i = i T / samples, i = 0..=samples, and its stats.
-fn sample(
-    scene: &Scene,
-    h: f64,
-    samples: usize,
-) -> Result<(Vec<Vec<f64>>, usize, f64, f64, f64, f64)> {
+fn sample(scene: &Scene, h: f64, samples: usize) -> Result<Sampled> {
     let mut scene = scene.clone();
     let interval = scene.time.horizon / samples as f64;
     let per = interval / h;
@@ -95,7 +101,8 @@ fn sample(
     let n = sim.total_people();
     let start = Instant::now();
     let mut states = Vec::new();
-    let (mut steps, mut iterations, mut max_eps, mut max_violation) = (0usize, 0usize, 0.0f64, 0.0f64);
+    let (mut steps, mut iterations, mut max_eps, mut max_violation) =
+        (0usize, 0usize, 0.0f64, 0.0f64);
     sim.run::<anyhow::Error>(
         |_, r| {
             steps += 1;
@@ -128,14 +135,14 @@ fn sample(
         states.len()
     );
     let wall = start.elapsed().as_secs_f64();
-    Ok((
+    Ok(Sampled {
         states,
         steps,
-        iterations as f64 / steps.max(1) as f64,
+        iterations_per_step: iterations as f64 / steps.max(1) as f64,
         max_eps,
         max_violation,
         wall,
-    ))
+    })
 }
 
 /// Runs `moreau converge`.
@@ -160,21 +167,29 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         }
     };
     say(format!("reference run, h_min = {} ...", args.h_min));
-    let (reference, ref_steps, ..) = sample(&scene, args.h_min, args.samples)
+    let reference = sample(&scene, args.h_min, args.samples)
         .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
-    say(format!("  {ref_steps} steps"));
+    say(format!("  {} steps", reference.steps));
+    let reference = reference.states;
     let n = reference[0].len() / 2;
     let mut rows = Vec::new();
     for &h in &args.steps {
-        let (states, steps, it, max_eps, max_violation, wall) =
-            sample(&scene, h, args.samples).with_context(|| format!("run with h = {h}"))?;
+        let Sampled {
+            states,
+            steps,
+            iterations_per_step: it,
+            max_eps,
+            max_violation,
+            wall,
+        } = sample(&scene, h, args.samples).with_context(|| format!("run with h = {h}"))?;
         // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates.
         let (mut error, mut per_person) = (0.0f64, 0.0f64);
         for (a, b) in reference.iter().zip(&states).skip(1) {
             let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
             error = error.max(d2.sqrt());
             for i in 0..n {
-                let d = ((a[2 * i] - b[2 * i]).powi(2) + (a[2 * i + 1] - b[2 * i + 1]).powi(2)).sqrt();
+                let d =
+                    ((a[2 * i] - b[2 * i]).powi(2) + (a[2 * i + 1] - b[2 * i + 1]).powi(2)).sqrt();
                 per_person = per_person.max(d);
             }
         }

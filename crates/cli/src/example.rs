@@ -52,4 +52,3 @@ pub fn example_8_1(a: f64, b: f64, x0: f64, h0: f64, t_end: f64) -> Result<()> {
     }
     Ok(())
 }
-

@@ -99,7 +99,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
     let people = sim.total_people();
     let frame = sim.frame();
-    if frame.ids.iter().enumerate().any(|(k, &id)| id as usize != k) {
+    if frame
+        .ids
+        .iter()
+        .enumerate()
+        .any(|(k, &id)| id as usize != k)
+    {
         bail!("internal: people are not numbered 0..{people} at the start");
     }
     let mut writer = match &args.output {
@@ -129,11 +134,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             ProgressDrawTarget::stderr_with_hz(10),
         );
         bar.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {msg}  ETA {eta}",
-            )
-            .expect("a valid template")
-            .progress_chars("=> "),
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {msg}  ETA {eta}")
+                .expect("a valid template")
+                .progress_chars("=> "),
         );
         bar
     };

@@ -79,8 +79,12 @@ impl LogLog {
         };
         (x0, x1) = pad(x0, x1);
         (y0, y1) = pad(y0, y1);
-        let px = |x: f64| left + (x.log10() - x0.log10()) / (x1.log10() - x0.log10()) * (w - left - right);
-        let py = |y: f64| h - bottom - (y.log10() - y0.log10()) / (y1.log10() - y0.log10()) * (h - top - bottom);
+        let px = |x: f64| {
+            left + (x.log10() - x0.log10()) / (x1.log10() - x0.log10()) * (w - left - right)
+        };
+        let py = |y: f64| {
+            h - bottom - (y.log10() - y0.log10()) / (y1.log10() - y0.log10()) * (h - top - bottom)
+        };
 
         let mut s = String::new();
         let _ = writeln!(
@@ -175,7 +179,9 @@ impl LogLog {
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// Least squares fit of `log y = a + p log x`: `(p, a, r²)`.
@@ -200,7 +206,11 @@ pub fn fit_power(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
         return None;
     }
     let p = sxy / sxx;
-    let r2 = if syy == 0.0 { 1.0 } else { sxy * sxy / (sxx * syy) };
+    let r2 = if syy == 0.0 {
+        1.0
+    } else {
+        sxy * sxy / (sxx * syy)
+    };
     Some((p, my - p * mx, r2))
 }
 
@@ -210,9 +220,14 @@ mod tests {
 
     #[test]
     fn a_power_law_is_fitted_exactly() {
-        let pts: Vec<(f64, f64)> = [0.1, 0.2, 0.5, 1.0].iter().map(|&h| (h, 3.0 * h.powf(0.5))).collect();
+        let pts: Vec<(f64, f64)> = [0.1, 0.2, 0.5, 1.0]
+            .iter()
+            .map(|&h: &f64| (h, 3.0 * h.powf(0.5)))
+            .collect();
         let (p, a, r2) = fit_power(&pts).unwrap();
-        assert!((p - 0.5).abs() < 1e-12 && (a - 3f64.ln()).abs() < 1e-12 && (r2 - 1.0).abs() < 1e-12);
+        assert!(
+            (p - 0.5).abs() < 1e-12 && (a - 3f64.ln()).abs() < 1e-12 && (r2 - 1.0).abs() < 1e-12
+        );
     }
 
     #[test]
@@ -222,8 +237,16 @@ mod tests {
             x_label: "h".into(),
             y_label: "e".into(),
             series: vec![
-                Series { name: "a".into(), points: vec![(0.1, 1.0), (1.0, 3.0)], dashed: false },
-                Series { name: "b".into(), points: vec![(0.1, 2.0), (1.0, 4.0)], dashed: true },
+                Series {
+                    name: "a".into(),
+                    points: vec![(0.1, 1.0), (1.0, 3.0)],
+                    dashed: false,
+                },
+                Series {
+                    name: "b".into(),
+                    points: vec![(0.1, 2.0), (1.0, 4.0)],
+                    dashed: true,
+                },
             ],
         };
         let svg = plot.render();

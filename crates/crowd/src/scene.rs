@@ -463,7 +463,10 @@ impl Scene {
     /// the shortest text that reads back to the same `f64`.
     pub fn wkt(&self) -> String {
         fn ring(points: &[[f64; 2]]) -> String {
-            let mut out: Vec<String> = points.iter().map(|p| format!("{} {}", p[0], p[1])).collect();
+            let mut out: Vec<String> = points
+                .iter()
+                .map(|p| format!("{} {}", p[0], p[1]))
+                .collect();
             if let (Some(a), Some(b)) = (points.first(), points.last())
                 && a != b
             {

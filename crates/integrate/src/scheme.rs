@@ -197,6 +197,13 @@ impl<F: Field, C: Correction> Scheme<F, C> {
     ) -> Result<StepReport, IntegrateError> {
         let start = Instant::now();
         let n = q.len();
+        if !(mu > 0.0 && mu.is_finite()) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "mu",
+                value: mu.to_string(),
+                reason: "the step must be finite and > 0",
+            });
+        }
         if let Some(index) = q.iter().position(|x| !x.is_finite()) {
             return Err(IntegrateError::NonFinite {
                 step,

@@ -32,9 +32,7 @@ impl RunFile {
         };
         let format = me.text("format")?;
         if format != FORMAT {
-            return Err(me.layout(format!(
-                "format '{format}', this moreau reads '{FORMAT}'"
-            )));
+            return Err(me.layout(format!("format '{format}', this moreau reads '{FORMAT}'")));
         }
         Ok(me)
     }
@@ -158,7 +156,9 @@ impl RunFile {
                 .and_then(|t| t.to_descriptor())
                 .map(|d| describe_type(&d))
                 .unwrap_or_else(|_| "?".into());
-            let chunk = ds.chunk().map_or("contiguous".into(), |c| format!("chunks {c:?}"));
+            let chunk = ds
+                .chunk()
+                .map_or("contiguous".into(), |c| format!("chunks {c:?}"));
             let filters: Vec<String> = ds.filters().iter().map(|f| format!("{f:?}")).collect();
             let _ = writeln!(
                 out,

@@ -109,7 +109,9 @@ impl RunWriter {
                 what: format!("fps must be > 0 and finite, got {}", header.fps),
             });
         }
-        let name = path.file_name().map_or("run".into(), |n| n.to_string_lossy());
+        let name = path
+            .file_name()
+            .map_or("run".into(), |n| n.to_string_lossy());
         let partial = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
         let created = File::create_excl(&partial)
             .map_err(|e| IoError::Create {
@@ -235,10 +237,16 @@ impl RunWriter {
 
     /// Records that person `id` passed an exit at time `t` (written with the next frame).
     pub fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
-        let slot = self.exit_times.get_mut(id as usize).ok_or_else(|| IoError::Layout {
-            path: self.path.clone(),
-            what: format!("exit of person {id}, but the file holds {} people", self.people),
-        })?;
+        let slot = self
+            .exit_times
+            .get_mut(id as usize)
+            .ok_or_else(|| IoError::Layout {
+                path: self.path.clone(),
+                what: format!(
+                    "exit of person {id}, but the file holds {} people",
+                    self.people
+                ),
+            })?;
         *slot = t;
         self.pending_exits.push(ExitRow { id: id as i64, t });
         Ok(())
@@ -296,7 +304,8 @@ impl RunWriter {
         let mut n_frames = frame;
         append(&self.frame_count, &mut n_frames, &[ids.len() as i64])
             .at(&path, what("writing 'frames/count'"))?;
-        self.flush_rows().at(&path, what("writing 'steps' and 'exits'"))?;
+        self.flush_rows()
+            .at(&path, what("writing 'steps' and 'exits'"))?;
         self.file.flush().at(&path, what("flushing"))?;
         self.frames += 1;
         Ok(())

@@ -51,7 +51,8 @@ fn a_run_file_reads_back_what_was_written() {
     let path = scratch("roundtrip.h5");
     let h = header(3);
     let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
-    w.frame(0.0, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6]).unwrap();
+    w.frame(0.0, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+        .unwrap();
     w.step(&report(0, 0.05));
     w.step(&report(1, 0.1));
     w.exit(1, 0.07).unwrap();
@@ -82,13 +83,16 @@ fn a_run_file_reads_back_what_was_written() {
     assert_eq!((exits.len(), exits[0].id, exits[0].t), (1, 1, 0.07));
     // The temporary name used while laying out is gone.
     let dir = path.parent().unwrap();
-    assert!(
-        std::fs::read_dir(dir)
-            .unwrap()
-            .all(|e| !e.unwrap().file_name().to_string_lossy().ends_with(".partial"))
-    );
+    assert!(std::fs::read_dir(dir).unwrap().all(|e| {
+        !e.unwrap()
+            .file_name()
+            .to_string_lossy()
+            .ends_with(".partial")
+    }));
     let text = f.describe().unwrap();
-    assert!(text.contains("/trajectory") && text.contains("@fps") && text.contains("@wkt_geometry"));
+    assert!(
+        text.contains("/trajectory") && text.contains("@fps") && text.contains("@wkt_geometry")
+    );
 }
 
 #[test]

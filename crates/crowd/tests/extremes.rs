@@ -1,0 +1,296 @@
+//! Stability at the extremes (DESIGN §5): steps from 1e-6 to 1 s, one person to 100,000
+//! (1,000,000 behind `--ignored`), radii 1:100, a crowd jammed against a door too narrow to
+//! pass, degenerate contact (a chain touching end to end, a disk wedged between two others or
+//! in a door's corners, people touching a wall corner), zero and very high desired speeds.
+//! Every step: no NaN, no overlap beyond the certified violation, and on the small cases the
+//! step's certificate really bounds its distance to a Clarabel solve.
+//!
+//! The long variant: `cargo test --release -p moreau-crowd --test extremes -- --ignored`.
+
+mod common;
+
+use common::{assert_feasible, assert_matches_clarabel};
+use moreau_crowd::{Scene, Simulation};
+
+/// A 6 m × 6 m room with a door of width `door` in the middle of its right wall (0.2 m thick)
+/// and a corridor to x = 8 whose end removes people; `groups` is TOML for `[[groups]]`.
+fn room(door: f64, step: f64, horizon: f64, groups: &str) -> Scene {
+    let (lo, hi) = (3.0 - door / 2.0, 3.0 + door / 2.0);
+    let text = format!(
+        r#"
+name = "extremes"
+seed = 7
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, {lo}], [6.2, {lo}], [6.2, 0.0], [8.0, 0.0],
+         [8.0, 6.0], [6.2, 6.0], [6.2, {hi}], [6.0, {hi}], [6.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "out"
+area = [[7.5, 0.0], [8.0, 0.0], [8.0, 6.0], [7.5, 6.0]]
+action = "remove"
+{groups}
+[time]
+horizon = {horizon}
+step = {step}
+output_interval = {step}
+[solver]
+eps_kappa = 1e-3
+max_violation = 1e-6
+grid_cell = 0.1
+"#
+    );
+    Scene::from_toml(&text, "extremes").unwrap()
+}
+
+fn spawn(count: usize, radius: &str, speed: &str) -> String {
+    format!(
+        r#"[[groups]]
+name = "crowd"
+count = {count}
+spawn = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]
+radius = {radius}
+speed = {speed}
+destination = "out"
+"#
+    )
+}
+
+fn listed(name: &str, positions: &[[f64; 2]], radius: f64, speed: f64) -> String {
+    let list: Vec<String> = positions
+        .iter()
+        .map(|p| format!("[{:?}, {:?}]", p[0], p[1]))
+        .collect();
+    format!(
+        "[[groups]]\nname = \"{name}\"\npositions = [{}]\nradius = {radius:?}\nspeed = {speed:?}\ndestination = \"out\"\n",
+        list.join(", ")
+    )
+}
+
+/// Runs the scene over its schedule, checking every step; compares with Clarabel every
+/// `compare_every` steps (when nobody left during the step). Returns the simulation.
+fn run_checked(scene: Scene, compare_every: Option<usize>) -> Simulation {
+    let mut sim = Simulation::new(scene.clone()).unwrap();
+    for (k, (mu, _)) in sim.schedule().into_iter().enumerate() {
+        let before = sim.frame().positions.to_vec();
+        let people = sim.frame().ids.len();
+        let report = sim.step(mu).unwrap();
+        assert_feasible(&scene, &sim, &report);
+        if let Some(every) = compare_every
+            && k % every == 0
+            && sim.frame().ids.len() == people
+        {
+            assert_matches_clarabel(&sim, &before, &report);
+        }
+    }
+    sim
+}
+
+#[test]
+fn a_single_person_walks_out_at_its_speed() {
+    let scene = room(1.2, 0.05, 10.0, &listed("one", &[[1.0, 3.0]], 0.2, 1.0));
+    let sim = run_checked(scene, None);
+    // Straight along y = 3 from x = 1 into the exit area at x ≥ 7.5: 6.5 m at 1 m/s.
+    let exits = sim.exit_times();
+    assert_eq!(exits.len(), 1);
+    assert!((exits[0].1 - 6.5).abs() <= 0.1, "exit at {}", exits[0].1);
+}
+
+#[test]
+fn tiny_steps_stay_feasible_and_move_by_speed_times_step() {
+    let scene = room(1.2, 1e-6, 1e-4, &spawn(60, "0.2", "1.0"));
+    let start = Simulation::new(scene.clone())
+        .unwrap()
+        .frame()
+        .positions
+        .to_vec();
+    let sim = run_checked(scene, Some(25));
+    let moved = sim
+        .frame()
+        .positions
+        .chunks(2)
+        .zip(start.chunks(2))
+        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+        .fold(0.0, f64::max);
+    // 100 steps of 1e-6 s at ≤ 1 m/s: at most 1e-4 m, and someone walks freely.
+    assert!(
+        moved <= 1e-4 * (1.0 + 1e-9) && moved > 0.9e-4,
+        "moved {moved}"
+    );
+}
+
+#[test]
+fn one_second_steps_stay_feasible() {
+    let scene = room(1.2, 1.0, 12.0, &spawn(60, "0.2", "1.0"));
+    let sim = run_checked(scene, Some(3));
+    assert!(!sim.exit_times().is_empty());
+}
+
+#[test]
+fn radii_one_to_a_hundred() {
+    let groups = format!(
+        "{}{}",
+        spawn(4, "1.0", "0.8"),
+        spawn(250, "0.01", "1.2").replace("\"crowd\"", "\"small\"")
+    );
+    let scene = room(2.4, 0.05, 3.0, &groups);
+    run_checked(scene, Some(6));
+}
+
+/// A door 0.3 m wide and people 0.5 m wide: nobody can pass; everyone presses on the wall.
+#[test]
+fn a_crowd_jammed_against_a_door_too_narrow_to_pass() {
+    let scene = room(0.3, 0.05, 8.0, &spawn(75, "0.25", "1.0"));
+    let mut sim = Simulation::new(scene.clone()).unwrap();
+    let mut max_active = 0;
+    for (k, (mu, _)) in sim.schedule().into_iter().enumerate() {
+        let before = sim.frame().positions.to_vec();
+        let report = sim.step(mu).unwrap();
+        assert_feasible(&scene, &sim, &report);
+        if k % 20 == 0 {
+            assert_matches_clarabel(&sim, &before, &report);
+        }
+        max_active = max_active.max(report.active);
+    }
+    assert!(
+        sim.exit_times().is_empty(),
+        "someone passed a door narrower than themselves"
+    );
+    // Jammed: more active contacts than people.
+    assert!(max_active > 75, "only {max_active} active contacts");
+}
+
+/// Ten disks exactly touching in a line, pushed end-on into a door too narrow for them: the
+/// first wedges into the door's two corners. Plus two disks exactly touching both walls at the
+/// room's corners, and a disk pushed into two others that touch each other.
+#[test]
+fn degenerate_contacts_chain_wedges_and_corners() {
+    // r = 0.25 and spacing 0.5 are exact in binary: the chain starts exactly touching, its
+    // first disk exactly touching the wall x = 6 (door 0.3 m wide, y ∈ [2.85, 3.15]).
+    let chain: Vec<[f64; 2]> = (0..10).map(|k| [5.75 - 0.5 * k as f64, 3.0]).collect();
+    let corners = [[0.25, 0.25], [0.25, 5.75]]; // touching both walls at the room's corners
+    let pair = [[3.0, 0.75], [3.0, 1.25]]; // touching each other
+    let groups = format!(
+        "{}{}{}{}",
+        listed("chain", &chain, 0.25, 1.0),
+        listed("corners", &corners, 0.25, 1.0),
+        listed("pair", &pair, 0.25, 0.0),
+        listed("wedge", &[[2.0, 1.0]], 0.25, 1.0),
+    );
+    let scene = room(0.3, 0.05, 4.0, &groups);
+    let sim = run_checked(scene, Some(4));
+    assert!(sim.exit_times().is_empty());
+    // The chain's head sits in the door's corners: (x − 6)² + 0.15² = 0.25².
+    let head = &sim.frame().positions[0..2];
+    assert!((head[0] - (6.0 - 0.2)).abs() < 1e-3, "head at {head:?}");
+    assert!((head[1] - 3.0).abs() < 1e-3, "head at {head:?}");
+}
+
+#[test]
+fn zero_desired_speed_moves_nobody() {
+    let scene = room(1.2, 0.05, 1.0, &spawn(80, "0.2", "0.0"));
+    let start = Simulation::new(scene.clone())
+        .unwrap()
+        .frame()
+        .positions
+        .to_vec();
+    let sim = run_checked(scene, Some(5));
+    assert_eq!(sim.frame().positions, &start[..]);
+}
+
+/// 40 m/s with 0.05 s steps: 2 m, twenty grid cells, ten diameters, a wall's thickness ten
+/// times over, in one step. Nobody tunnels through a wall or another person.
+#[test]
+fn very_high_desired_speed_does_not_tunnel() {
+    let scene = room(1.2, 0.05, 1.5, &spawn(100, "0.2", "40.0"));
+    let sim = run_checked(scene, Some(3));
+    assert!(sim.exit_times().len() > 10);
+}
+
+#[test]
+fn a_non_positive_or_nan_step_is_refused() {
+    let scene = room(1.2, 0.05, 1.0, &spawn(5, "0.2", "1.0"));
+    let mut sim = Simulation::new(scene).unwrap();
+    for mu in [0.0, -0.05, f64::NAN, f64::INFINITY] {
+        let err = sim.step(mu).unwrap_err().to_string();
+        assert!(err.contains("mu"), "{err}");
+    }
+    assert_eq!(sim.steps(), 0);
+}
+
+/// A hall with one wide door, `n` people at about 1.6 people/m² (radii 0.18–0.22).
+fn hall(n: usize, steps: usize) -> Scene {
+    let side = (n as f64 / 1.6).sqrt();
+    let (lo, hi) = (side / 2.0 - 2.0, side / 2.0 + 2.0);
+    let text = format!(
+        r#"
+name = "hall-{n}"
+seed = 11
+[area]
+outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
+[[exits]]
+name = "door"
+area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
+action = "remove"
+[[groups]]
+name = "crowd"
+count = {n}
+spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+radius = {{ min = 0.18, max = 0.22 }}
+speed = {{ min = 0.9, max = 1.3 }}
+destination = "door"
+[time]
+horizon = {horizon}
+step = 0.05
+output_interval = 0.05
+[solver]
+eps_kappa = 1e-2
+max_violation = 1e-5
+grid_cell = 0.5
+"#,
+        x0 = side + 0.5,
+        x1 = side + 1.0,
+        horizon = 0.05 * steps as f64,
+    );
+    Scene::from_toml(&text, "hall").unwrap()
+}
+
+#[test]
+fn a_hundred_thousand_people() {
+    let scene = hall(100_000, 2);
+    let sim = run_checked(scene, None);
+    assert_eq!(sim.frame().ids.len(), 100_000);
+}
+
+#[test]
+#[ignore = "long: a million people; run with --ignored"]
+fn a_million_people() {
+    let scene = hall(1_000_000, 2);
+    let sim = run_checked(scene, None);
+    assert_eq!(sim.frame().ids.len(), 1_000_000);
+}
+
+#[test]
+#[ignore = "long: the extremes over longer horizons; run with --ignored"]
+fn long_horizons_at_the_extremes() {
+    run_checked(room(1.2, 1.0, 60.0, &spawn(120, "0.2", "1.0")), Some(5));
+    run_checked(room(0.3, 0.05, 30.0, &spawn(75, "0.25", "1.0")), Some(50));
+    run_checked(room(1.2, 0.05, 10.0, &spawn(120, "0.2", "40.0")), Some(10));
+}
+
+/// An accuracy no solver reaches in floating point (ε_k = 10⁻²⁰ μ³) is a clear error naming
+/// the step and the certificate, not a silently accepted step.
+#[test]
+fn an_unreachable_accuracy_is_a_clear_error() {
+    let mut scene = room(0.3, 0.05, 2.0, &spawn(60, "0.25", "1.0"));
+    scene.solver.eps_kappa = 1e-20;
+    let mut sim = Simulation::new(scene).unwrap();
+    let err = sim
+        .schedule()
+        .into_iter()
+        .find_map(|(mu, _)| sim.step(mu).err())
+        .expect("some step cannot be certified");
+    let text = err.to_string();
+    assert!(
+        text.contains("not certified") && text.contains("step"),
+        "{text}"
+    );
+}
