@@ -7,10 +7,12 @@
 //! yields a [`StepReport`](moreau_core::StepReport); a step whose certificate misses its
 //! target is retried with the fallback solver or rejected with an error, never accepted.
 
+pub mod adaptive;
 mod correction;
 mod error;
 mod scheme;
 
+pub use adaptive::{AdaptiveSettings, AdaptiveStep, ErrorEstimate, StepController};
 pub use correction::{
     Correction, ExactProjection, LinearizedProjection, LinearizedSettings, Unconstrained,
 };

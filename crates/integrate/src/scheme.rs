@@ -55,6 +55,17 @@ impl EpsPolicy {
         Ok(Self { kappa, power })
     }
 
+    /// `ε = budget² μ / μ_max` for an adaptive controller whose convergence parameter is its
+    /// tolerance, not the step: `budget = θ tol` is the projection's share of a step's error
+    /// (`√ε ≤ budget` for `μ ≤ μ_max`), and `ε/μ² = budget²/(μ μ_max) → 0` as `tol → 0`
+    /// (see [`crate::adaptive`]). Not checked here: the controller's settings are.
+    pub fn tied_to_tolerance(budget: f64, mu_max: f64) -> Self {
+        Self {
+            kappa: budget * budget / mu_max,
+            power: 1.0,
+        }
+    }
+
     /// `ε` for a step `mu`.
     pub fn eps(&self, mu: f64) -> f64 {
         self.kappa * mu.powf(self.power)
@@ -180,6 +191,16 @@ impl<F: Field, C: Correction> Scheme<F, C> {
     /// The field, mutably (an input changed between steps).
     pub fn field_mut(&mut self) -> &mut F {
         &mut self.field
+    }
+
+    /// The `ε_k` policy in force.
+    pub fn eps_policy(&self) -> EpsPolicy {
+        self.eps
+    }
+
+    /// Replaces the `ε_k` policy (an adaptive controller ties it to its tolerance).
+    pub fn set_eps(&mut self, eps: EpsPolicy) {
+        self.eps = eps;
     }
 
     /// The prediction velocity `w_k` of the last step.

@@ -1,0 +1,198 @@
+//! The adaptive step controller on Example 8.1 of `seeds/002` (closed form, a contact event at
+//! `t*` where the velocity jumps): errors follow the tolerance, steps shrink at the event and
+//! grow after it, the `ε_k` policy follows the step, and it costs fewer steps than fixed steps
+//! at the same error.
+
+use moreau::core::{FnField, HalfSpace};
+use moreau::integrate::{
+    AdaptiveSettings, ErrorEstimate, ExactProjection, IntegrateError, Scheme, StepController,
+    StepSequence,
+};
+
+const A: f64 = 1.0;
+const B: f64 = -1.0;
+const X0: f64 = 1.0;
+const T: f64 = 3.0;
+
+fn exact(t: f64) -> f64 {
+    let k = A + 1.0;
+    let xs = B / k;
+    let t_hit = ((X0 - xs) / -xs).ln() / k;
+    if t >= t_hit {
+        0.0
+    } else {
+        xs + (X0 - xs) * (-k * t).exp()
+    }
+}
+
+fn t_hit() -> f64 {
+    let k = A + 1.0;
+    ((X0 + 1.0 / k) / (1.0 / k)).ln() / k
+}
+
+type Example = Scheme<FnField<fn(f64, &[f64], &mut [f64])>, ExactProjection<HalfSpace>>;
+
+fn scheme() -> Example {
+    fn f(_t: f64, x: &[f64], out: &mut [f64]) {
+        out[0] = -(A + 1.0) * x[0] + B;
+    }
+    let half_line = HalfSpace::new(vec![-1.0], 0.0).unwrap();
+    Scheme::new(
+        FnField::new(1, f as fn(f64, &[f64], &mut [f64])),
+        ExactProjection::new(half_line),
+        Default::default(),
+    )
+}
+
+/// Runs adaptively to T: (max error at the step times, accepted steps, rejected, steps (t, μ)).
+fn adaptive(settings: AdaptiveSettings) -> (f64, usize, usize, Vec<(f64, f64)>) {
+    let mut s = scheme();
+    let mut c = StepController::new(settings).unwrap();
+    let (mut t, mut x, mut err, mut steps) = (0.0, [X0], 0.0f64, Vec::new());
+    let mut k = 0;
+    while t < T {
+        let step = c.step(&mut s, k, t, &mut x, T).unwrap();
+        let r = &step.report;
+        assert!(
+            (r.eps_target
+                - settings.eps_policy().eps(
+                    r.mu / if settings.estimate == ErrorEstimate::StepDoubling {
+                        2.0
+                    } else {
+                        1.0
+                    }
+                ))
+            .abs()
+                <= 1e-15 * r.eps_target.max(1e-300)
+        );
+        t = r.t;
+        k += 1;
+        assert!(x[0] >= 0.0, "left C at t = {t}");
+        err = err.max((x[0] - exact(t)).abs());
+        steps.push((t, r.mu));
+    }
+    assert_eq!(t, T, "the run lands on T exactly");
+    (err, c.accepted, c.rejected, steps)
+}
+
+fn fixed(h: f64) -> (f64, usize) {
+    let mut s = scheme();
+    let mut x = [X0];
+    let (mut err, mut n) = (0.0f64, 0);
+    s.run(0.0, &mut x, &StepSequence::Fixed { h, t_end: T }, |r, x| {
+        err = err.max((x[0] - exact(r.t)).abs());
+        n += 1;
+    })
+    .unwrap();
+    (err, n)
+}
+
+/// With the error bounded per step, smooth stretches take steps `μ ~ √(tol/C)` and the global
+/// error of a first-order scheme is `~ (T/μ) C μ² ~ √tol`: the observed slope of log error
+/// against log tol is 1/2, and errors shrink with every tolerance.
+#[test]
+fn errors_follow_the_tolerance() {
+    for estimate in [ErrorEstimate::StepDoubling, ErrorEstimate::VelocityChange] {
+        let mut points = Vec::new();
+        for tol in [1e-3, 1e-4, 1e-5, 1e-6, 1e-7] {
+            let mut settings = AdaptiveSettings::new(tol);
+            settings.estimate = estimate;
+            let (err, accepted, rejected, _) = adaptive(settings);
+            eprintln!(
+                "{estimate:?} tol {tol:e}: error {err:.3e}, {accepted} steps, {rejected} rejected"
+            );
+            if let Some(&(_, last)) = points.last() {
+                assert!(
+                    err < last,
+                    "{estimate:?}: error did not shrink at tol {tol}"
+                );
+            }
+            points.push((tol, err));
+        }
+        let n = points.len() as f64;
+        let (lx, ly): (Vec<f64>, Vec<f64>) = points.iter().map(|(t, e)| (t.ln(), e.ln())).unzip();
+        let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
+        let slope = lx
+            .iter()
+            .zip(&ly)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum::<f64>()
+            / lx.iter().map(|x| (x - mx).powi(2)).sum::<f64>();
+        assert!(
+            (slope - 0.5).abs() <= 0.1,
+            "{estimate:?}: error ~ tol^{slope}"
+        );
+    }
+}
+
+#[test]
+fn steps_shrink_at_the_contact_and_grow_after_it() {
+    let (_, _, _, steps) = adaptive(AdaptiveSettings::new(1e-5));
+    let th = t_hit();
+    let near = steps
+        .iter()
+        .filter(|(t, _)| (t - th).abs() < 0.05)
+        .map(|s| s.1)
+        .fold(f64::INFINITY, f64::min);
+    let after = steps
+        .iter()
+        .filter(|(t, _)| *t > th + 0.5)
+        .map(|s| s.1)
+        .fold(0.0, f64::max);
+    assert!(
+        after >= 0.5 * AdaptiveSettings::new(1e-5).mu_max,
+        "largest step after the contact {after}"
+    );
+    assert!(
+        near * 20.0 < after,
+        "step at the contact {near} vs after {after}"
+    );
+}
+
+#[test]
+fn adaptive_steps_cost_less_than_fixed_steps_at_the_same_error() {
+    let (err, accepted, rejected, _) = adaptive(AdaptiveSettings::new(1e-5));
+    // The largest fixed step whose error is no larger: halve until it is.
+    let mut h = 0.1;
+    let (mut e, mut n) = fixed(h);
+    while e > err {
+        h /= 2.0;
+        (e, n) = fixed(h);
+    }
+    // Step doubling: three projections per trial.
+    let adaptive_cost = 3 * (accepted + rejected);
+    eprintln!(
+        "adaptive: error {err:.3e} for {adaptive_cost} projections; fixed h = {h}: error {e:.3e} for {n}"
+    );
+    assert!(
+        2 * adaptive_cost <= n,
+        "adaptive {adaptive_cost} vs fixed {n}"
+    );
+}
+
+#[test]
+fn bad_settings_name_the_field() {
+    let mut s = AdaptiveSettings::new(f64::NAN);
+    assert!(matches!(
+        StepController::new(s),
+        Err(IntegrateError::InvalidSetting { field: "tol", .. })
+    ));
+    s.tol = 1e-3;
+    s.mu_first = 10.0;
+    assert!(matches!(
+        StepController::new(s),
+        Err(IntegrateError::InvalidSetting {
+            field: "mu_first",
+            ..
+        })
+    ));
+    s.mu_first = 0.01;
+    s.shrink = 1.5;
+    assert!(matches!(
+        StepController::new(s),
+        Err(IntegrateError::InvalidSetting {
+            field: "shrink",
+            ..
+        })
+    ));
+}
