@@ -6,6 +6,7 @@ mod converge;
 mod example;
 mod run;
 mod svg;
+mod tradeoff;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,6 +42,9 @@ enum Command {
     /// The convergence experiment of Bernicot & Venel §5: error (24) of each step size
     /// against a fine reference, the fitted order, as JSON, Markdown and a log–log SVG.
     Converge(converge::ConvergeArgs),
+    /// Work–precision: error against wall time for fixed steps, adaptive steps at several
+    /// tolerances and each solver, against a fine reference; JSON, Markdown and SVG.
+    Tradeoff(tradeoff::TradeoffArgs),
     /// Prints what a run file holds: the run, its status, datasets and attributes.
     #[command(after_help = EXIT_CODES)]
     Inspect {
@@ -106,6 +110,7 @@ fn run() -> Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
+        Command::Tradeoff(args) => tradeoff::tradeoff(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
         Command::Example81 { a, b, x0, h, t_end } => {
             example::example_8_1(a, b, x0, h, t_end).map(|()| ExitCode::SUCCESS)

@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use moreau_crowd::{Scene, Simulation};
+use moreau_integrate::{AdaptiveSettings, ErrorEstimate, StepController};
 use moreau_io::{Overwrite, RunFile, RunHeader, RunWriter};
 use serde::Serialize;
 
@@ -32,6 +33,39 @@ pub struct RunArgs {
     /// Write a JSON summary of the run to this file ('-' for stdout).
     #[arg(long, value_name = "FILE")]
     summary_json: Option<PathBuf>,
+    /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
+    /// 1e-6 s and min(0.5 s, output interval), starting from the scene's step) and the projection
+    /// accuracy ε_k = (θ·tol)² μ_k/μ_max with θ = 0.1. Without it, the scene's fixed step.
+    #[arg(long, value_name = "METRES")]
+    tol: Option<f64>,
+    /// The error estimate of the adaptive steps.
+    #[arg(long, value_enum, default_value_t = Estimate::Doubling, requires = "tol")]
+    estimate: Estimate,
+}
+
+/// The error estimate of `--tol` runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Estimate {
+    /// One step against two half steps (three projections per step).
+    Doubling,
+    /// The change of velocity between consecutive steps (one projection per step).
+    Velocity,
+}
+
+/// The adaptive controller for a scene and `--tol`, with the output interval as largest step.
+pub fn controller(scene: &Scene, tol: f64, estimate: Estimate) -> Result<StepController> {
+    let mut settings = AdaptiveSettings::new(tol);
+    settings.mu_max = settings
+        .mu_max
+        .min(scene.time.output_interval)
+        .min(scene.time.horizon);
+    settings.mu_first = scene.time.step.min(settings.mu_max);
+    settings.mu_min = settings.mu_min.min(settings.mu_first);
+    settings.estimate = match estimate {
+        Estimate::Doubling => ErrorEstimate::StepDoubling,
+        Estimate::Velocity => ErrorEstimate::VelocityChange,
+    };
+    StepController::new(settings).context("--tol")
 }
 
 /// What a run reports at its end (the `--summary-json` object and the file's `summary`).
@@ -53,6 +87,8 @@ struct Summary {
     max_eps: f64,
     max_violation: f64,
     steps_redone: usize,
+    steps_rejected: usize,
+    tol: Option<f64>,
     broad_phase: String,
     solvers: Vec<(String, usize)>,
 }
@@ -125,12 +161,16 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         None => None,
     };
 
-    let schedule = sim.schedule();
+    let mut stepping = match args.tol {
+        Some(tol) => Stepping::Adaptive(controller(sim.scene(), tol, args.estimate)?),
+        None => Stepping::Fixed(sim.schedule()),
+    };
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
     } else {
+        // Simulated milliseconds: the same bar for fixed and adaptive steps.
         let bar = ProgressBar::with_draw_target(
-            Some(schedule.len() as u64),
+            Some((sim.scene().time.horizon * 1e3).round() as u64),
             ProgressDrawTarget::stderr_with_hz(10),
         );
         bar.set_style(
@@ -143,7 +183,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
 
     let start = Instant::now();
     let mut stats = Stats::default();
-    let outcome = drive(&mut sim, &schedule, writer.as_mut(), &bar, &mut stats);
+    let outcome = drive(&mut sim, &mut stepping, writer.as_mut(), &bar, &mut stats);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 
@@ -168,6 +208,8 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         max_eps: stats.max_eps,
         max_violation: stats.max_violation,
         steps_redone: stats.redone,
+        steps_rejected: stats.rejected,
+        tol: args.tol,
         broad_phase: format!("{:?}", sim.broad_phase()),
         solvers: stats.solvers.clone(),
     };
@@ -217,26 +259,56 @@ struct Stats {
     max_eps: f64,
     max_violation: f64,
     redone: usize,
+    rejected: usize,
     solvers: Vec<(String, usize)>,
+}
+
+/// How the run chooses its steps.
+pub enum Stepping {
+    /// The scene's schedule: `(μ_k, frame after it?)`.
+    Fixed(Vec<(f64, bool)>),
+    /// Chosen by a controller; frames every output interval.
+    Adaptive(StepController),
 }
 
 /// The step loop: steps, records steps and exits, writes frames, moves the bar.
 fn drive(
     sim: &mut Simulation,
-    schedule: &[(f64, bool)],
+    stepping: &mut Stepping,
     mut writer: Option<&mut RunWriter>,
     bar: &ProgressBar,
     stats: &mut Stats,
 ) -> Result<()> {
     let people = sim.total_people();
+    let time = sim.scene().time;
     if let Some(w) = writer.as_deref_mut() {
         let f = sim.frame();
         w.frame(f.t, f.ids, f.positions)?;
     }
     stats.frames += 1;
     let mut exits_seen = 0;
-    for &(mu, frame) in schedule {
-        let report = sim.step(mu)?;
+    let mut k = 0;
+    loop {
+        let (report, frame) = match stepping {
+            Stepping::Fixed(schedule) => {
+                let Some(&(mu, frame)) = schedule.get(k) else {
+                    break;
+                };
+                (sim.step(mu)?, frame)
+            }
+            Stepping::Adaptive(controller) => {
+                if sim.time() >= time.horizon {
+                    break;
+                }
+                // The next output time; frames land on it exactly.
+                let next = ((stats.frames as f64) * time.output_interval).min(time.horizon);
+                let step = sim.step_adaptive(controller, next)?;
+                stats.rejected += step.rejected;
+                let due = step.report.t >= next;
+                (step.report, due)
+            }
+        };
+        k += 1;
         stats.steps += 1;
         stats.iterations += report.iterations;
         stats.max_eps = stats.max_eps.max(report.eps);
@@ -261,9 +333,9 @@ fn drive(
             }
             stats.frames += 1;
         }
-        bar.inc(1);
         if !bar.is_hidden() {
-            let rate = bar.position() as f64 / bar.elapsed().as_secs_f64().max(1e-9);
+            bar.set_position((report.t * 1e3).round() as u64);
+            let rate = k as f64 / bar.elapsed().as_secs_f64().max(1e-9);
             bar.set_message(format!(
                 "t = {:7.2} s  {:>8.1} steps/s  {:>7} people left",
                 report.t,

@@ -3,7 +3,9 @@
 use std::collections::HashMap;
 
 use moreau_core::StepReport;
-use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme};
+use moreau_integrate::{
+    AdaptiveStep, EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepController,
+};
 use moreau_solve::{Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, ProjectionSolver};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -410,6 +412,24 @@ impl Simulation {
         self.steps += 1;
         self.apply_exits();
         Ok(report)
+    }
+
+    /// One adaptive step chosen by `controller`, ending at or before `t_end`; then applies
+    /// exits (and makes the controller forget velocities when people left).
+    pub fn step_adaptive(
+        &mut self,
+        controller: &mut StepController,
+        t_end: f64,
+    ) -> Result<AdaptiveStep, CrowdError> {
+        let people = self.q.len();
+        let step = controller.step(&mut self.scheme, self.steps, self.t, &mut self.q, t_end)?;
+        self.t = step.report.t;
+        self.steps += 1;
+        self.apply_exits();
+        if self.q.len() != people {
+            controller.reset_history();
+        }
+        Ok(step)
     }
 
     /// The steps [`run`](Self::run) takes: `(μ_k, frame after it?)`, the scene's step with the

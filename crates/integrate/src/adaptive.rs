@@ -241,6 +241,9 @@ impl StepController {
                         report.iterations = iterations;
                         report.redone = redone;
                         report.mu = mu;
+                        if mu == remaining {
+                            report.t = t_end;
+                        }
                         return Ok(AdaptiveStep {
                             report,
                             error,

@@ -1,0 +1,267 @@
+//! `moreau tradeoff`: work–precision of fixed steps, adaptive steps at several tolerances and
+//! each solver, against a fine reference: error (24) and evacuation-curve error against wall
+//! time, written as JSON, Markdown and a log–log SVG.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result, ensure};
+use moreau_crowd::{Scene, Simulation, SolverKind};
+use serde::Serialize;
+
+use crate::run::{Estimate, controller};
+use crate::svg::{LogLog, Series};
+
+/// Arguments of `moreau tradeoff`.
+#[derive(Debug, clap::Args)]
+pub struct TradeoffArgs {
+    /// The scene (its exits must keep everyone, `action = "continue"`).
+    scene: PathBuf,
+    /// The step of the reference run (s), with ε_k = 1e-5 μ³.
+    #[arg(long, default_value_t = 0.01)]
+    reference_step: f64,
+    /// Fixed steps to measure (s), with the scene's solver.
+    #[arg(long, value_delimiter = ',', default_value = "0.02,0.05,0.1,0.2")]
+    steps: Vec<f64>,
+    /// Adaptive tolerances to measure (m), with each error estimate.
+    #[arg(long, value_delimiter = ',', default_value = "0.1,0.03,0.01,0.003")]
+    tols: Vec<f64>,
+    /// Fixed steps to measure with Clarabel as the only solver (s).
+    #[arg(long, value_delimiter = ',', default_value = "0.05,0.1")]
+    clarabel_steps: Vec<f64>,
+    /// Compare at t_i = i T / samples.
+    #[arg(long, default_value_t = 10)]
+    samples: usize,
+    /// Override the horizon T of the scene (s).
+    #[arg(long)]
+    horizon: Option<f64>,
+    /// Directory for tradeoff.json, tradeoff.md and tradeoff.svg.
+    #[arg(short, long, default_value = "out/tradeoff")]
+    out: PathBuf,
+}
+
+#[derive(Debug, Serialize)]
+struct Point {
+    method: String,
+    setting: f64,
+    steps: usize,
+    rejected: usize,
+    wall_seconds: f64,
+    error: f64,
+    evacuation_error: usize,
+    passed_exit: usize,
+}
+
+struct Sampled {
+    states: Vec<Vec<f64>>,
+    passed: Vec<usize>,
+    steps: usize,
+    rejected: usize,
+    wall: f64,
+}
+
+enum How {
+    Fixed(f64),
+    Adaptive(f64, Estimate),
+}
+
+fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
+    let mut scene = scene.clone();
+    let interval = scene.time.horizon / samples as f64;
+    scene.time.output_interval = interval;
+    if let How::Fixed(h) = how {
+        let per = interval / h;
+        ensure!(
+            (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
+            "step {h} does not divide the sampling interval {interval}"
+        );
+        scene.time.step = *h;
+    }
+    let mut sim = Simulation::new(scene.clone())?;
+    let n = sim.total_people();
+    let grab = |sim: &Simulation| -> Result<Vec<f64>> {
+        let f = sim.frame();
+        ensure!(
+            f.ids.len() == n,
+            "people left the scene: the study needs exits with action = \"continue\""
+        );
+        let mut q = vec![0.0; 2 * n];
+        for (k, &id) in f.ids.iter().enumerate() {
+            q[2 * id as usize] = f.positions[2 * k];
+            q[2 * id as usize + 1] = f.positions[2 * k + 1];
+        }
+        Ok(q)
+    };
+    let start = Instant::now();
+    let (mut states, mut passed) = (vec![grab(&sim)?], vec![0]);
+    let (mut steps, mut rejected) = (0, 0);
+    match how {
+        How::Fixed(_) => {
+            for (mu, frame) in sim.schedule() {
+                sim.step(mu)?;
+                steps += 1;
+                if frame {
+                    states.push(grab(&sim)?);
+                    passed.push(sim.exit_times().len());
+                }
+            }
+        }
+        How::Adaptive(tol, estimate) => {
+            let mut c = controller(&scene, *tol, *estimate)?;
+            for i in 1..=samples {
+                let next = (i as f64 * interval).min(scene.time.horizon);
+                while sim.time() < next {
+                    let s = sim.step_adaptive(&mut c, next)?;
+                    steps += 1;
+                    rejected += s.rejected;
+                }
+                states.push(grab(&sim)?);
+                passed.push(sim.exit_times().len());
+            }
+        }
+    }
+    Ok(Sampled {
+        states,
+        passed,
+        steps,
+        rejected,
+        wall: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Runs `moreau tradeoff`.
+pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
+    let mut scene = Scene::from_file(&args.scene)?;
+    if let Some(t) = args.horizon {
+        scene.time.horizon = t;
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating '{}'", args.out.display()))?;
+    let mut reference_scene = scene.clone();
+    reference_scene.solver.eps_kappa = 1e-5;
+    eprintln!("reference run, h = {} ...", args.reference_step);
+    let reference = sample(
+        &reference_scene,
+        &How::Fixed(args.reference_step),
+        args.samples,
+    )
+    .context("the reference run")?;
+
+    let mut runs: Vec<(String, f64, Scene, How)> = Vec::new();
+    for &h in &args.steps {
+        runs.push(("fixed step, APGD".into(), h, scene.clone(), How::Fixed(h)));
+    }
+    for &h in &args.clarabel_steps {
+        let mut s = scene.clone();
+        s.solver.kind = SolverKind::Clarabel;
+        runs.push(("fixed step, Clarabel".into(), h, s, How::Fixed(h)));
+    }
+    for &tol in &args.tols {
+        runs.push((
+            "adaptive, step doubling".into(),
+            tol,
+            scene.clone(),
+            How::Adaptive(tol, Estimate::Doubling),
+        ));
+        runs.push((
+            "adaptive, velocity change".into(),
+            tol,
+            scene.clone(),
+            How::Adaptive(tol, Estimate::Velocity),
+        ));
+    }
+    let mut points = Vec::new();
+    for (method, setting, s, how) in &runs {
+        let r = sample(s, how, args.samples).with_context(|| format!("{method} at {setting}"))?;
+        let error = reference
+            .states
+            .iter()
+            .zip(&r.states)
+            .skip(1)
+            .map(|(a, b)| {
+                a.iter()
+                    .zip(b)
+                    .map(|(x, y)| (x - y).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(0.0, f64::max);
+        let evacuation_error = reference
+            .passed
+            .iter()
+            .zip(&r.passed)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap_or(0);
+        eprintln!(
+            "  {method:<26} {setting:<6} e = {error:9.4}  ΔN = {evacuation_error:3}  {:5} steps ({:4} rejected)  {:7.2} s",
+            r.steps, r.rejected, r.wall
+        );
+        points.push(Point {
+            method: method.clone(),
+            setting: *setting,
+            steps: r.steps,
+            rejected: r.rejected,
+            wall_seconds: r.wall,
+            error,
+            evacuation_error,
+            passed_exit: *r.passed.last().unwrap_or(&0),
+        });
+    }
+
+    std::fs::write(
+        args.out.join("tradeoff.json"),
+        serde_json::to_string_pretty(&points)? + "\n",
+    )?;
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "Work–precision on `{}` (T = {} s) against a reference with h = {} and ε_k = 1e-5 μ³; \
+         e = max_i |q_ref(t_i) − q(t_i)| (error (24)), ΔN = max_i |N_ref(t_i) − N(t_i)| \
+         (people through the exit), wall time of one thread:\n",
+        args.scene.display(),
+        scene.time.horizon,
+        args.reference_step
+    );
+    let _ = writeln!(
+        md,
+        "| method | step (s) or tol (m) | steps | rejected | e (m) | ΔN | wall (s) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for p in &points {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {:.3} | {} | {:.2} |",
+            p.method, p.setting, p.steps, p.rejected, p.error, p.evacuation_error, p.wall_seconds
+        );
+    }
+    std::fs::write(args.out.join("tradeoff.md"), md)?;
+
+    let mut series: Vec<Series> = Vec::new();
+    for p in &points {
+        match series.iter_mut().find(|s| s.name == p.method) {
+            Some(s) => s.points.push((p.wall_seconds, p.error)),
+            None => series.push(Series {
+                name: p.method.clone(),
+                points: vec![(p.wall_seconds, p.error)],
+                dashed: false,
+            }),
+        }
+    }
+    for s in &mut series {
+        s.points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    let plot = LogLog {
+        title: format!("Work–precision, {}", args.scene.display()),
+        x_label: "wall time of the run (s)".into(),
+        y_label: "error (24) against the reference (m)".into(),
+        series,
+    };
+    std::fs::write(args.out.join("tradeoff.svg"), plot.render())?;
+    println!(
+        "wrote {}/tradeoff.json, tradeoff.md, tradeoff.svg",
+        args.out.display()
+    );
+    Ok(())
+}
