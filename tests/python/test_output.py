@@ -153,3 +153,24 @@ def test_the_plot_script_writes_its_pngs(room_run, tmp_path):
         png = tmp_path / "plots" / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
         assert png.stat().st_size > 10_000, name
+
+
+def test_an_adaptive_run_writes_frames_on_output_times(tmp_path):
+    from conftest import ROOM
+
+    short = tmp_path / "short.toml"
+    short.write_text(ROOM.read_text().replace("horizon = 20.0", "horizon = 4.0"))
+    out = tmp_path / "adaptive.h5"
+    moreau("run", short, "-o", out, "--quiet", "--tol", "0.01")
+    run = moreau_run.load(out)
+    np.testing.assert_allclose(run.time, np.arange(41) * 0.1, atol=1e-12)
+    mu = run.steps["mu"]
+    assert mu.min() < mu.max(), "the steps should vary"
+    assert mu.max() <= 0.1 + 1e-12
+    assert mu.sum() == pytest.approx(4.0, abs=1e-9)
+    # ε_k = (θ tol)² μ / μ_max with θ = 0.1, μ_max = 0.1; step doubling certifies half steps.
+    np.testing.assert_allclose(run.steps["eps_target"], (0.1 * 0.01) ** 2 * (mu / 2) / 0.1,
+                               rtol=1e-9)
+    assert np.all(run.steps["eps"] <= run.steps["eps_target"] * (1 + 1e-12))
+    assert moreau_run.min_gaps(run).min() >= -run.steps["violation"].max() - 1e-12
+    assert run.summary["tol"] == 0.01

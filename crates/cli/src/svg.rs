@@ -33,7 +33,11 @@ const COLORS: [&str; 8] = [
 
 fn ticks(lo: f64, hi: f64) -> Vec<f64> {
     let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
-    let mantissas: &[f64] = if b - a <= 2 { &[1.0, 2.0, 5.0] } else { &[1.0] };
+    let mantissas: &[f64] = match b - a {
+        ..=1 => &[1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0],
+        2 => &[1.0, 2.0, 5.0],
+        _ => &[1.0],
+    };
     let mut out = Vec::new();
     for e in a..=b {
         for m in mantissas {
@@ -57,8 +61,8 @@ fn label(v: f64) -> String {
 impl LogLog {
     /// The SVG document.
     pub fn render(&self) -> String {
-        let (w, h) = (720.0, 480.0);
-        let (left, right, top, bottom) = (80.0, 220.0, 40.0, 60.0);
+        let (w, h) = (770.0, 480.0);
+        let (left, right, top, bottom) = (80.0, 270.0, 40.0, 60.0);
         let pts = self.series.iter().flat_map(|s| s.points.iter());
         let finite: Vec<(f64, f64)> = pts
             .filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite())
