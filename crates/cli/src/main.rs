@@ -24,7 +24,7 @@ Exit codes:
 /// moreau: Moreau's catching-up scheme for first-order nonsmooth dynamics, with crowds of
 /// rigid disks that never overlap.
 #[derive(Debug, Parser)]
-#[command(name = "moreau", version, about, long_about = None, after_help = EXIT_CODES)]
+#[command(name = "moreau", version, long_about = None, after_help = EXIT_CODES)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

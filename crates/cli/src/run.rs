@@ -38,8 +38,9 @@ pub struct RunArgs {
     /// accuracy ε_k = (θ·tol)² μ_k/μ_max with θ = 0.1. Without it, the scene's fixed step.
     #[arg(long, value_name = "METRES")]
     tol: Option<f64>,
-    /// The error estimate of the adaptive steps.
-    #[arg(long, value_enum, default_value_t = Estimate::Doubling, requires = "tol")]
+    /// The error estimate of the adaptive steps (velocity: cheaper at equal error on the
+    /// measured crowds, see the README's work–precision).
+    #[arg(long, value_enum, default_value_t = Estimate::Velocity, requires = "tol")]
     estimate: Estimate,
 }
 

@@ -33,9 +33,10 @@ const COLORS: [&str; 8] = [
 
 fn ticks(lo: f64, hi: f64) -> Vec<f64> {
     let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
-    let mantissas: &[f64] = match b - a {
-        ..=1 => &[1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 7.0],
-        2 => &[1.0, 2.0, 5.0],
+    // Enough ticks to read a value off even a narrow range.
+    let mantissas: &[f64] = match hi / lo {
+        r if r < 20.0 => &[1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0],
+        r if r < 300.0 => &[1.0, 2.0, 5.0],
         _ => &[1.0],
     };
     let mut out = Vec::new();

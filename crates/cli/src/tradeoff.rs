@@ -39,9 +39,12 @@ pub struct TradeoffArgs {
     /// Directory for tradeoff.json, tradeoff.md and tradeoff.svg.
     #[arg(short, long, default_value = "out/tradeoff")]
     out: PathBuf,
+    /// Run nothing: redraw tradeoff.md and tradeoff.svg from the tradeoff.json in --out.
+    #[arg(long)]
+    replot: bool,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, serde::Deserialize)]
 struct Point {
     method: String,
     setting: f64,
@@ -138,6 +141,14 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating '{}'", args.out.display()))?;
+    if args.replot {
+        let json = args.out.join("tradeoff.json");
+        let text = std::fs::read_to_string(&json)
+            .with_context(|| format!("reading '{}'", json.display()))?;
+        let points: Vec<Point> = serde_json::from_str(&text)
+            .with_context(|| format!("parsing '{}'", json.display()))?;
+        return write(args, &scene, &points);
+    }
     let mut reference_scene = scene.clone();
     reference_scene.solver.eps_kappa = 1e-5;
     eprintln!("reference run, h = {} ...", args.reference_step);
@@ -228,6 +239,11 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
         args.out.join("tradeoff.json"),
         serde_json::to_string_pretty(&points)? + "\n",
     )?;
+    write(args, &scene, &points)
+}
+
+/// Writes tradeoff.md and tradeoff.svg from the measured points.
+fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -243,7 +259,7 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
         "| method | step (s) or tol (m) | steps | rejected | e (m) | ΔN | wall (s) |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|");
-    for p in &points {
+    for p in points {
         let _ = writeln!(
             md,
             "| {} | {} | {} | {} | {:.3} | {} | {:.2} |",
@@ -253,7 +269,7 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
     std::fs::write(args.out.join("tradeoff.md"), md)?;
 
     let mut series: Vec<Series> = Vec::new();
-    for p in &points {
+    for p in points {
         match series.iter_mut().find(|s| s.name == p.method) {
             Some(s) => s.points.push((p.wall_seconds, p.error)),
             None => series.push(Series {
