@@ -145,8 +145,8 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
         let json = args.out.join("tradeoff.json");
         let text = std::fs::read_to_string(&json)
             .with_context(|| format!("reading '{}'", json.display()))?;
-        let points: Vec<Point> = serde_json::from_str(&text)
-            .with_context(|| format!("parsing '{}'", json.display()))?;
+        let points: Vec<Point> =
+            serde_json::from_str(&text).with_context(|| format!("parsing '{}'", json.display()))?;
         return write(args, &scene, &points);
     }
     let mut reference_scene = scene.clone();
