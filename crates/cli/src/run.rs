@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use moreau_crowd::{Scene, Simulation};
+use moreau_crowd::{Scene, Simulation, SolverKind};
 use moreau_integrate::{AdaptiveSettings, ErrorEstimate, StepController};
 use moreau_io::{Overwrite, RunFile, RunHeader, RunWriter};
 use serde::Serialize;
@@ -109,9 +109,13 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
 
 fn solver_text(sim: &Simulation) -> String {
     let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
+    let solver = match sim.solver_kind() {
+        SolverKind::Clarabel => "Clarabel alone",
+        _ => "APGD with Clarabel as fallback",
+    };
     format!(
-        "{settings}# in force: ε_k = eps_kappa · μ³, projection by APGD with Clarabel as fallback \
-         (or Clarabel alone), broad phase {:?}, up to 8 redone steps per step\n",
+        "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \
+         broad phase {:?}, up to 8 redone steps per step\n",
         sim.broad_phase()
     )
 }

@@ -76,6 +76,7 @@ pub struct Simulation {
     exit_times: Vec<(u32, f64)>,
     total: usize,
     broad: BroadPhaseKind,
+    solver: SolverKind,
 }
 
 impl std::fmt::Debug for Simulation {
@@ -324,15 +325,18 @@ impl Simulation {
             max_violation: scene.solver.max_violation,
             max_redo: 8,
         };
-        let solver: Box<dyn ProjectionSolver> = match scene.solver.kind {
+        let kind = scene.solver.kind.resolve(n);
+        let solver: Box<dyn ProjectionSolver> = match kind {
             SolverKind::Apgd => Box::new(
                 Apgd::new(ApgdSettings::default())
                     .map_err(moreau_integrate::IntegrateError::from)?,
             ),
-            SolverKind::Clarabel => Box::new(ClarabelReference::new(ClarabelSettings::default())),
+            SolverKind::Clarabel | SolverKind::Auto => {
+                Box::new(ClarabelReference::new(ClarabelSettings::default()))
+            }
         };
         let mut correction = LinearizedProjection::new(constraints, solver, settings)?;
-        if scene.solver.kind == SolverKind::Apgd {
+        if kind == SolverKind::Apgd {
             correction = correction.with_fallback(Box::new(ClarabelReference::new(
                 ClarabelSettings::default(),
             )));
@@ -350,6 +354,7 @@ impl Simulation {
             exit_times: Vec::new(),
             total: n,
             broad,
+            solver: kind,
         })
     }
 
@@ -387,6 +392,11 @@ impl Simulation {
     /// `(id, time)` of everyone who passed an exit so far.
     pub fn exit_times(&self) -> &[(u32, f64)] {
         &self.exit_times
+    }
+
+    /// The projection solver in use (`Auto` resolved): `Apgd` has Clarabel as fallback.
+    pub fn solver_kind(&self) -> SolverKind {
+        self.solver
     }
 
     /// The broad phase in use.

@@ -294,3 +294,22 @@ fn an_unreachable_accuracy_is_a_clear_error() {
         "{text}"
     );
 }
+
+/// `kind = "auto"` picks Clarabel for a small crowd and APGD for a large one, and every step
+/// report names the solver that answered.
+#[test]
+fn auto_picks_the_solver_by_crowd_size_and_says_so() {
+    use moreau_crowd::SolverKind;
+    let mut small = room(1.2, 0.05, 0.5, &spawn(60, "0.2", "1.0"));
+    small.solver.kind = SolverKind::Auto;
+    let mut sim = Simulation::new(small).unwrap();
+    assert_eq!(sim.solver_kind(), SolverKind::Clarabel);
+    for (mu, _) in sim.schedule() {
+        assert_eq!(sim.step(mu).unwrap().solver, "clarabel");
+    }
+    let mut large = hall(SolverKind::AUTO_CLARABEL_MAX_PEOPLE + 1, 1);
+    large.solver.kind = SolverKind::Auto;
+    let mut sim = Simulation::new(large).unwrap();
+    assert_eq!(sim.solver_kind(), SolverKind::Apgd);
+    assert_eq!(sim.step(0.05).unwrap().solver, "apgd");
+}
