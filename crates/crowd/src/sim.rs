@@ -36,10 +36,35 @@ struct ExitRuntime {
     action: ExitAction,
     field: usize,
     target: Option<(Polygon, usize)>,
+    open: bool,
 }
 
 impl ExitRuntime {
+    /// The wall that closes the exit.
+    fn closure(&self) -> Segment {
+        if let Some(s) = self.segment {
+            return s;
+        }
+        let (lo, hi) = self.area.as_ref().expect("an area or a segment").bounds();
+        if hi[1] - lo[1] >= hi[0] - lo[0] {
+            let x = 0.5 * (lo[0] + hi[0]);
+            Segment {
+                a: [x, lo[1]],
+                b: [x, hi[1]],
+            }
+        } else {
+            let y = 0.5 * (lo[1] + hi[1]);
+            Segment {
+                a: [lo[0], y],
+                b: [hi[0], y],
+            }
+        }
+    }
+
     fn reached(&self, p: [f64; 2], r: f64) -> bool {
+        if !self.open {
+            return false;
+        }
         match (&self.area, &self.segment) {
             (Some(a), _) => a.contains(p),
             (None, Some(s)) => s.distance(p) <= r,
@@ -77,6 +102,8 @@ pub struct Simulation {
     total: usize,
     broad: BroadPhaseKind,
     solver: SolverKind,
+    /// The walls of the scene, before closed exits add theirs.
+    scene_walls: usize,
 }
 
 impl std::fmt::Debug for Simulation {
@@ -201,6 +228,7 @@ impl Simulation {
                 action: exit.action,
                 field,
                 target,
+                open: true,
             });
         }
 
@@ -320,6 +348,7 @@ impl Simulation {
             goal: goal.collect(),
             speed_factor: 1.0,
         };
+        let scene_walls = walls.len();
         let constraints = CrowdConstraints::new(walls, radius, ids, broad.build());
         let settings = LinearizedSettings {
             max_violation: scene.solver.max_violation,
@@ -355,6 +384,7 @@ impl Simulation {
             total: n,
             broad,
             solver: kind,
+            scene_walls,
         })
     }
 
@@ -422,6 +452,55 @@ impl Simulation {
         self.steps += 1;
         self.apply_exits();
         Ok(report)
+    }
+
+    /// Whether exit `e` is open.
+    pub fn exit_open(&self, e: usize) -> Option<bool> {
+        self.exits.get(e).map(|x| x.open)
+    }
+
+    /// Opens or closes exit `e` (a scene change, from the next step on). A closed exit is a
+    /// wall: its segment, or for an area the mid-line of the area's bounding box along its
+    /// longer side; nobody passes it, and people standing in it are pushed out to the side
+    /// their centre is on. Reopening removes the wall.
+    pub fn set_exit_open(&mut self, e: usize, open: bool) -> Result<(), CrowdError> {
+        let Some(exit) = self.exits.get_mut(e) else {
+            return Err(CrowdError::invalid(
+                "exit",
+                e,
+                format!("the scene has {} exits", self.exits.len()),
+            ));
+        };
+        if exit.open == open {
+            return Ok(());
+        }
+        exit.open = open;
+        let mut walls: Vec<Segment> = self.scheme.correction().constraints().walls
+            [..self.scene_walls]
+            .to_vec();
+        for x in self.exits.iter().filter(|x| !x.open) {
+            walls.push(x.closure());
+        }
+        self.scheme.field_mut().walls = walls.clone();
+        self.scheme.correction_mut().constraints_mut().walls = walls;
+        Ok(())
+    }
+
+    /// The smallest gap between two people present, or between a person and a wall (closed
+    /// exits included), at the current configuration (m); `+∞` when there is nothing to
+    /// touch within `reach` (m).
+    pub fn min_gap(&self, reach: f64) -> f64 {
+        let c = self.scheme.correction().constraints();
+        let mut rows = moreau_core::ConstraintRows::new(self.q.len());
+        // Assembling with a margin lists every pair and wall closer than it.
+        let mut scratch = CrowdConstraints::new(
+            c.walls.clone(),
+            c.radius.clone(),
+            c.ids.clone(),
+            self.broad.build(),
+        );
+        moreau_core::ConstraintSet::assemble(&mut scratch, self.t, &self.q, reach, &mut rows);
+        rows.values().iter().copied().fold(f64::INFINITY, f64::min)
     }
 
     /// One adaptive step chosen by `controller`, ending at or before `t_end`; then applies

@@ -1,0 +1,446 @@
+//! FMI 2.0 co-simulation glue: the 34 functions of the standard. Every entry point checks its
+//! pointers and the instance state, catches panics, and turns errors into `fmi2Error` and a
+//! log line; the work is the runtime's.
+
+use std::ffi::{CStr, CString, c_char, c_int, c_uint, c_void};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::LazyLock;
+
+use crate::FmuError;
+use crate::runtime::{Instance, Level, State};
+
+/// `fmi2Status`.
+pub type Status = c_int;
+const OK: Status = 0;
+const ERROR: Status = 3;
+const FATAL: Status = 4;
+
+const CO_SIMULATION: c_int = 1;
+const LAST_SUCCESSFUL_TIME: c_int = 2;
+const TERMINATED: c_int = 3;
+
+/// The FMI 2 model description, as shipped in the FMU.
+pub const MODEL_DESCRIPTION: &str = include_str!("../fmi2/modelDescription.xml");
+
+/// The GUID the model description declares: `fmi2Instantiate` accepts no other.
+pub static GUID: LazyLock<&'static str> =
+    LazyLock::new(|| crate::xml_attribute(MODEL_DESCRIPTION, "guid"));
+
+type Logger = Option<
+    unsafe extern "C" fn(*mut c_void, *const c_char, Status, *const c_char, *const c_char, ...),
+>;
+
+/// `fmi2CallbackFunctions`.
+#[repr(C)]
+#[derive(Debug)]
+pub struct CallbackFunctions {
+    logger: Logger,
+    allocate_memory: Option<unsafe extern "C" fn(usize, usize) -> *mut c_void>,
+    free_memory: Option<unsafe extern "C" fn(*mut c_void)>,
+    step_finished: Option<unsafe extern "C" fn(*mut c_void, Status)>,
+    component_environment: *mut c_void,
+}
+
+/// What an `fmi2Component` points to.
+struct Component {
+    instance: Instance,
+    strings: Vec<CString>,
+}
+
+fn c_text(s: &str) -> CString {
+    CString::new(s.replace('\0', " ")).expect("no NUL left")
+}
+
+/// Runs `f` on the component behind `c`: null, panics and errors become `fmi2Error` (errors
+/// logged); `fatal` errors also put the instance in the error state.
+fn with(c: *mut c_void, function: &'static str, f: impl FnOnce(&mut Component) -> Result<(), FmuError>) -> Status {
+    if c.is_null() {
+        return ERROR;
+    }
+    // SAFETY: a non-null fmi2Component is a pointer fmi2Instantiate returned and
+    // fmi2FreeInstance has not freed (the standard's contract with the host).
+    let component = unsafe { &mut *(c as *mut Component) };
+    let outcome = catch_unwind(AssertUnwindSafe(|| {
+        if component.instance.state == State::Error
+            && !matches!(function, "fmi2Reset" | "fmi2GetRealStatus" | "fmi2GetBooleanStatus")
+        {
+            return Err(FmuError::State {
+                function: function.to_string(),
+                state: State::Error,
+            });
+        }
+        f(component)
+    }));
+    match outcome {
+        Ok(Ok(())) => OK,
+        Ok(Err(e)) => {
+            component.instance.error(&format!("{function}: {e}"));
+            if matches!(e, FmuError::Crowd(_)) && function == "fmi2DoStep" {
+                component.instance.state = State::Error;
+            }
+            ERROR
+        }
+        Err(_) => {
+            component.instance.state = State::Error;
+            component.instance.error(&format!("{function}: internal error (panic); the instance is unusable"));
+            FATAL
+        }
+    }
+}
+
+/// `(vr, nvr)` as a slice, refusing null pointers.
+unsafe fn refs<'a>(vr: *const c_uint, nvr: usize) -> Result<&'a [c_uint], FmuError> {
+    if nvr == 0 {
+        return Ok(&[]);
+    }
+    if vr.is_null() {
+        return Err(FmuError::Null("vr"));
+    }
+    // SAFETY: the host passes `nvr` value references at `vr`.
+    Ok(unsafe { std::slice::from_raw_parts(vr, nvr) })
+}
+
+unsafe fn values<'a, T>(value: *const T, n: usize) -> Result<&'a [T], FmuError> {
+    if n == 0 {
+        return Ok(&[]);
+    }
+    if value.is_null() {
+        return Err(FmuError::Null("value"));
+    }
+    // SAFETY: the host passes `n` values at `value`.
+    Ok(unsafe { std::slice::from_raw_parts(value, n) })
+}
+
+unsafe fn values_mut<'a, T>(value: *mut T, n: usize) -> Result<&'a mut [T], FmuError> {
+    if n == 0 {
+        return Ok(&mut []);
+    }
+    if value.is_null() {
+        return Err(FmuError::Null("value"));
+    }
+    // SAFETY: the host provides room for `n` values at `value`.
+    Ok(unsafe { std::slice::from_raw_parts_mut(value, n) })
+}
+
+unsafe fn text<'a>(s: *const c_char, what: &'static str) -> Result<&'a str, FmuError> {
+    if s.is_null() {
+        return Err(FmuError::Null(what));
+    }
+    // SAFETY: the host passes a NUL-terminated string.
+    unsafe { CStr::from_ptr(s) }
+        .to_str()
+        .map_err(|_| FmuError::Setting(format!("{what} is not UTF-8")))
+}
+
+// ---- Common functions ------------------------------------------------------------------
+
+/// `fmi2GetTypesPlatform`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2GetTypesPlatform() -> *const c_char {
+    c"default".as_ptr()
+}
+
+/// `fmi2GetVersion`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2GetVersion() -> *const c_char {
+    c"2.0".as_ptr()
+}
+
+/// `fmi2SetDebugLogging`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2SetDebugLogging(c: *mut c_void, logging_on: c_int, _n: usize, _categories: *const *const c_char) -> Status {
+    with(c, "fmi2SetDebugLogging", |comp| {
+        comp.instance.logging_on = logging_on != 0;
+        Ok(())
+    })
+}
+
+/// `fmi2Instantiate`: null (and a log line when possible) for a wrong GUID, a type other than
+/// co-simulation, or missing callbacks.
+///
+/// # Safety
+/// The pointers are the host's, as the standard defines them.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2Instantiate(
+    instance_name: *const c_char,
+    fmu_type: c_int,
+    guid: *const c_char,
+    resource_location: *const c_char,
+    functions: *const CallbackFunctions,
+    _visible: c_int,
+    logging_on: c_int,
+) -> *mut c_void {
+    let made = catch_unwind(AssertUnwindSafe(|| {
+        if functions.is_null() {
+            return None;
+        }
+        // SAFETY: non-null, points to the host's callback struct.
+        let callbacks = unsafe { &*functions };
+        let logger = callbacks.logger;
+        let env = callbacks.component_environment;
+        // SAFETY: the host's strings.
+        let name = unsafe { text(instance_name, "instanceName") }.unwrap_or("?").to_string();
+        let c_name = c_text(&name);
+        let log = move |level: Level, message: &str| {
+            if let Some(logger) = logger {
+                let (status, category) = match level {
+                    Level::Info => (OK, c"logAll"),
+                    Level::Error => (ERROR, c"logStatusError"),
+                };
+                let message = c_text(message);
+                // SAFETY: the host's logger; the message is passed as "%s" and an argument, so
+                // no '%' in it is interpreted.
+                unsafe { logger(env, c_name.as_ptr(), status, category.as_ptr(), c"%s".as_ptr(), message.as_ptr()) };
+            }
+        };
+        let fail = |message: String| {
+            log(Level::Error, &format!("fmi2Instantiate: {message}"));
+            None
+        };
+        if instance_name.is_null() {
+            return fail("instanceName is a null pointer".into());
+        }
+        if fmu_type != CO_SIMULATION {
+            return fail(format!("fmuType = {fmu_type}: this FMU is for co-simulation only"));
+        }
+        // SAFETY: the host's string.
+        let given = match unsafe { text(guid, "fmuGUID") } {
+            Ok(g) => g,
+            Err(e) => return fail(e.to_string()),
+        };
+        if given != *GUID {
+            return fail(format!("wrong GUID {given}: this binary is {}", *GUID));
+        }
+        let resources = if resource_location.is_null() {
+            None
+        } else {
+            // SAFETY: the host's string.
+            unsafe { text(resource_location, "fmuResourceLocation") }
+                .ok()
+                .map(crate::resource_path)
+        };
+        let instance = Instance::new(name, resources, logging_on != 0, Box::new(log));
+        instance.info("instantiated");
+        Some(Box::into_raw(Box::new(Component {
+            instance,
+            strings: Vec::new(),
+        })) as *mut c_void)
+    }));
+    made.ok().flatten().unwrap_or(std::ptr::null_mut())
+}
+
+/// `fmi2FreeInstance`.
+///
+/// # Safety
+/// `c` is null or a component from `fmi2Instantiate`, not freed yet.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2FreeInstance(c: *mut c_void) {
+    if c.is_null() {
+        return;
+    }
+    let _ = catch_unwind(AssertUnwindSafe(|| {
+        // SAFETY: see above; ownership returns to Rust and is dropped.
+        drop(unsafe { Box::from_raw(c as *mut Component) });
+    }));
+}
+
+/// `fmi2SetupExperiment`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2SetupExperiment(c: *mut c_void, _tolerance_defined: c_int, _tolerance: f64, start_time: f64, _stop_time_defined: c_int, _stop_time: f64) -> Status {
+    with(c, "fmi2SetupExperiment", |comp| {
+        comp.instance.expect("fmi2SetupExperiment", &[State::Instantiated])?;
+        if !start_time.is_finite() {
+            return Err(FmuError::Setting(format!("startTime = {start_time}: not a finite number")));
+        }
+        comp.instance.settings.start_time = start_time;
+        Ok(())
+    })
+}
+
+/// `fmi2EnterInitializationMode`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2EnterInitializationMode(c: *mut c_void) -> Status {
+    with(c, "fmi2EnterInitializationMode", |comp| comp.instance.enter_initialization())
+}
+
+/// `fmi2ExitInitializationMode`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2ExitInitializationMode(c: *mut c_void) -> Status {
+    with(c, "fmi2ExitInitializationMode", |comp| comp.instance.exit_initialization())
+}
+
+/// `fmi2Terminate`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2Terminate(c: *mut c_void) -> Status {
+    with(c, "fmi2Terminate", |comp| comp.instance.terminate())
+}
+
+/// `fmi2Reset`.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2Reset(c: *mut c_void) -> Status {
+    with(c, "fmi2Reset", |comp| {
+        comp.instance.reset();
+        Ok(())
+    })
+}
+
+// ---- Getting and setting values --------------------------------------------------------
+
+macro_rules! getter {
+    ($name:ident, $fmi:literal, $ty:ty, |$inst:ident, $vr:ident| $get:expr) => {
+        #[doc = concat!("`", $fmi, "`.")]
+        ///
+        /// # Safety
+        /// `vr` and `value` hold `nvr` elements, as the standard defines.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $name(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *mut $ty) -> Status {
+            with(c, $fmi, |comp| {
+                comp.instance.expect($fmi, &[State::Initialization, State::Stepping, State::Terminated, State::Instantiated])?;
+                // SAFETY: the host's arrays of `nvr` elements.
+                let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
+                for (slot, &$vr) in out.iter_mut().zip(refs) {
+                    let $inst = &mut comp.instance;
+                    *slot = $get;
+                }
+                Ok(())
+            })
+        }
+    };
+}
+
+getter!(fmi2GetReal, "fmi2GetReal", f64, |inst, r| inst.get_real(r)?);
+getter!(fmi2GetInteger, "fmi2GetInteger", c_int, |inst, r| inst.get_integer(r)?);
+getter!(fmi2GetBoolean, "fmi2GetBoolean", c_int, |inst, r| inst.get_boolean(r)? as c_int);
+
+/// `fmi2GetString`: the strings stay valid until the next call on this instance.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetString(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *mut *const c_char) -> Status {
+    with(c, "fmi2GetString", |comp| {
+        // SAFETY: the host's arrays of `nvr` elements.
+        let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
+        comp.strings.clear();
+        for &r in refs {
+            let s = comp.instance.get_string(r)?;
+            comp.strings.push(c_text(&s));
+        }
+        for (slot, s) in out.iter_mut().zip(&comp.strings) {
+            *slot = s.as_ptr();
+        }
+        Ok(())
+    })
+}
+
+macro_rules! setter {
+    ($name:ident, $fmi:literal, $ty:ty, |$inst:ident, $vr:ident, $v:ident| $set:expr) => {
+        #[doc = concat!("`", $fmi, "`.")]
+        ///
+        /// # Safety
+        /// `vr` and `value` hold `nvr` elements, as the standard defines.
+        #[unsafe(no_mangle)]
+        pub unsafe extern "C" fn $name(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *const $ty) -> Status {
+            with(c, $fmi, |comp| {
+                // SAFETY: the host's arrays of `nvr` elements.
+                let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
+                for (&$vr, &$v) in refs.iter().zip(vals) {
+                    let $inst = &mut comp.instance;
+                    $set?;
+                }
+                Ok(())
+            })
+        }
+    };
+}
+
+setter!(fmi2SetReal, "fmi2SetReal", f64, |inst, r, v| inst.set_real(r, v));
+setter!(fmi2SetInteger, "fmi2SetInteger", c_int, |inst, r, v| inst.set_integer(r, v));
+setter!(fmi2SetBoolean, "fmi2SetBoolean", c_int, |inst, r, v| inst.set_boolean(r, v != 0));
+
+/// `fmi2SetString`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetString(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *const *const c_char) -> Status {
+    with(c, "fmi2SetString", |comp| {
+        // SAFETY: the host's arrays of `nvr` elements.
+        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
+        for (&r, &v) in refs.iter().zip(vals) {
+            // SAFETY: the host's string.
+            let s = unsafe { text(v, "value") }?;
+            comp.instance.set_string(r, s)?;
+        }
+        Ok(())
+    })
+}
+
+// ---- What this FMU does not provide ----------------------------------------------------
+
+macro_rules! unsupported {
+    ($name:ident, $fmi:literal, ($($arg:ident: $ty:ty),*)) => {
+        #[doc = concat!("`", $fmi, "`: not supported (an error and a log line).")]
+        #[unsafe(no_mangle)]
+        pub extern "C" fn $name(c: *mut c_void, $($arg: $ty),*) -> Status {
+            $(let _ = $arg;)*
+            with(c, $fmi, |_| Err(FmuError::Unsupported($fmi)))
+        }
+    };
+}
+
+unsupported!(fmi2GetFMUstate, "fmi2GetFMUstate", (state: *mut *mut c_void));
+unsupported!(fmi2SetFMUstate, "fmi2SetFMUstate", (state: *mut c_void));
+unsupported!(fmi2FreeFMUstate, "fmi2FreeFMUstate", (state: *mut *mut c_void));
+unsupported!(fmi2SerializedFMUstateSize, "fmi2SerializedFMUstateSize", (state: *mut c_void, size: *mut usize));
+unsupported!(fmi2SerializeFMUstate, "fmi2SerializeFMUstate", (state: *mut c_void, bytes: *mut c_char, size: usize));
+unsupported!(fmi2DeSerializeFMUstate, "fmi2DeSerializeFMUstate", (bytes: *const c_char, size: usize, state: *mut *mut c_void));
+unsupported!(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative", (unknown: *const c_uint, n_unknown: usize, known: *const c_uint, n_known: usize, dv_known: *const f64, dv_unknown: *mut f64));
+unsupported!(fmi2SetRealInputDerivatives, "fmi2SetRealInputDerivatives", (vr: *const c_uint, nvr: usize, order: *const c_int, value: *const f64));
+unsupported!(fmi2GetRealOutputDerivatives, "fmi2GetRealOutputDerivatives", (vr: *const c_uint, nvr: usize, order: *const c_int, value: *mut f64));
+unsupported!(fmi2CancelStep, "fmi2CancelStep", ());
+unsupported!(fmi2GetStatus, "fmi2GetStatus", (kind: c_int, value: *mut Status));
+unsupported!(fmi2GetIntegerStatus, "fmi2GetIntegerStatus", (kind: c_int, value: *mut c_int));
+unsupported!(fmi2GetStringStatus, "fmi2GetStringStatus", (kind: c_int, value: *mut *const c_char));
+
+// ---- Co-simulation ---------------------------------------------------------------------
+
+/// `fmi2DoStep`: steps the model to `t + h` with its internal steps.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi2DoStep(c: *mut c_void, t: f64, h: f64, _no_set_prior: c_int) -> Status {
+    with(c, "fmi2DoStep", |comp| comp.instance.do_step(t, h))
+}
+
+/// `fmi2GetRealStatus`: `fmi2LastSuccessfulTime` only.
+///
+/// # Safety
+/// `value` points to one Real.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetRealStatus(c: *mut c_void, kind: c_int, value: *mut f64) -> Status {
+    with(c, "fmi2GetRealStatus", |comp| {
+        if kind != LAST_SUCCESSFUL_TIME {
+            return Err(FmuError::Setting(format!("status kind {kind} has no Real value")));
+        }
+        // SAFETY: room for one value.
+        let out = unsafe { values_mut(value, 1)? };
+        out[0] = comp.instance.time().unwrap_or(comp.instance.settings.start_time);
+        Ok(())
+    })
+}
+
+/// `fmi2GetBooleanStatus`: `fmi2Terminated` only (always false: the FMU never asks to stop).
+///
+/// # Safety
+/// `value` points to one Boolean.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetBooleanStatus(c: *mut c_void, kind: c_int, value: *mut c_int) -> Status {
+    with(c, "fmi2GetBooleanStatus", |_| {
+        if kind != TERMINATED {
+            return Err(FmuError::Setting(format!("status kind {kind} has no Boolean value")));
+        }
+        // SAFETY: room for one value.
+        let out = unsafe { values_mut(value, 1)? };
+        out[0] = 0;
+        Ok(())
+    })
+}

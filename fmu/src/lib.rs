@@ -1,0 +1,109 @@
+//! The crowd stepper of moreau as an FMU for co-simulation, in three layers as in the
+//! Modelica Reference-FMUs: the FMI glue ([`fmi2`], [`fmi3`]: C entry points that check the
+//! instance state, pointers and numbers, catch panics and translate), a small runtime
+//! ([`runtime`]: instance, state machine, logging, stepping to the communication point), and
+//! the model ([`model`]: the scene driven by the catching-up scheme). The glue translates; it
+//! does not simulate.
+//!
+//! The model descriptions are `fmu/fmi2/modelDescription.xml` and
+//! `fmu/fmi3/modelDescription.xml`; the binary embeds them, so the GUID and the instantiation
+//! token it checks are the ones the XML declares. `fmu/package.py` makes the `.fmu` files.
+// The FMI layers are a C ABI: raw pointers from the host, exported symbols.
+#![allow(unsafe_code)]
+
+pub mod fmi2;
+pub mod fmi3;
+pub mod model;
+pub mod runtime;
+
+use runtime::State;
+
+/// The errors of the FMU; each becomes an error status and a log line.
+#[derive(Debug, thiserror::Error)]
+pub enum FmuError {
+    /// A function called in a state that does not allow it.
+    #[error("{function} is not allowed in state {state:?}")]
+    State {
+        /// The FMI function.
+        function: String,
+        /// The instance's state.
+        state: State,
+    },
+    /// No variable has this value reference.
+    #[error("unknown value reference {0}")]
+    UnknownReference(u32),
+    /// The variable exists with another type.
+    #[error("value reference {vr} ({name}) is of another type")]
+    WrongType {
+        /// The value reference.
+        vr: u32,
+        /// The variable's name.
+        name: &'static str,
+    },
+    /// A value or setting out of its domain.
+    #[error("{0}")]
+    Setting(String),
+    /// A null pointer where a value was needed.
+    #[error("{0} is a null pointer")]
+    Null(&'static str),
+    /// A capability this FMU does not have.
+    #[error("{0} is not supported by this FMU")]
+    Unsupported(&'static str),
+    /// The scene or a step failed.
+    #[error(transparent)]
+    Crowd(#[from] moreau_crowd::CrowdError),
+}
+
+/// The value of `attribute="…"` in an XML text (the GUID or instantiation token of a model
+/// description embedded in the binary).
+pub(crate) fn xml_attribute(xml: &'static str, attribute: &str) -> &'static str {
+    let key = format!("{attribute}=\"");
+    let start = xml.find(&key).map_or(0, |i| i + key.len());
+    let end = xml[start..].find('"').map_or(start, |i| start + i);
+    &xml[start..end]
+}
+
+/// A file path from an FMI resource location: `file:///a/b`, `file:/a/b` or a plain path,
+/// with `%XX` escapes decoded.
+pub(crate) fn resource_path(location: &str) -> std::path::PathBuf {
+    let rest = location
+        .strip_prefix("file://localhost")
+        .or_else(|| location.strip_prefix("file://"))
+        .or_else(|| location.strip_prefix("file:"))
+        .unwrap_or(location);
+    let bytes = rest.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let Ok(v) = u8::from_str_radix(&rest[i + 1..i + 3], 16)
+        {
+            out.push(v);
+            i += 3;
+            continue;
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    std::path::PathBuf::from(String::from_utf8_lossy(&out).into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resource_locations_become_paths() {
+        assert_eq!(resource_path("file:///tmp/a%20b/resources"), std::path::PathBuf::from("/tmp/a b/resources"));
+        assert_eq!(resource_path("file:/tmp/x/"), std::path::PathBuf::from("/tmp/x/"));
+        assert_eq!(resource_path("/plain/path"), std::path::PathBuf::from("/plain/path"));
+    }
+
+    #[test]
+    fn the_guids_come_from_the_model_descriptions() {
+        let guid = *fmi2::GUID;
+        assert!(guid.starts_with('{') && guid.ends_with('}') && guid.len() == 38, "{guid}");
+        assert_eq!(guid, *fmi3::TOKEN);
+    }
+}

@@ -1,0 +1,337 @@
+//! The model behind the FMU: a crowd scene stepped by the catching-up scheme between
+//! communication points, its variables, parameters, inputs and outputs. No FMI here.
+
+use std::path::{Path, PathBuf};
+
+use moreau_crowd::{Scene, Simulation};
+
+use crate::FmuError;
+
+/// The type of a variable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Float64 (FMI 2 Real).
+    Real,
+    /// Int32 (FMI 2 Integer).
+    Integer,
+    /// Boolean.
+    Boolean,
+    /// String.
+    String,
+    /// Float64 array (FMI 3 only).
+    RealArray,
+}
+
+/// The role of a variable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Causality {
+    /// Set before initialization.
+    Parameter,
+    /// Set at any communication point.
+    Input,
+    /// Computed.
+    Output,
+}
+
+/// One model variable.
+#[derive(Debug, Clone, Copy)]
+pub struct Variable {
+    /// Value reference.
+    pub vr: u32,
+    /// Name in the model description.
+    pub name: &'static str,
+    /// Type.
+    pub kind: Kind,
+    /// Role.
+    pub causality: Causality,
+}
+
+/// Value references.
+pub mod vr {
+    /// The scene file (empty: the room shipped in `resources/`).
+    pub const SCENE: u32 = 1;
+    /// The internal step (s); 0: the scene's.
+    pub const STEP: u32 = 2;
+    /// κ in ε_k = κ μ³; 0: the scene's.
+    pub const EPS_KAPPA: u32 = 3;
+    /// A factor on every desired speed, fixed for the run.
+    pub const DESIRED_SPEED_FACTOR: u32 = 4;
+    /// A factor on every desired speed, over time.
+    pub const SPEED_FACTOR: u32 = 10;
+    /// Whether the first exit is open.
+    pub const DOOR_OPEN: u32 = 11;
+    /// People who have not passed an exit.
+    pub const PEOPLE_INSIDE: u32 = 20;
+    /// People who have passed an exit.
+    pub const PEOPLE_EVACUATED: u32 = 21;
+    /// Mean speed over the last communication step (m/s).
+    pub const MEAN_SPEED: u32 = 22;
+    /// Smallest gap between people or to a wall (m).
+    pub const MIN_GAP: u32 = 23;
+    /// Certified ε of the last internal step (m²).
+    pub const EPS: u32 = 24;
+    /// Internal steps taken.
+    pub const INTERNAL_STEPS: u32 = 25;
+    /// Positions `[nPeople][2]` by person id (FMI 3; NaN when gone).
+    pub const POSITIONS: u32 = 31;
+    /// Radii `[nPeople]` (FMI 3).
+    pub const RADII: u32 = 32;
+}
+
+/// Every variable, in the order of the model descriptions.
+pub const VARIABLES: &[Variable] = &[
+    Variable { vr: vr::SCENE, name: "scene", kind: Kind::String, causality: Causality::Parameter },
+    Variable { vr: vr::STEP, name: "step", kind: Kind::Real, causality: Causality::Parameter },
+    Variable { vr: vr::EPS_KAPPA, name: "eps_kappa", kind: Kind::Real, causality: Causality::Parameter },
+    Variable {
+        vr: vr::DESIRED_SPEED_FACTOR,
+        name: "desired_speed_factor",
+        kind: Kind::Real,
+        causality: Causality::Parameter,
+    },
+    Variable { vr: vr::SPEED_FACTOR, name: "speed_factor", kind: Kind::Real, causality: Causality::Input },
+    Variable { vr: vr::DOOR_OPEN, name: "door_open", kind: Kind::Boolean, causality: Causality::Input },
+    Variable { vr: vr::PEOPLE_INSIDE, name: "people_inside", kind: Kind::Integer, causality: Causality::Output },
+    Variable {
+        vr: vr::PEOPLE_EVACUATED,
+        name: "people_evacuated",
+        kind: Kind::Integer,
+        causality: Causality::Output,
+    },
+    Variable { vr: vr::MEAN_SPEED, name: "mean_speed", kind: Kind::Real, causality: Causality::Output },
+    Variable { vr: vr::MIN_GAP, name: "min_gap", kind: Kind::Real, causality: Causality::Output },
+    Variable { vr: vr::EPS, name: "eps", kind: Kind::Real, causality: Causality::Output },
+    Variable {
+        vr: vr::INTERNAL_STEPS,
+        name: "internal_steps",
+        kind: Kind::Integer,
+        causality: Causality::Output,
+    },
+    Variable { vr: vr::POSITIONS, name: "positions", kind: Kind::RealArray, causality: Causality::Output },
+    Variable { vr: vr::RADII, name: "radii", kind: Kind::RealArray, causality: Causality::Output },
+];
+
+/// The variable with value reference `vr`.
+pub fn variable(vr: u32) -> Option<&'static Variable> {
+    VARIABLES.iter().find(|v| v.vr == vr)
+}
+
+/// Parameters and inputs, as the master set them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// `scene`.
+    pub scene: String,
+    /// `step`.
+    pub step: f64,
+    /// `eps_kappa`.
+    pub eps_kappa: f64,
+    /// `desired_speed_factor`.
+    pub desired_speed_factor: f64,
+    /// `speed_factor`.
+    pub speed_factor: f64,
+    /// `door_open`.
+    pub door_open: bool,
+    /// The start time the master set up (not a variable).
+    pub start_time: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            scene: String::new(),
+            step: 0.0,
+            eps_kappa: 0.0,
+            desired_speed_factor: 1.0,
+            speed_factor: 1.0,
+            door_open: true,
+            start_time: 0.0,
+        }
+    }
+}
+
+/// The scene the FMU runs when the `scene` parameter is empty.
+pub const DEFAULT_SCENE: &str = "room-150.toml";
+
+/// A crowd stepped between communication points.
+#[derive(Debug)]
+pub struct CrowdModel {
+    sim: Simulation,
+    step: f64,
+    time: f64,
+    eps: f64,
+    mean_speed: f64,
+    people: usize,
+    before: Vec<f64>,
+}
+
+impl CrowdModel {
+    /// Loads the scene (`settings.scene`, or the default in `resources`), applies the
+    /// parameters, and places the people.
+    pub fn new(settings: &Settings, resources: Option<&Path>) -> Result<Self, FmuError> {
+        let path: PathBuf = if settings.scene.is_empty() {
+            let dir = resources.ok_or_else(|| {
+                FmuError::Setting("scene: empty, and the FMU was given no resource location".into())
+            })?;
+            dir.join(DEFAULT_SCENE)
+        } else {
+            PathBuf::from(&settings.scene)
+        };
+        let mut scene = Scene::from_file(&path)?;
+        if settings.step != 0.0 {
+            scene.time.step = settings.step;
+        }
+        if settings.eps_kappa != 0.0 {
+            scene.solver.eps_kappa = settings.eps_kappa;
+        }
+        let check = |name: &str, x: f64| {
+            if x > 0.0 && x.is_finite() {
+                Ok(())
+            } else {
+                Err(FmuError::Setting(format!("{name} = {x}: must be finite and > 0")))
+            }
+        };
+        check("step", scene.time.step)?;
+        check("eps_kappa", scene.solver.eps_kappa)?;
+        if !(settings.desired_speed_factor >= 0.0 && settings.desired_speed_factor.is_finite()) {
+            return Err(FmuError::Setting(format!(
+                "desired_speed_factor = {}: must be finite and ≥ 0",
+                settings.desired_speed_factor
+            )));
+        }
+        let step = scene.time.step;
+        let sim = Simulation::new(scene)?;
+        let people = sim.total_people();
+        let mut model = Self {
+            sim,
+            step,
+            time: settings.start_time,
+            eps: 0.0,
+            mean_speed: 0.0,
+            people,
+            before: Vec::new(),
+        };
+        model.apply(settings)?;
+        Ok(model)
+    }
+
+    /// People at the start (the size of the array outputs).
+    pub fn people(&self) -> usize {
+        self.people
+    }
+
+    /// The model's time.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Applies the inputs (and the fixed speed factor).
+    pub fn apply(&mut self, settings: &Settings) -> Result<(), FmuError> {
+        let factor = settings.desired_speed_factor * settings.speed_factor;
+        if !(factor >= 0.0 && factor.is_finite()) {
+            return Err(FmuError::Setting(format!(
+                "speed_factor = {}: the desired-speed factor must be finite and ≥ 0",
+                settings.speed_factor
+            )));
+        }
+        self.sim.set_speed_factor(factor);
+        if self.sim.exit_open(0).is_some() {
+            self.sim.set_exit_open(0, settings.door_open)?;
+        }
+        Ok(())
+    }
+
+    /// Steps from `t` to `t + h` with internal steps of the scene's step (the last one
+    /// shortened to land on `t + h`; one that differs from the step by rounding only is taken
+    /// as the step, so that communication steps that are multiples of it give the internal
+    /// steps of a native run).
+    pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
+        if (t - self.time).abs() > 1e-9 * t.abs().max(1.0) {
+            return Err(FmuError::Setting(format!(
+                "currentCommunicationPoint = {t}, but the model is at t = {}",
+                self.time
+            )));
+        }
+        self.before.clear();
+        self.before.resize(2 * self.people, f64::NAN);
+        let f = self.sim.frame();
+        for (k, &id) in f.ids.iter().enumerate() {
+            self.before[2 * id as usize] = f.positions[2 * k];
+            self.before[2 * id as usize + 1] = f.positions[2 * k + 1];
+        }
+        let n = ((h / self.step) - 1e-9).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let mut mu = if k + 1 < n {
+                self.step
+            } else {
+                h - self.step * (n - 1) as f64
+            };
+            if (mu - self.step).abs() <= 1e-12 * self.step {
+                mu = self.step;
+            }
+            let report = self.sim.step(mu)?;
+            self.eps = report.eps;
+        }
+        self.time = t + h;
+        // Mean speed of the people present before and after the communication step.
+        let f = self.sim.frame();
+        let (mut sum, mut count) = (0.0, 0usize);
+        for (k, &id) in f.ids.iter().enumerate() {
+            let (x0, y0) = (self.before[2 * id as usize], self.before[2 * id as usize + 1]);
+            if x0.is_finite() {
+                sum += ((f.positions[2 * k] - x0).powi(2) + (f.positions[2 * k + 1] - y0).powi(2))
+                    .sqrt();
+                count += 1;
+            }
+        }
+        self.mean_speed = if count > 0 { sum / count as f64 / h } else { 0.0 };
+        Ok(())
+    }
+
+    /// A Real output.
+    pub fn real(&self, vr: u32) -> Option<f64> {
+        Some(match vr {
+            vr::MEAN_SPEED => self.mean_speed,
+            vr::MIN_GAP => {
+                let gap = self.sim.min_gap(1.0);
+                if gap.is_finite() { gap } else { 1.0 }
+            }
+            vr::EPS => self.eps,
+            _ => return None,
+        })
+    }
+
+    /// An Integer output.
+    pub fn integer(&self, vr: u32) -> Option<i32> {
+        let passed = self.sim.exit_times().len();
+        Some(match vr {
+            vr::PEOPLE_INSIDE => (self.people - passed) as i32,
+            vr::PEOPLE_EVACUATED => passed as i32,
+            vr::INTERNAL_STEPS => self.sim.steps() as i32,
+            _ => return None,
+        })
+    }
+
+    /// Positions `[x0, y0, x1, y1, ...]` by person id (NaN when gone) into `out`.
+    pub fn positions(&self, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        let f = self.sim.frame();
+        for (k, &id) in f.ids.iter().enumerate() {
+            let i = id as usize;
+            if 2 * i + 1 < out.len() {
+                out[2 * i] = f.positions[2 * k];
+                out[2 * i + 1] = f.positions[2 * k + 1];
+            }
+        }
+    }
+
+    /// Radii by person id (NaN when gone) into `out`.
+    pub fn radii(&self, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        let f = self.sim.frame();
+        for (k, &id) in f.ids.iter().enumerate() {
+            if let Some(r) = out.get_mut(id as usize) {
+                *r = f.radii[k];
+            }
+        }
+    }
+}
