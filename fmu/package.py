@@ -12,8 +12,10 @@ resources/room-150.toml (the default scene). Standard library only.
 
 import argparse
 import pathlib
+import re
 import subprocess
 import sys
+import tomllib
 import zipfile
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -26,6 +28,12 @@ def package(version: str, library: pathlib.Path, out: pathlib.Path) -> pathlib.P
     text = description.read_text()
     if f'modelIdentifier="{IDENTIFIER}"' not in text:
         sys.exit(f"{description}: modelIdentifier is not {IDENTIFIER}")
+    # The arrays of FMI 3 are sized from the scene the FMU ships.
+    scene = tomllib.loads((ROOT / "data" / "scenes" / "room-150.toml").read_text())
+    people = sum(g.get("count", len(g.get("positions", []))) for g in scene["groups"])
+    for dims in re.findall(r'<Dimension start="(\d+)"/>\s*(?:<Dimension start="2"/>)?', text):
+        if int(dims) != people:
+            sys.exit(f"{description}: an array is sized {dims}, the scene has {people} people")
     target = out / f"moreau-crowd-fmi{version}.fmu"
     tmp = target.with_suffix(".fmu.partial")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:

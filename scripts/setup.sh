@@ -38,3 +38,6 @@ if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$want" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r python/requirements.txt
   echo "$want" > .venv/.requirements.sha256
 fi
+
+# The FMUs (target/fmu/*.fmu) from the library the build above made.
+python3 fmu/package.py --no-build >/dev/null

@@ -2,18 +2,13 @@
 //! pointers and the instance state, catches panics, and turns errors into `fmi2Error` and a
 //! log line; the work is the runtime's.
 
-use std::ffi::{CStr, CString, c_char, c_int, c_uint, c_void};
+use std::ffi::{c_char, c_int, c_uint, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::LazyLock;
 
 use crate::FmuError;
+use crate::glue::{Component, ERROR, OK, Status, c_text, refs, text, values, values_mut, with};
 use crate::runtime::{Instance, Level, State};
-
-/// `fmi2Status`.
-pub type Status = c_int;
-const OK: Status = 0;
-const ERROR: Status = 3;
-const FATAL: Status = 4;
 
 const CO_SIMULATION: c_int = 1;
 const LAST_SUCCESSFUL_TIME: c_int = 2;
@@ -41,97 +36,6 @@ pub struct CallbackFunctions {
     component_environment: *mut c_void,
 }
 
-/// What an `fmi2Component` points to.
-struct Component {
-    instance: Instance,
-    strings: Vec<CString>,
-}
-
-fn c_text(s: &str) -> CString {
-    CString::new(s.replace('\0', " ")).expect("no NUL left")
-}
-
-/// Runs `f` on the component behind `c`: null, panics and errors become `fmi2Error` (errors
-/// logged); `fatal` errors also put the instance in the error state.
-fn with(c: *mut c_void, function: &'static str, f: impl FnOnce(&mut Component) -> Result<(), FmuError>) -> Status {
-    if c.is_null() {
-        return ERROR;
-    }
-    // SAFETY: a non-null fmi2Component is a pointer fmi2Instantiate returned and
-    // fmi2FreeInstance has not freed (the standard's contract with the host).
-    let component = unsafe { &mut *(c as *mut Component) };
-    let outcome = catch_unwind(AssertUnwindSafe(|| {
-        if component.instance.state == State::Error
-            && !matches!(function, "fmi2Reset" | "fmi2GetRealStatus" | "fmi2GetBooleanStatus")
-        {
-            return Err(FmuError::State {
-                function: function.to_string(),
-                state: State::Error,
-            });
-        }
-        f(component)
-    }));
-    match outcome {
-        Ok(Ok(())) => OK,
-        Ok(Err(e)) => {
-            component.instance.error(&format!("{function}: {e}"));
-            if matches!(e, FmuError::Crowd(_)) && function == "fmi2DoStep" {
-                component.instance.state = State::Error;
-            }
-            ERROR
-        }
-        Err(_) => {
-            component.instance.state = State::Error;
-            component.instance.error(&format!("{function}: internal error (panic); the instance is unusable"));
-            FATAL
-        }
-    }
-}
-
-/// `(vr, nvr)` as a slice, refusing null pointers.
-unsafe fn refs<'a>(vr: *const c_uint, nvr: usize) -> Result<&'a [c_uint], FmuError> {
-    if nvr == 0 {
-        return Ok(&[]);
-    }
-    if vr.is_null() {
-        return Err(FmuError::Null("vr"));
-    }
-    // SAFETY: the host passes `nvr` value references at `vr`.
-    Ok(unsafe { std::slice::from_raw_parts(vr, nvr) })
-}
-
-unsafe fn values<'a, T>(value: *const T, n: usize) -> Result<&'a [T], FmuError> {
-    if n == 0 {
-        return Ok(&[]);
-    }
-    if value.is_null() {
-        return Err(FmuError::Null("value"));
-    }
-    // SAFETY: the host passes `n` values at `value`.
-    Ok(unsafe { std::slice::from_raw_parts(value, n) })
-}
-
-unsafe fn values_mut<'a, T>(value: *mut T, n: usize) -> Result<&'a mut [T], FmuError> {
-    if n == 0 {
-        return Ok(&mut []);
-    }
-    if value.is_null() {
-        return Err(FmuError::Null("value"));
-    }
-    // SAFETY: the host provides room for `n` values at `value`.
-    Ok(unsafe { std::slice::from_raw_parts_mut(value, n) })
-}
-
-unsafe fn text<'a>(s: *const c_char, what: &'static str) -> Result<&'a str, FmuError> {
-    if s.is_null() {
-        return Err(FmuError::Null(what));
-    }
-    // SAFETY: the host passes a NUL-terminated string.
-    unsafe { CStr::from_ptr(s) }
-        .to_str()
-        .map_err(|_| FmuError::Setting(format!("{what} is not UTF-8")))
-}
-
 // ---- Common functions ------------------------------------------------------------------
 
 /// `fmi2GetTypesPlatform`.
@@ -148,7 +52,12 @@ pub extern "C" fn fmi2GetVersion() -> *const c_char {
 
 /// `fmi2SetDebugLogging`.
 #[unsafe(no_mangle)]
-pub extern "C" fn fmi2SetDebugLogging(c: *mut c_void, logging_on: c_int, _n: usize, _categories: *const *const c_char) -> Status {
+pub extern "C" fn fmi2SetDebugLogging(
+    c: *mut c_void,
+    logging_on: c_int,
+    _n: usize,
+    _categories: *const *const c_char,
+) -> Status {
     with(c, "fmi2SetDebugLogging", |comp| {
         comp.instance.logging_on = logging_on != 0;
         Ok(())
@@ -179,7 +88,9 @@ pub unsafe extern "C" fn fmi2Instantiate(
         let logger = callbacks.logger;
         let env = callbacks.component_environment;
         // SAFETY: the host's strings.
-        let name = unsafe { text(instance_name, "instanceName") }.unwrap_or("?").to_string();
+        let name = unsafe { text(instance_name, "instanceName") }
+            .unwrap_or("?")
+            .to_string();
         let c_name = c_text(&name);
         let log = move |level: Level, message: &str| {
             if let Some(logger) = logger {
@@ -190,7 +101,16 @@ pub unsafe extern "C" fn fmi2Instantiate(
                 let message = c_text(message);
                 // SAFETY: the host's logger; the message is passed as "%s" and an argument, so
                 // no '%' in it is interpreted.
-                unsafe { logger(env, c_name.as_ptr(), status, category.as_ptr(), c"%s".as_ptr(), message.as_ptr()) };
+                unsafe {
+                    logger(
+                        env,
+                        c_name.as_ptr(),
+                        status,
+                        category.as_ptr(),
+                        c"%s".as_ptr(),
+                        message.as_ptr(),
+                    )
+                };
             }
         };
         let fail = |message: String| {
@@ -201,7 +121,9 @@ pub unsafe extern "C" fn fmi2Instantiate(
             return fail("instanceName is a null pointer".into());
         }
         if fmu_type != CO_SIMULATION {
-            return fail(format!("fmuType = {fmu_type}: this FMU is for co-simulation only"));
+            return fail(format!(
+                "fmuType = {fmu_type}: this FMU is for co-simulation only"
+            ));
         }
         // SAFETY: the host's string.
         let given = match unsafe { text(guid, "fmuGUID") } {
@@ -246,11 +168,21 @@ pub unsafe extern "C" fn fmi2FreeInstance(c: *mut c_void) {
 
 /// `fmi2SetupExperiment`.
 #[unsafe(no_mangle)]
-pub extern "C" fn fmi2SetupExperiment(c: *mut c_void, _tolerance_defined: c_int, _tolerance: f64, start_time: f64, _stop_time_defined: c_int, _stop_time: f64) -> Status {
+pub extern "C" fn fmi2SetupExperiment(
+    c: *mut c_void,
+    _tolerance_defined: c_int,
+    _tolerance: f64,
+    start_time: f64,
+    _stop_time_defined: c_int,
+    _stop_time: f64,
+) -> Status {
     with(c, "fmi2SetupExperiment", |comp| {
-        comp.instance.expect("fmi2SetupExperiment", &[State::Instantiated])?;
+        comp.instance
+            .expect("fmi2SetupExperiment", &[State::Instantiated])?;
         if !start_time.is_finite() {
-            return Err(FmuError::Setting(format!("startTime = {start_time}: not a finite number")));
+            return Err(FmuError::Setting(format!(
+                "startTime = {start_time}: not a finite number"
+            )));
         }
         comp.instance.settings.start_time = start_time;
         Ok(())
@@ -260,13 +192,17 @@ pub extern "C" fn fmi2SetupExperiment(c: *mut c_void, _tolerance_defined: c_int,
 /// `fmi2EnterInitializationMode`.
 #[unsafe(no_mangle)]
 pub extern "C" fn fmi2EnterInitializationMode(c: *mut c_void) -> Status {
-    with(c, "fmi2EnterInitializationMode", |comp| comp.instance.enter_initialization())
+    with(c, "fmi2EnterInitializationMode", |comp| {
+        comp.instance.enter_initialization()
+    })
 }
 
 /// `fmi2ExitInitializationMode`.
 #[unsafe(no_mangle)]
 pub extern "C" fn fmi2ExitInitializationMode(c: *mut c_void) -> Status {
-    with(c, "fmi2ExitInitializationMode", |comp| comp.instance.exit_initialization())
+    with(c, "fmi2ExitInitializationMode", |comp| {
+        comp.instance.exit_initialization()
+    })
 }
 
 /// `fmi2Terminate`.
@@ -293,9 +229,22 @@ macro_rules! getter {
         /// # Safety
         /// `vr` and `value` hold `nvr` elements, as the standard defines.
         #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $name(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *mut $ty) -> Status {
+        pub unsafe extern "C" fn $name(
+            c: *mut c_void,
+            vr: *const c_uint,
+            nvr: usize,
+            value: *mut $ty,
+        ) -> Status {
             with(c, $fmi, |comp| {
-                comp.instance.expect($fmi, &[State::Initialization, State::Stepping, State::Terminated, State::Instantiated])?;
+                comp.instance.expect(
+                    $fmi,
+                    &[
+                        State::Initialization,
+                        State::Stepping,
+                        State::Terminated,
+                        State::Instantiated,
+                    ],
+                )?;
                 // SAFETY: the host's arrays of `nvr` elements.
                 let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
                 for (slot, &$vr) in out.iter_mut().zip(refs) {
@@ -308,16 +257,28 @@ macro_rules! getter {
     };
 }
 
-getter!(fmi2GetReal, "fmi2GetReal", f64, |inst, r| inst.get_real(r)?);
-getter!(fmi2GetInteger, "fmi2GetInteger", c_int, |inst, r| inst.get_integer(r)?);
-getter!(fmi2GetBoolean, "fmi2GetBoolean", c_int, |inst, r| inst.get_boolean(r)? as c_int);
+getter!(fmi2GetReal, "fmi2GetReal", f64, |inst, r| inst
+    .get_real(r)?);
+getter!(fmi2GetInteger, "fmi2GetInteger", c_int, |inst, r| inst
+    .get_integer(r)?);
+getter!(
+    fmi2GetBoolean,
+    "fmi2GetBoolean",
+    c_int,
+    |inst, r| inst.get_boolean(r)? as c_int
+);
 
 /// `fmi2GetString`: the strings stay valid until the next call on this instance.
 ///
 /// # Safety
 /// `vr` and `value` hold `nvr` elements.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2GetString(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *mut *const c_char) -> Status {
+pub unsafe extern "C" fn fmi2GetString(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut *const c_char,
+) -> Status {
     with(c, "fmi2GetString", |comp| {
         // SAFETY: the host's arrays of `nvr` elements.
         let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
@@ -340,7 +301,12 @@ macro_rules! setter {
         /// # Safety
         /// `vr` and `value` hold `nvr` elements, as the standard defines.
         #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $name(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *const $ty) -> Status {
+        pub unsafe extern "C" fn $name(
+            c: *mut c_void,
+            vr: *const c_uint,
+            nvr: usize,
+            value: *const $ty,
+        ) -> Status {
             with(c, $fmi, |comp| {
                 // SAFETY: the host's arrays of `nvr` elements.
                 let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
@@ -354,16 +320,24 @@ macro_rules! setter {
     };
 }
 
-setter!(fmi2SetReal, "fmi2SetReal", f64, |inst, r, v| inst.set_real(r, v));
-setter!(fmi2SetInteger, "fmi2SetInteger", c_int, |inst, r, v| inst.set_integer(r, v));
-setter!(fmi2SetBoolean, "fmi2SetBoolean", c_int, |inst, r, v| inst.set_boolean(r, v != 0));
+setter!(fmi2SetReal, "fmi2SetReal", f64, |inst, r, v| inst
+    .set_real(r, v));
+setter!(fmi2SetInteger, "fmi2SetInteger", c_int, |inst, r, v| inst
+    .set_integer(r, v));
+setter!(fmi2SetBoolean, "fmi2SetBoolean", c_int, |inst, r, v| inst
+    .set_boolean(r, v != 0));
 
 /// `fmi2SetString`.
 ///
 /// # Safety
 /// `vr` and `value` hold `nvr` elements.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2SetString(c: *mut c_void, vr: *const c_uint, nvr: usize, value: *const *const c_char) -> Status {
+pub unsafe extern "C" fn fmi2SetString(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const *const c_char,
+) -> Status {
     with(c, "fmi2SetString", |comp| {
         // SAFETY: the host's arrays of `nvr` elements.
         let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
@@ -419,11 +393,16 @@ pub extern "C" fn fmi2DoStep(c: *mut c_void, t: f64, h: f64, _no_set_prior: c_in
 pub unsafe extern "C" fn fmi2GetRealStatus(c: *mut c_void, kind: c_int, value: *mut f64) -> Status {
     with(c, "fmi2GetRealStatus", |comp| {
         if kind != LAST_SUCCESSFUL_TIME {
-            return Err(FmuError::Setting(format!("status kind {kind} has no Real value")));
+            return Err(FmuError::Setting(format!(
+                "status kind {kind} has no Real value"
+            )));
         }
         // SAFETY: room for one value.
         let out = unsafe { values_mut(value, 1)? };
-        out[0] = comp.instance.time().unwrap_or(comp.instance.settings.start_time);
+        out[0] = comp
+            .instance
+            .time()
+            .unwrap_or(comp.instance.settings.start_time);
         Ok(())
     })
 }
@@ -433,10 +412,16 @@ pub unsafe extern "C" fn fmi2GetRealStatus(c: *mut c_void, kind: c_int, value: *
 /// # Safety
 /// `value` points to one Boolean.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn fmi2GetBooleanStatus(c: *mut c_void, kind: c_int, value: *mut c_int) -> Status {
+pub unsafe extern "C" fn fmi2GetBooleanStatus(
+    c: *mut c_void,
+    kind: c_int,
+    value: *mut c_int,
+) -> Status {
     with(c, "fmi2GetBooleanStatus", |_| {
         if kind != TERMINATED {
-            return Err(FmuError::Setting(format!("status kind {kind} has no Boolean value")));
+            return Err(FmuError::Setting(format!(
+                "status kind {kind} has no Boolean value"
+            )));
         }
         // SAFETY: room for one value.
         let out = unsafe { values_mut(value, 1)? };

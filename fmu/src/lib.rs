@@ -13,6 +13,7 @@
 
 pub mod fmi2;
 pub mod fmi3;
+mod glue;
 pub mod model;
 pub mod runtime;
 
@@ -95,15 +96,27 @@ mod tests {
 
     #[test]
     fn resource_locations_become_paths() {
-        assert_eq!(resource_path("file:///tmp/a%20b/resources"), std::path::PathBuf::from("/tmp/a b/resources"));
-        assert_eq!(resource_path("file:/tmp/x/"), std::path::PathBuf::from("/tmp/x/"));
-        assert_eq!(resource_path("/plain/path"), std::path::PathBuf::from("/plain/path"));
+        assert_eq!(
+            resource_path("file:///tmp/a%20b/resources"),
+            std::path::PathBuf::from("/tmp/a b/resources")
+        );
+        assert_eq!(
+            resource_path("file:/tmp/x/"),
+            std::path::PathBuf::from("/tmp/x/")
+        );
+        assert_eq!(
+            resource_path("/plain/path"),
+            std::path::PathBuf::from("/plain/path")
+        );
     }
 
     #[test]
     fn the_guids_come_from_the_model_descriptions() {
         let guid = *fmi2::GUID;
-        assert!(guid.starts_with('{') && guid.ends_with('}') && guid.len() == 38, "{guid}");
+        assert!(
+            guid.starts_with('{') && guid.ends_with('}') && guid.len() == 38,
+            "{guid}"
+        );
         assert_eq!(guid, *fmi3::TOKEN);
     }
 }

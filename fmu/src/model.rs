@@ -80,35 +80,90 @@ pub mod vr {
 
 /// Every variable, in the order of the model descriptions.
 pub const VARIABLES: &[Variable] = &[
-    Variable { vr: vr::SCENE, name: "scene", kind: Kind::String, causality: Causality::Parameter },
-    Variable { vr: vr::STEP, name: "step", kind: Kind::Real, causality: Causality::Parameter },
-    Variable { vr: vr::EPS_KAPPA, name: "eps_kappa", kind: Kind::Real, causality: Causality::Parameter },
+    Variable {
+        vr: vr::SCENE,
+        name: "scene",
+        kind: Kind::String,
+        causality: Causality::Parameter,
+    },
+    Variable {
+        vr: vr::STEP,
+        name: "step",
+        kind: Kind::Real,
+        causality: Causality::Parameter,
+    },
+    Variable {
+        vr: vr::EPS_KAPPA,
+        name: "eps_kappa",
+        kind: Kind::Real,
+        causality: Causality::Parameter,
+    },
     Variable {
         vr: vr::DESIRED_SPEED_FACTOR,
         name: "desired_speed_factor",
         kind: Kind::Real,
         causality: Causality::Parameter,
     },
-    Variable { vr: vr::SPEED_FACTOR, name: "speed_factor", kind: Kind::Real, causality: Causality::Input },
-    Variable { vr: vr::DOOR_OPEN, name: "door_open", kind: Kind::Boolean, causality: Causality::Input },
-    Variable { vr: vr::PEOPLE_INSIDE, name: "people_inside", kind: Kind::Integer, causality: Causality::Output },
+    Variable {
+        vr: vr::SPEED_FACTOR,
+        name: "speed_factor",
+        kind: Kind::Real,
+        causality: Causality::Input,
+    },
+    Variable {
+        vr: vr::DOOR_OPEN,
+        name: "door_open",
+        kind: Kind::Boolean,
+        causality: Causality::Input,
+    },
+    Variable {
+        vr: vr::PEOPLE_INSIDE,
+        name: "people_inside",
+        kind: Kind::Integer,
+        causality: Causality::Output,
+    },
     Variable {
         vr: vr::PEOPLE_EVACUATED,
         name: "people_evacuated",
         kind: Kind::Integer,
         causality: Causality::Output,
     },
-    Variable { vr: vr::MEAN_SPEED, name: "mean_speed", kind: Kind::Real, causality: Causality::Output },
-    Variable { vr: vr::MIN_GAP, name: "min_gap", kind: Kind::Real, causality: Causality::Output },
-    Variable { vr: vr::EPS, name: "eps", kind: Kind::Real, causality: Causality::Output },
+    Variable {
+        vr: vr::MEAN_SPEED,
+        name: "mean_speed",
+        kind: Kind::Real,
+        causality: Causality::Output,
+    },
+    Variable {
+        vr: vr::MIN_GAP,
+        name: "min_gap",
+        kind: Kind::Real,
+        causality: Causality::Output,
+    },
+    Variable {
+        vr: vr::EPS,
+        name: "eps",
+        kind: Kind::Real,
+        causality: Causality::Output,
+    },
     Variable {
         vr: vr::INTERNAL_STEPS,
         name: "internal_steps",
         kind: Kind::Integer,
         causality: Causality::Output,
     },
-    Variable { vr: vr::POSITIONS, name: "positions", kind: Kind::RealArray, causality: Causality::Output },
-    Variable { vr: vr::RADII, name: "radii", kind: Kind::RealArray, causality: Causality::Output },
+    Variable {
+        vr: vr::POSITIONS,
+        name: "positions",
+        kind: Kind::RealArray,
+        causality: Causality::Output,
+    },
+    Variable {
+        vr: vr::RADII,
+        name: "radii",
+        kind: Kind::RealArray,
+        causality: Causality::Output,
+    },
 ];
 
 /// The variable with value reference `vr`.
@@ -187,7 +242,9 @@ impl CrowdModel {
             if x > 0.0 && x.is_finite() {
                 Ok(())
             } else {
-                Err(FmuError::Setting(format!("{name} = {x}: must be finite and > 0")))
+                Err(FmuError::Setting(format!(
+                    "{name} = {x}: must be finite and > 0"
+                )))
             }
         };
         check("step", scene.time.step)?;
@@ -276,14 +333,21 @@ impl CrowdModel {
         let f = self.sim.frame();
         let (mut sum, mut count) = (0.0, 0usize);
         for (k, &id) in f.ids.iter().enumerate() {
-            let (x0, y0) = (self.before[2 * id as usize], self.before[2 * id as usize + 1]);
+            let (x0, y0) = (
+                self.before[2 * id as usize],
+                self.before[2 * id as usize + 1],
+            );
             if x0.is_finite() {
                 sum += ((f.positions[2 * k] - x0).powi(2) + (f.positions[2 * k + 1] - y0).powi(2))
                     .sqrt();
                 count += 1;
             }
         }
-        self.mean_speed = if count > 0 { sum / count as f64 / h } else { 0.0 };
+        self.mean_speed = if count > 0 {
+            sum / count as f64 / h
+        } else {
+            0.0
+        };
         Ok(())
     }
 

@@ -117,7 +117,10 @@ impl Instance {
             (Causality::Parameter, State::Instantiated | State::Initialization) => {}
             (Causality::Input, State::Instantiated | State::Initialization | State::Stepping) => {}
             (Causality::Output, _) => {
-                return Err(FmuError::Setting(format!("{} is an output: it cannot be set", v.name)));
+                return Err(FmuError::Setting(format!(
+                    "{} is an output: it cannot be set",
+                    v.name
+                )));
             }
             (_, state) => {
                 return Err(FmuError::Setting(format!(
@@ -146,7 +149,9 @@ impl Instance {
         let causality = self.settable(vr, Kind::Real)?;
         if !value.is_finite() {
             let name = variable(vr).map_or("?", |v| v.name);
-            return Err(FmuError::Setting(format!("{name} = {value}: not a finite number")));
+            return Err(FmuError::Setting(format!(
+                "{name} = {value}: not a finite number"
+            )));
         }
         match vr {
             vr::STEP => self.settings.step = value,
@@ -205,14 +210,19 @@ impl Instance {
             vr::EPS_KAPPA => self.settings.eps_kappa,
             vr::DESIRED_SPEED_FACTOR => self.settings.desired_speed_factor,
             vr::SPEED_FACTOR => self.settings.speed_factor,
-            other => self.model()?.real(other).ok_or(FmuError::UnknownReference(other))?,
+            other => self
+                .model()?
+                .real(other)
+                .ok_or(FmuError::UnknownReference(other))?,
         })
     }
 
     /// Gets an Integer.
     pub fn get_integer(&mut self, vr: u32) -> Result<i32, FmuError> {
         self.readable(vr, Kind::Integer)?;
-        self.model()?.integer(vr).ok_or(FmuError::UnknownReference(vr))
+        self.model()?
+            .integer(vr)
+            .ok_or(FmuError::UnknownReference(vr))
     }
 
     /// Gets a Boolean.

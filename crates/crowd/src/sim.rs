@@ -475,9 +475,8 @@ impl Simulation {
             return Ok(());
         }
         exit.open = open;
-        let mut walls: Vec<Segment> = self.scheme.correction().constraints().walls
-            [..self.scene_walls]
-            .to_vec();
+        let mut walls: Vec<Segment> =
+            self.scheme.correction().constraints().walls[..self.scene_walls].to_vec();
         for x in self.exits.iter().filter(|x| !x.open) {
             walls.push(x.closure());
         }
