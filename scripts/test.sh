@@ -11,7 +11,8 @@ status=0
 cargo test --workspace --release --locked 2>&1 | tee "$log" || status=$?
 
 # The Python tests drive target/release/moreau, built by setup.sh above.
-.venv/bin/python -m pytest tests/python -p no:cacheprovider 2>&1 | tee -a "$log" || status=$?
+# -rP shows what passing tests print (the measured figures, e.g. memory over 10,000 FMU instances).
+.venv/bin/python -m pytest tests/python -p no:cacheprovider -rP 2>&1 | tee -a "$log" || status=$?
 
 echo
 # cargo: "test result: ok. 12 passed; 0 failed; ..."; pytest: "==== 3 failed, 20 passed in 9.1s ====".
