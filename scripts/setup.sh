@@ -32,10 +32,12 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   python3 -m venv .venv
 fi
-want=$(sha256sum python/requirements.txt | cut -d' ' -f1)
+want=$(cat python/requirements.txt python/pyproject.toml | sha256sum | cut -d' ' -f1)
 if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$want" ]; then
-  echo "setup: installing python/requirements.txt into .venv"
+  echo "setup: installing python/requirements.txt and the moreau Python package into .venv"
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r python/requirements.txt
+  # Editable: python/moreau_run.py, plot_run.py and moreau_ensemble/ as they are in the tree.
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check -e python
   echo "$want" > .venv/.requirements.sha256
 fi
 

@@ -1,0 +1,160 @@
+"""Sweep files: the base scene, fixed settings, varied parameters, seeds, and the scene of
+every variant with its deterministic name."""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import pathlib
+import re
+import tomllib
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One run: its name (also its directory), its parameter values and its scene (TOML)."""
+
+    name: str
+    values: dict
+    seed: int
+    scene: str
+
+
+@dataclass
+class Sweep:
+    """A parsed sweep file."""
+
+    path: pathlib.Path
+    base: pathlib.Path
+    seeds: list[int]
+    fixed: dict = field(default_factory=dict)
+    vary: dict = field(default_factory=dict)
+
+    def variants(self) -> list[Variant]:
+        """Every combination of the varied values with every seed, in a fixed order."""
+        base = tomllib.loads(self.base.read_text())
+        keys = list(self.vary)
+        out = []
+        for combo in itertools.product(*(self.vary[k] for k in keys)):
+            values = dict(zip(keys, combo))
+            for seed in self.seeds:
+                scene = copy.deepcopy(base)
+                for key, value in {**self.fixed, **values}.items():
+                    apply(scene, key, value)
+                scene["seed"] = int(base.get("seed", 0)) + seed
+                parts = [f"{k}={_label(v)}" for k, v in values.items()] + [f"seed={seed}"]
+                name = "_".join(parts)
+                scene["name"] = f"{base.get('name', 'scene')}-{name}"
+                out.append(Variant(name=name, values=values, seed=seed, scene=to_toml(scene)))
+        return out
+
+
+def _label(value) -> str:
+    text = str(value)
+    return re.sub(r"[^A-Za-z0-9.+-]", "-", text)
+
+
+def load_sweep(path) -> Sweep:
+    """Reads a sweep file; errors name the key at fault."""
+    path = pathlib.Path(path)
+    spec = tomllib.loads(path.read_text())
+    unknown = set(spec) - {"base", "seeds", "set", "vary"}
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {sorted(unknown)} (base, seeds, set, vary)")
+    if "base" not in spec:
+        raise ValueError(f"{path}: 'base' (the scene file) is missing")
+    base = (path.parent / spec["base"]).resolve()
+    if not base.is_file():
+        raise ValueError(f"{path}: base = {spec['base']!r}: no such scene file ({base})")
+    seeds = spec.get("seeds", 1)
+    seeds = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError(f"{path}: seeds: at least one")
+    vary = spec.get("vary", {})
+    for key, values in vary.items():
+        if not isinstance(values, list) or not values:
+            raise ValueError(f"{path}: vary.{key} must be a non-empty list, got {values!r}")
+    return Sweep(path=path, base=base, seeds=seeds, fixed=spec.get("set", {}), vary=vary)
+
+
+def apply(scene: dict, key: str, value) -> None:
+    """Sets `key` in the scene: a dotted path (`time.step`, `groups.0.count`), or
+    `door_width`, which widens or narrows the first exit's door (see `set_door_width`)."""
+    if key == "door_width":
+        set_door_width(scene, float(value))
+        return
+    node = scene
+    parts = key.split(".")
+    for part in parts[:-1]:
+        node = node[int(part)] if isinstance(node, list) else node.setdefault(part, {})
+    last = parts[-1]
+    if isinstance(node, list):
+        node[int(last)] = value
+    else:
+        node[last] = value
+
+
+def set_door_width(scene: dict, width: float) -> None:
+    """Resizes the first exit, an axis-aligned rectangle in a gap of the walls: along its
+    longer side, every coordinate equal to the door's ends (in the exit's area and in the
+    walkable outline) moves to `centre ± width/2`."""
+    if not width > 0:
+        raise ValueError(f"door_width = {width}: must be > 0")
+    area = scene["exits"][0].get("area")
+    if not area:
+        raise ValueError("door_width needs the first exit to be an area")
+    xs = [p[0] for p in area]
+    ys = [p[1] for p in area]
+    axis = 1 if max(ys) - min(ys) >= max(xs) - min(xs) else 0
+    lo, hi = (min(ys), max(ys)) if axis == 1 else (min(xs), max(xs))
+    centre = 0.5 * (lo + hi)
+    new = {lo: centre - width / 2, hi: centre + width / 2}
+    for polygon in [area, scene["area"]["outer"], *scene["area"].get("holes", [])]:
+        for point in polygon:
+            if point[axis] in new:
+                point[axis] = new[point[axis]]
+
+
+def to_toml(value: dict) -> str:
+    """A small TOML writer for scenes (tables, arrays of tables, numbers, strings, lists)."""
+    lines: list[str] = []
+
+    def scalar(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, float)):
+            return repr(v)
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, list):
+            return "[" + ", ".join(scalar(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {scalar(x)}" for k, x in v.items()) + " }"
+        raise TypeError(f"cannot write {v!r} as TOML")
+
+    def table(prefix: str, d: dict) -> None:
+        simple = {k: v for k, v in d.items() if not _is_table(v) and not _is_table_array(v)}
+        for k, v in simple.items():
+            lines.append(f"{k} = {scalar(v)}")
+        for k, v in d.items():
+            name = f"{prefix}.{k}" if prefix else k
+            if _is_table(v):
+                lines.append(f"\n[{name}]")
+                table(name, v)
+            elif _is_table_array(v):
+                for item in v:
+                    lines.append(f"\n[[{name}]]")
+                    table(name, item)
+
+    table("", value)
+    return "\n".join(lines) + "\n"
+
+
+def _is_table(v) -> bool:
+    return isinstance(v, dict) and any(isinstance(x, (dict, list)) for x in v.values()) or (
+        isinstance(v, dict) and len(v) > 2)
+
+
+def _is_table_array(v) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
