@@ -109,8 +109,9 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
 
 fn solver_text(sim: &Simulation) -> String {
     let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
-    let solver = match sim.solver_kind() {
-        SolverKind::Clarabel => "Clarabel alone",
+    let solver = match (sim.scene().solver.kind, sim.solver_kind()) {
+        (SolverKind::Clarabel, _) => "Clarabel alone",
+        (_, SolverKind::Clarabel) => "Clarabel with APGD as fallback",
         _ => "APGD with Clarabel as fallback",
     };
     format!(

@@ -148,7 +148,7 @@ pub enum SolverKind {
     Apgd,
     /// Clarabel's interior point only (reference).
     Clarabel,
-    /// Chosen from the number of people at the start: Clarabel up to
+    /// Chosen from the number of people at the start: Clarabel (with APGD as fallback) up to
     /// [`SolverKind::AUTO_CLARABEL_MAX_PEOPLE`], APGD (with Clarabel as fallback) above. The
     /// step report names the solver each step used.
     Auto,

@@ -369,6 +369,13 @@ impl Simulation {
             correction = correction.with_fallback(Box::new(ClarabelReference::new(
                 ClarabelSettings::default(),
             )));
+        } else if scene.solver.kind == SolverKind::Auto {
+            // Clarabel stalls short of tight targets in jams (NumericalError at ε a few times
+            // the target, seen in the evacuation study); APGD then finishes the job.
+            correction = correction.with_fallback(Box::new(
+                Apgd::new(ApgdSettings::default())
+                    .map_err(moreau_integrate::IntegrateError::from)?,
+            ));
         }
         let eps = EpsPolicy::new(scene.solver.eps_kappa, 3.0)?;
         let scheme = Scheme::new(field, correction, eps);
@@ -424,7 +431,8 @@ impl Simulation {
         &self.exit_times
     }
 
-    /// The projection solver in use (`Auto` resolved): `Apgd` has Clarabel as fallback.
+    /// The projection solver in use (`Auto` resolved): `Apgd` has Clarabel as fallback, and
+    /// Clarabel chosen by `Auto` has APGD as fallback.
     pub fn solver_kind(&self) -> SolverKind {
         self.solver
     }
