@@ -2,6 +2,7 @@
 //! papers' examples. It translates between the command line, the crates and the files; it
 //! does not simulate.
 
+mod bench;
 mod converge;
 mod example;
 mod run;
@@ -45,6 +46,9 @@ enum Command {
     /// Work–precision: error against wall time for fixed steps, adaptive steps at several
     /// tolerances and each solver, against a fine reference; JSON, Markdown and SVG.
     Tradeoff(tradeoff::TradeoffArgs),
+    /// The scale table: dense evacuation halls of 10³…10⁶ people, per-step time and stages,
+    /// iterations, certified ε, violation, peak memory; the cost exponent; Clarabel at 40k.
+    Bench(bench::BenchArgs),
     /// Prints what a run file holds: the run, its status, datasets and attributes.
     #[command(after_help = EXIT_CODES)]
     Inspect {
@@ -110,6 +114,7 @@ fn run() -> Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
+        Command::Bench(args) => bench::bench(&args).map(|()| ExitCode::SUCCESS),
         Command::Tradeoff(args) => tradeoff::tradeoff(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
         Command::Example81 { a, b, x0, h, t_end } => {
