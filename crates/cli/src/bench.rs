@@ -127,7 +127,11 @@ fn peak_rss_mb() -> f64 {
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
-    if v.is_empty() { f64::NAN } else { v[v.len() / 2] }
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
 }
 
 fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
@@ -218,8 +222,19 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let mut rows: Vec<Row> = Vec::new();
     println!(
         "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>8} {:>7}",
-        "people", "m²", "rows", "active", "ms/step", "assemble", "solve", "other", "iter",
-        "max ε", "max viol", "RSS MB", "setup s"
+        "people",
+        "m²",
+        "rows",
+        "active",
+        "ms/step",
+        "assemble",
+        "solve",
+        "other",
+        "iter",
+        "max ε",
+        "max viol",
+        "RSS MB",
+        "setup s"
     );
     let mut sizes = args.sizes.clone();
     if args.clarabel_at > 0 && !sizes.contains(&args.clarabel_at) {
@@ -274,7 +289,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         .map(|r| (r.people as f64, r.ms_median))
         .collect();
     if let Some((p, _, r2)) = fit_power(&measured) {
-        println!("cost ~ N^{p:.3} (R² = {r2:.3}) over {} sizes", measured.len());
+        println!(
+            "cost ~ N^{p:.3} (R² = {r2:.3}) over {} sizes",
+            measured.len()
+        );
     }
     for row in &rows {
         if let Some(c) = &row.clarabel {

@@ -156,9 +156,10 @@ pub enum SolverKind {
 
 impl SolverKind {
     /// The largest crowd `Auto` gives to Clarabel. Measured on 2 cores (benches/README.md):
-    /// Clarabel is 3.5× faster than APGD on 150 people, 1.8× on 2,000, equal on 10,000 at
-    /// h = 0.1 and slower above (45 s for one 100,000-person projection).
-    pub const AUTO_CLARABEL_MAX_PEOPLE: usize = 5_000;
+    /// Clarabel is 3.5× faster than APGD on 150 people, 1.8× on 2,000 and 2.5× on one jammed
+    /// 40,000-person projection; at 10,000 people the two are even at h = 0.1 and APGD wins
+    /// at h = 0.2; one Clarabel projection of 100,000 people takes tens of seconds.
+    pub const AUTO_CLARABEL_MAX_PEOPLE: usize = 50_000;
 
     /// The solver `self` stands for in a crowd of `people`.
     pub fn resolve(self, people: usize) -> SolverKind {
