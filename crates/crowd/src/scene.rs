@@ -155,11 +155,11 @@ pub enum SolverKind {
 }
 
 impl SolverKind {
-    /// The largest crowd `Auto` gives to Clarabel. Measured on 2 cores (benches/README.md):
-    /// Clarabel is 3.5× faster than APGD on 150 people, 1.8× on 2,000 and 2.5× on one jammed
-    /// 40,000-person projection; at 10,000 people the two are even at h = 0.1 and APGD wins
-    /// at h = 0.2; one Clarabel projection of 100,000 people takes tens of seconds.
-    pub const AUTO_CLARABEL_MAX_PEOPLE: usize = 50_000;
+    /// The largest crowd `Auto` gives to Clarabel: the largest size measured where it beat our
+    /// APGD (benches/README.md, 2 cores): 3.5× faster on 150 people, 1.8× on 2,000, 2.5× and
+    /// 3× on one jammed projection of 40,000 and 100,000 people (at 10,000 people the two are
+    /// even at h = 0.1 and APGD wins at h = 0.2). Beyond it, memory and the unmeasured.
+    pub const AUTO_CLARABEL_MAX_PEOPLE: usize = 100_000;
 
     /// The solver `self` stands for in a crowd of `people`.
     pub fn resolve(self, people: usize) -> SolverKind {
