@@ -7,7 +7,10 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::LazyLock;
 
 use crate::FmuError;
-use crate::glue::{Component, ERROR, OK, Status, c_text, refs, text, values, values_mut, with};
+use crate::glue::{
+    Component, ERROR, OK, Status, c_text, get_scalars, get_strings, set_scalars, set_strings, text,
+    values_mut, with,
+};
 use crate::runtime::{Instance, Level, State};
 
 const CO_SIMULATION: c_int = 1;
@@ -222,51 +225,58 @@ pub extern "C" fn fmi2Reset(c: *mut c_void) -> Status {
 
 // ---- Getting and setting values --------------------------------------------------------
 
-macro_rules! getter {
-    ($name:ident, $fmi:literal, $ty:ty, |$inst:ident, $vr:ident| $get:expr) => {
-        #[doc = concat!("`", $fmi, "`.")]
-        ///
-        /// # Safety
-        /// `vr` and `value` hold `nvr` elements, as the standard defines.
-        #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $name(
-            c: *mut c_void,
-            vr: *const c_uint,
-            nvr: usize,
-            value: *mut $ty,
-        ) -> Status {
-            with(c, $fmi, |comp| {
-                comp.instance.expect(
-                    $fmi,
-                    &[
-                        State::Initialization,
-                        State::Stepping,
-                        State::Terminated,
-                        State::Instantiated,
-                    ],
-                )?;
-                // SAFETY: the host's arrays of `nvr` elements.
-                let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
-                for (slot, &$vr) in out.iter_mut().zip(refs) {
-                    let $inst = &mut comp.instance;
-                    *slot = $get;
-                }
-                Ok(())
-            })
-        }
-    };
+/// `fmi2GetReal`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements, as the standard defines.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetReal(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut f64,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2GetReal", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, nvr, Instance::get_real)
+    })
 }
 
-getter!(fmi2GetReal, "fmi2GetReal", f64, |inst, r| inst
-    .get_real(r)?);
-getter!(fmi2GetInteger, "fmi2GetInteger", c_int, |inst, r| inst
-    .get_integer(r)?);
-getter!(
-    fmi2GetBoolean,
-    "fmi2GetBoolean",
-    c_int,
-    |inst, r| inst.get_boolean(r)? as c_int
-);
+/// `fmi2GetInteger`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetInteger(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut c_int,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2GetInteger", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, nvr, Instance::get_integer)
+    })
+}
+
+/// `fmi2GetBoolean`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetBoolean(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut c_int,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2GetBoolean", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, nvr, |inst, r| {
+            Ok(inst.get_boolean(r)? as c_int)
+        })
+    })
+}
 
 /// `fmi2GetString`: the strings stay valid until the next call on this instance.
 ///
@@ -279,53 +289,64 @@ pub unsafe extern "C" fn fmi2GetString(
     nvr: usize,
     value: *mut *const c_char,
 ) -> Status {
-    with(c, "fmi2GetString", |comp| {
-        // SAFETY: the host's arrays of `nvr` elements.
-        let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, nvr)?) };
-        comp.strings.clear();
-        for &r in refs {
-            let s = comp.instance.get_string(r)?;
-            comp.strings.push(c_text(&s));
-        }
-        for (slot, s) in out.iter_mut().zip(&comp.strings) {
-            *slot = s.as_ptr();
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi2GetString", |comp| unsafe {
+        get_strings(comp, vr, nvr, value, nvr)
     })
 }
 
-macro_rules! setter {
-    ($name:ident, $fmi:literal, $ty:ty, |$inst:ident, $vr:ident, $v:ident| $set:expr) => {
-        #[doc = concat!("`", $fmi, "`.")]
-        ///
-        /// # Safety
-        /// `vr` and `value` hold `nvr` elements, as the standard defines.
-        #[unsafe(no_mangle)]
-        pub unsafe extern "C" fn $name(
-            c: *mut c_void,
-            vr: *const c_uint,
-            nvr: usize,
-            value: *const $ty,
-        ) -> Status {
-            with(c, $fmi, |comp| {
-                // SAFETY: the host's arrays of `nvr` elements.
-                let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
-                for (&$vr, &$v) in refs.iter().zip(vals) {
-                    let $inst = &mut comp.instance;
-                    $set?;
-                }
-                Ok(())
-            })
-        }
-    };
+/// `fmi2SetReal`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetReal(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const f64,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SetReal", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, nvr, Instance::set_real)
+    })
 }
 
-setter!(fmi2SetReal, "fmi2SetReal", f64, |inst, r, v| inst
-    .set_real(r, v));
-setter!(fmi2SetInteger, "fmi2SetInteger", c_int, |inst, r, v| inst
-    .set_integer(r, v));
-setter!(fmi2SetBoolean, "fmi2SetBoolean", c_int, |inst, r, v| inst
-    .set_boolean(r, v != 0));
+/// `fmi2SetInteger`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetInteger(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const c_int,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SetInteger", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, nvr, Instance::set_integer)
+    })
+}
+
+/// `fmi2SetBoolean`.
+///
+/// # Safety
+/// `vr` and `value` hold `nvr` elements.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetBoolean(
+    c: *mut c_void,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const c_int,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SetBoolean", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, nvr, |inst, r, v| {
+            inst.set_boolean(r, v != 0)
+        })
+    })
+}
 
 /// `fmi2SetString`.
 ///
@@ -338,15 +359,9 @@ pub unsafe extern "C" fn fmi2SetString(
     nvr: usize,
     value: *const *const c_char,
 ) -> Status {
-    with(c, "fmi2SetString", |comp| {
-        // SAFETY: the host's arrays of `nvr` elements.
-        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, nvr)?) };
-        for (&r, &v) in refs.iter().zip(vals) {
-            // SAFETY: the host's string.
-            let s = unsafe { text(v, "value") }?;
-            comp.instance.set_string(r, s)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi2SetString", |comp| unsafe {
+        set_strings(comp, vr, nvr, value, nvr)
     })
 }
 

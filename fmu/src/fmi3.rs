@@ -7,7 +7,10 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::LazyLock;
 
 use crate::FmuError;
-use crate::glue::{Component, Status, c_text, refs, text, values, values_mut, with};
+use crate::glue::{
+    Component, Status, c_text, get_scalars, get_strings, refs, set_scalars, set_strings, text,
+    values_mut, with,
+};
 use crate::model::{Kind, variable};
 use crate::runtime::{Instance, Level, State};
 
@@ -285,7 +288,7 @@ pub unsafe extern "C" fn fmi3GetFloat64(
     })
 }
 
-/// `fmi3SetFloat64`.
+/// `fmi3SetFloat64` (scalars: no Float64 array is settable).
 ///
 /// # Safety
 /// `vr` holds `nvr` references and `value` `n_values` values.
@@ -297,18 +300,9 @@ pub unsafe extern "C" fn fmi3SetFloat64(
     value: *const f64,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3SetFloat64", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, n_values)?) };
-        if nvr != n_values {
-            return Err(FmuError::Setting(format!(
-                "nValues = {n_values} for {nvr} scalar references"
-            )));
-        }
-        for (&r, &v) in refs.iter().zip(vals) {
-            comp.instance.set_real(r, v)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3SetFloat64", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, n_values, Instance::set_real)
     })
 }
 
@@ -324,18 +318,9 @@ pub unsafe extern "C" fn fmi3GetInt32(
     value: *mut i32,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3GetInt32", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, n_values)?) };
-        if nvr != n_values {
-            return Err(FmuError::Setting(format!(
-                "nValues = {n_values} for {nvr} scalar references"
-            )));
-        }
-        for (slot, &r) in out.iter_mut().zip(refs) {
-            *slot = comp.instance.get_integer(r)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3GetInt32", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, n_values, Instance::get_integer)
     })
 }
 
@@ -351,13 +336,9 @@ pub unsafe extern "C" fn fmi3SetInt32(
     value: *const i32,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3SetInt32", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, n_values)?) };
-        for (&r, &v) in refs.iter().zip(vals) {
-            comp.instance.set_integer(r, v)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3SetInt32", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, n_values, Instance::set_integer)
     })
 }
 
@@ -373,17 +354,13 @@ pub unsafe extern "C" fn fmi3GetBoolean(
     value: *mut bool,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3GetBoolean", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, n_values)?) };
-        for (slot, &r) in out.iter_mut().zip(refs) {
-            *slot = comp.instance.get_boolean(r)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3GetBoolean", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, n_values, Instance::get_boolean)
     })
 }
 
-/// `fmi3SetBoolean`.
+/// `fmi3SetBoolean`: the bytes are read as `u8`, so a host's value other than 0/1 is no UB.
 ///
 /// # Safety
 /// `vr` holds `nvr` references and `value` `n_values` values.
@@ -395,13 +372,11 @@ pub unsafe extern "C" fn fmi3SetBoolean(
     value: *const bool,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3SetBoolean", |comp| {
-        // SAFETY: the host's arrays; bytes read as u8 so a value other than 0/1 is no UB.
-        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value as *const u8, n_values)?) };
-        for (&r, &v) in refs.iter().zip(vals) {
-            comp.instance.set_boolean(r, v != 0)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3SetBoolean", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value as *const u8, n_values, |inst, r, v| {
+            inst.set_boolean(r, v != 0)
+        })
     })
 }
 
@@ -417,18 +392,9 @@ pub unsafe extern "C" fn fmi3GetString(
     value: *mut *const c_char,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3GetString", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, n_values)?) };
-        comp.strings.clear();
-        for &r in refs {
-            let s = comp.instance.get_string(r)?;
-            comp.strings.push(c_text(&s));
-        }
-        for (slot, s) in out.iter_mut().zip(&comp.strings) {
-            *slot = s.as_ptr();
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3GetString", |comp| unsafe {
+        get_strings(comp, vr, nvr, value, n_values)
     })
 }
 
@@ -444,15 +410,9 @@ pub unsafe extern "C" fn fmi3SetString(
     value: *const *const c_char,
     n_values: usize,
 ) -> Status {
-    with(c, "fmi3SetString", |comp| {
-        // SAFETY: the host's arrays.
-        let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, n_values)?) };
-        for (&r, &v) in refs.iter().zip(vals) {
-            // SAFETY: the host's string.
-            let s = unsafe { text(v, "value") }?;
-            comp.instance.set_string(r, s)?;
-        }
-        Ok(())
+    // SAFETY: passed on.
+    with(c, "fmi3SetString", |comp| unsafe {
+        set_strings(comp, vr, nvr, value, n_values)
     })
 }
 

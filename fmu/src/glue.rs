@@ -115,3 +115,104 @@ pub(crate) unsafe fn text<'a>(s: *const c_char, what: &'static str) -> Result<&'
         .to_str()
         .map_err(|_| FmuError::Setting(format!("{what} is not UTF-8")))
 }
+
+/// Reads one value per scalar reference: `nvr` references at `vr`, `n_values` slots at
+/// `value` (FMI 2 passes `nvr` for both), each filled by `get`.
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` room for `n_values` values (the host's contract).
+pub(crate) unsafe fn get_scalars<T>(
+    comp: &mut Component,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut T,
+    n_values: usize,
+    mut get: impl FnMut(&mut Instance, u32) -> Result<T, FmuError>,
+) -> Result<(), FmuError> {
+    if nvr != n_values {
+        return Err(FmuError::Setting(format!(
+            "nValues = {n_values} for {nvr} scalar references"
+        )));
+    }
+    // SAFETY: the host's arrays, as above.
+    let (refs, out) = unsafe { (refs(vr, nvr)?, values_mut(value, n_values)?) };
+    for (slot, &r) in out.iter_mut().zip(refs) {
+        *slot = get(&mut comp.instance, r)?;
+    }
+    Ok(())
+}
+
+/// Sets one value per scalar reference through `set` (see [`get_scalars`]).
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` `n_values` values.
+pub(crate) unsafe fn set_scalars<T: Copy>(
+    comp: &mut Component,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const T,
+    n_values: usize,
+    mut set: impl FnMut(&mut Instance, u32, T) -> Result<(), FmuError>,
+) -> Result<(), FmuError> {
+    if nvr != n_values {
+        return Err(FmuError::Setting(format!(
+            "nValues = {n_values} for {nvr} scalar references"
+        )));
+    }
+    // SAFETY: the host's arrays, as above.
+    let (refs, vals) = unsafe { (refs(vr, nvr)?, values(value, n_values)?) };
+    for (&r, &v) in refs.iter().zip(vals) {
+        set(&mut comp.instance, r, v)?;
+    }
+    Ok(())
+}
+
+/// Reads String variables; the pointers stay valid until the next call on this instance.
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` room for `n_values` pointers.
+pub(crate) unsafe fn get_strings(
+    comp: &mut Component,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *mut *const c_char,
+    n_values: usize,
+) -> Result<(), FmuError> {
+    // SAFETY: the host's arrays, as above.
+    let refs = unsafe { refs(vr, nvr)? };
+    comp.strings.clear();
+    for &r in refs {
+        let s = comp.instance.get_string(r)?;
+        comp.strings.push(c_text(&s));
+    }
+    if refs.len() != n_values {
+        return Err(FmuError::Setting(format!(
+            "nValues = {n_values} for {nvr} scalar references"
+        )));
+    }
+    // SAFETY: room for `n_values` pointers.
+    let out = unsafe { values_mut(value, n_values)? };
+    for (slot, s) in out.iter_mut().zip(&comp.strings) {
+        *slot = s.as_ptr();
+    }
+    Ok(())
+}
+
+/// Sets String variables.
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` `n_values` NUL-terminated strings.
+pub(crate) unsafe fn set_strings(
+    comp: &mut Component,
+    vr: *const c_uint,
+    nvr: usize,
+    value: *const *const c_char,
+    n_values: usize,
+) -> Result<(), FmuError> {
+    // SAFETY: the host's arrays; each string is checked by `text`.
+    unsafe {
+        set_scalars(comp, vr, nvr, value, n_values, |inst, r, v| {
+            inst.set_string(r, text(v, "value")?)
+        })
+    }
+}
