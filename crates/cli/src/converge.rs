@@ -3,12 +3,12 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use anyhow::{Context, Result, bail, ensure};
-use moreau_crowd::{Scene, Simulation};
+use anyhow::{Context, Result, bail};
+use moreau_crowd::Scene;
 use serde::Serialize;
 
+use crate::study::{How, error, sample};
 use crate::svg::{LogLog, Series, fit_power};
 
 /// Arguments of `moreau converge`.
@@ -76,75 +76,6 @@ struct Report {
     fits: Vec<Fit>,
 }
 
-/// One run: the states at the sampling times and what the run cost.
-struct Sampled {
-    states: Vec<Vec<f64>>,
-    steps: usize,
-    iterations_per_step: f64,
-    max_eps: f64,
-    max_violation: f64,
-    wall: f64,
-}
-
-/// One run with step `h`: the state at t_i = i T / samples, i = 0..=samples, and its stats.
-fn sample(scene: &Scene, h: f64, samples: usize) -> Result<Sampled> {
-    let mut scene = scene.clone();
-    let interval = scene.time.horizon / samples as f64;
-    let per = interval / h;
-    ensure!(
-        (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
-        "step {h} does not divide the sampling interval {interval} (T / samples)"
-    );
-    scene.time.step = h;
-    scene.time.output_interval = interval;
-    let mut sim = Simulation::new(scene)?;
-    let n = sim.total_people();
-    let start = Instant::now();
-    let mut states = Vec::new();
-    let (mut steps, mut iterations, mut max_eps, mut max_violation) =
-        (0usize, 0usize, 0.0f64, 0.0f64);
-    sim.run::<anyhow::Error>(
-        |_, r| {
-            steps += 1;
-            iterations += r.iterations;
-            max_eps = max_eps.max(r.eps);
-            max_violation = max_violation.max(r.violation);
-            Ok(())
-        },
-        |f| {
-            if f.ids.len() != n {
-                bail!(
-                    "exits: people left the scene at t = {}; the convergence study compares \
-                     everyone at every t_i: use action = \"continue\"",
-                    f.t
-                );
-            }
-            let mut q = vec![0.0; 2 * n];
-            for (k, &id) in f.ids.iter().enumerate() {
-                q[2 * id as usize] = f.positions[2 * k];
-                q[2 * id as usize + 1] = f.positions[2 * k + 1];
-            }
-            states.push(q);
-            Ok(())
-        },
-    )?;
-    ensure!(
-        states.len() == samples + 1,
-        "expected {} states, got {}",
-        samples + 1,
-        states.len()
-    );
-    let wall = start.elapsed().as_secs_f64();
-    Ok(Sampled {
-        states,
-        steps,
-        iterations_per_step: iterations as f64 / steps.max(1) as f64,
-        max_eps,
-        max_violation,
-        wall,
-    })
-}
-
 /// Runs `moreau converge`.
 pub fn converge(args: &ConvergeArgs) -> Result<()> {
     let mut scene = Scene::from_file(&args.scene)?;
@@ -154,7 +85,6 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
     if let Some(k) = args.eps_kappa {
         scene.solver.eps_kappa = k;
     }
-    ensure!(args.samples >= 1, "--samples must be ≥ 1");
     if args.steps.iter().any(|&h| !(h > args.h_min)) {
         bail!("every step must be larger than --h-min {}", args.h_min);
     }
@@ -167,32 +97,19 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         }
     };
     say(format!("reference run, h_min = {} ...", args.h_min));
-    let reference = sample(&scene, args.h_min, args.samples)
+    let reference = sample(&scene, &How::Fixed(args.h_min), args.samples)
         .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
     say(format!("  {} steps", reference.steps));
     let reference = reference.states;
     let n = reference[0].len() / 2;
     let mut rows = Vec::new();
     for &h in &args.steps {
-        let Sampled {
-            states,
-            steps,
-            iterations_per_step: it,
-            max_eps,
-            max_violation,
-            wall,
-        } = sample(&scene, h, args.samples).with_context(|| format!("run with h = {h}"))?;
+        let run = sample(&scene, &How::Fixed(h), args.samples)
+            .with_context(|| format!("run with h = {h}"))?;
         // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates.
-        let (mut error, mut per_person) = (0.0f64, 0.0f64);
-        for (a, b) in reference.iter().zip(&states).skip(1) {
-            let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
-            error = error.max(d2.sqrt());
-            for i in 0..n {
-                let d =
-                    ((a[2 * i] - b[2 * i]).powi(2) + (a[2 * i + 1] - b[2 * i + 1]).powi(2)).sqrt();
-                per_person = per_person.max(d);
-            }
-        }
+        let (error, per_person) = error(&reference, &run.states);
+        let (steps, wall) = (run.steps, run.wall);
+        let it = run.iterations as f64 / steps.max(1) as f64;
         say(format!(
             "  h = {h:<7} e_h = {error:.4e}  ({steps} steps, {it:.0} iterations/step, {wall:.1} s)"
         ));
@@ -202,8 +119,8 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
             error,
             error_per_person_max: per_person,
             iterations_per_step: it,
-            max_eps,
-            max_violation,
+            max_eps: run.max_eps,
+            max_violation: run.max_violation,
             wall_seconds: wall,
         });
     }

@@ -6,6 +6,7 @@ mod bench;
 mod converge;
 mod example;
 mod run;
+mod study;
 mod svg;
 mod tradeoff;
 

@@ -4,13 +4,13 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use std::time::Instant;
 
-use anyhow::{Context, Result, ensure};
-use moreau_crowd::{Scene, Simulation, SolverKind};
+use anyhow::{Context, Result};
+use moreau_crowd::{Scene, SolverKind};
 use serde::Serialize;
 
-use crate::run::{Estimate, controller};
+use crate::run::Estimate;
+use crate::study::{self, How, sample};
 use crate::svg::{LogLog, Series};
 
 /// Arguments of `moreau tradeoff`.
@@ -54,83 +54,6 @@ struct Point {
     error: f64,
     evacuation_error: usize,
     passed_exit: usize,
-}
-
-struct Sampled {
-    states: Vec<Vec<f64>>,
-    passed: Vec<usize>,
-    steps: usize,
-    rejected: usize,
-    wall: f64,
-}
-
-enum How {
-    Fixed(f64),
-    Adaptive(f64, Estimate),
-}
-
-fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
-    let mut scene = scene.clone();
-    let interval = scene.time.horizon / samples as f64;
-    scene.time.output_interval = interval;
-    if let How::Fixed(h) = how {
-        let per = interval / h;
-        ensure!(
-            (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
-            "step {h} does not divide the sampling interval {interval}"
-        );
-        scene.time.step = *h;
-    }
-    let mut sim = Simulation::new(scene.clone())?;
-    let n = sim.total_people();
-    let grab = |sim: &Simulation| -> Result<Vec<f64>> {
-        let f = sim.frame();
-        ensure!(
-            f.ids.len() == n,
-            "people left the scene: the study needs exits with action = \"continue\""
-        );
-        let mut q = vec![0.0; 2 * n];
-        for (k, &id) in f.ids.iter().enumerate() {
-            q[2 * id as usize] = f.positions[2 * k];
-            q[2 * id as usize + 1] = f.positions[2 * k + 1];
-        }
-        Ok(q)
-    };
-    let start = Instant::now();
-    let (mut states, mut passed) = (vec![grab(&sim)?], vec![0]);
-    let (mut steps, mut rejected) = (0, 0);
-    match how {
-        How::Fixed(_) => {
-            for (mu, frame) in sim.schedule() {
-                sim.step(mu)?;
-                steps += 1;
-                if frame {
-                    states.push(grab(&sim)?);
-                    passed.push(sim.exit_times().len());
-                }
-            }
-        }
-        How::Adaptive(tol, estimate) => {
-            let mut c = controller(&scene, *tol, *estimate)?;
-            for i in 1..=samples {
-                let next = (i as f64 * interval).min(scene.time.horizon);
-                while sim.time() < next {
-                    let s = sim.step_adaptive(&mut c, next)?;
-                    steps += 1;
-                    rejected += s.rejected;
-                }
-                states.push(grab(&sim)?);
-                passed.push(sim.exit_times().len());
-            }
-        }
-    }
-    Ok(Sampled {
-        states,
-        passed,
-        steps,
-        rejected,
-        wall: start.elapsed().as_secs_f64(),
-    })
 }
 
 /// Runs `moreau tradeoff`.
@@ -199,19 +122,7 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
     let mut points = Vec::new();
     for (method, setting, s, how) in &runs {
         let r = sample(s, how, args.samples).with_context(|| format!("{method} at {setting}"))?;
-        let error = reference
-            .states
-            .iter()
-            .zip(&r.states)
-            .skip(1)
-            .map(|(a, b)| {
-                a.iter()
-                    .zip(b)
-                    .map(|(x, y)| (x - y).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .fold(0.0, f64::max);
+        let (error, _) = study::error(&reference.states, &r.states);
         let evacuation_error = reference
             .passed
             .iter()
