@@ -10,8 +10,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use moreau_crowd::{Scene, Simulation};
 use moreau_solve::{
-    ClarabelReference, ClarabelSettings, ProjectionProblem, ProjectionSolution, ProjectionSolver,
-    Target,
+    ClarabelReference, ClarabelSettings, ProjectionSolution, ProjectionSolver, Target,
 };
 use serde::{Deserialize, Serialize};
 
@@ -185,14 +184,7 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
 fn compare(sim: &mut Simulation) -> Result<Comparison> {
     let mu = 0.05;
     let r = sim.step(mu)?;
-    let corr = sim.scheme().correction();
-    let rows = corr.rows();
-    let b: Vec<f64> = rows.values().iter().map(|g| g / mu).collect();
-    let problem = ProjectionProblem {
-        w: sim.scheme().prediction(),
-        jacobian: rows,
-        b: &b,
-    };
+    let problem = sim.last_projection();
     let target = Target {
         gap: r.eps_target / (2.0 * mu * mu),
         violation: sim.scene().solver.max_violation / mu,

@@ -448,6 +448,13 @@ impl Simulation {
         &self.scheme
     }
 
+    /// The projection problem of the last step (rows, offsets, prediction), to re-solve it.
+    pub fn last_projection(&self) -> moreau_solve::ProjectionProblem<'_> {
+        self.scheme
+            .correction()
+            .last_problem(self.scheme.prediction())
+    }
+
     /// The factor on every desired speed.
     pub fn set_speed_factor(&mut self, factor: f64) {
         self.scheme.field_mut().speed_factor = factor;

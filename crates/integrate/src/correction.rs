@@ -162,6 +162,17 @@ impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
         &self.rows
     }
 
+    /// The last step's projection problem, `min ½|v − w|²` s.t. `b + J v ≥ 0` with its rows
+    /// and offsets `b = g/μ`, for the prediction `w` it was solved with (to re-solve it with
+    /// another solver).
+    pub fn last_problem<'a>(&'a self, w: &'a [f64]) -> ProjectionProblem<'a> {
+        ProjectionProblem {
+            w,
+            jacobian: &self.rows,
+            b: &self.b,
+        }
+    }
+
     /// The multipliers of the last step, one per assembled row.
     pub fn multipliers(&self) -> &[f64] {
         &self.solution.lambda

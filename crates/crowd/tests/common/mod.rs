@@ -7,8 +7,7 @@ use std::collections::HashMap;
 use moreau_core::StepReport;
 use moreau_crowd::{Scene, Simulation};
 use moreau_solve::{
-    ClarabelReference, ClarabelSettings, ProjectionProblem, ProjectionSolution, ProjectionSolver,
-    Target,
+    ClarabelReference, ClarabelSettings, ProjectionSolution, ProjectionSolver, Target,
 };
 
 /// The largest overlap between two disks, and of a disk with a wall; panics if a centre left
@@ -107,14 +106,7 @@ pub fn assert_matches_clarabel(sim: &Simulation, before: &[f64], report: &StepRe
         .zip(after)
         .map(|(a, b)| (b - a) / mu)
         .collect();
-    let corr = sim.scheme().correction();
-    let rows = corr.rows();
-    let b: Vec<f64> = rows.values().iter().map(|g| g / mu).collect();
-    let problem = ProjectionProblem {
-        w: sim.scheme().prediction(),
-        jacobian: rows,
-        b: &b,
-    };
+    let problem = sim.last_projection();
     let mut reference = ClarabelReference::new(ClarabelSettings {
         tolerance: 1e-11,
         max_iterations: 200,
