@@ -19,8 +19,9 @@ use clap::{Parser, Subcommand};
 const EXIT_CODES: &str = "\
 Exit codes:
   0  the run reached its horizon (or the command succeeded)
-  1  the run stopped before its horizon (a step failed, or writing the output failed);
-     the output keeps every frame written so far and its attribute `status` says why
+  1  the run failed: it stopped before its horizon (a step failed, or writing the output
+     failed; the output keeps every frame written so far and its attribute `status` says
+     why), or its summary could not be written
   2  bad input: command line, scene file, or output path; nothing was written";
 
 /// moreau: Moreau's catching-up scheme for first-order nonsmooth dynamics, with crowds of

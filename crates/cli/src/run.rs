@@ -226,8 +226,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     {
         failed.get_or_insert(e.into());
     }
-    if let Some(target) = &args.summary_json {
-        write_summary(target, &json)?;
+    // After the run, a summary that cannot be written is a failure of the run (exit 1), not
+    // bad input (exit 2): the HDF5 file is already complete.
+    if let Some(target) = &args.summary_json
+        && let Err(e) = write_summary(target, &json)
+    {
+        failed.get_or_insert(e);
     }
     if !args.quiet {
         println!(
@@ -249,7 +253,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         None => Ok(ExitCode::SUCCESS),
         Some(e) => {
             eprintln!(
-                "moreau: error: the run stopped at t = {} s: {e:#}",
+                "moreau: error: {e:#} (simulated time reached: {} s)",
                 sim.time()
             );
             Ok(ExitCode::from(1))
