@@ -35,6 +35,12 @@ pub struct BenchArgs {
     /// Also solve one projection with Clarabel at this size (0: never) and compare.
     #[arg(long, default_value_t = 40_000)]
     clarabel_at: usize,
+    /// The fast solver measured (`interior`, `apgd`, `auto`, `clarabel`).
+    #[arg(long, default_value = "interior")]
+    kind: String,
+    /// Threads for the projection (0: every core).
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
     /// Internal: measure one size in this process and print its JSON row.
     #[arg(long, hide = true)]
     one: Option<usize>,
@@ -69,7 +75,8 @@ struct Comparison {
 }
 
 /// The hall: a square of `n / density` m² with one door in the right wall.
-fn hall(n: usize, density: f64, warmup: usize, steps: usize) -> Result<Scene> {
+fn hall(args: &BenchArgs, n: usize) -> Result<Scene> {
+    let (density, warmup, steps) = (args.density, args.warmup, args.steps);
     let side = (n as f64 / density).sqrt();
     let door = (side / 20.0).max(2.0);
     let (lo, hi) = (side / 2.0 - door / 2.0, side / 2.0 + door / 2.0);
@@ -98,7 +105,8 @@ horizon = {horizon}
 step = 0.05
 output_interval = 0.05
 [solver]
-kind = "apgd"
+kind = "{kind}"
+threads = {threads}
 eps_kappa = {kappa:e}
 max_violation = {violation:e}
 grid_cell = {cell}
@@ -108,6 +116,8 @@ grid_cell = {cell}
         horizon = 0.05 * (warmup + steps) as f64,
         violation = 1e-4 * r_min,
         cell = (side / 400.0).max(0.25),
+        kind = args.kind,
+        threads = args.threads,
     );
     Ok(Scene::from_toml(&text, "bench hall")?)
 }
@@ -135,7 +145,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     let start = Instant::now();
-    let scene = hall(n, args.density, args.warmup, args.steps)?;
+    let scene = hall(args, n)?;
     let side = (n as f64 / args.density).sqrt();
     let mut sim = Simulation::new(scene)?;
     let setup = start.elapsed().as_secs_f64();
@@ -247,6 +257,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 &args.steps.to_string(),
                 "--clarabel-at",
                 &args.clarabel_at.to_string(),
+                "--kind",
+                &args.kind,
+                "--threads",
+                &args.threads.to_string(),
             ])
             .output()
             .with_context(|| format!("running the {n}-people measurement"))?;

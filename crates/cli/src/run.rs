@@ -112,6 +112,7 @@ fn solver_text(sim: &Simulation) -> String {
     let solver = match (sim.scene().solver.kind, sim.solver_kind()) {
         (SolverKind::Clarabel, _) => "Clarabel alone",
         (_, SolverKind::Clarabel) => "Clarabel with APGD as fallback",
+        (_, SolverKind::Interior) => "our interior point with Clarabel as fallback",
         _ => "APGD with Clarabel as fallback",
     };
     format!(

@@ -10,12 +10,14 @@
 //! box and a crowd.
 
 mod error;
+mod parallel;
 mod report;
 mod rows;
 mod sets;
 mod traits;
 
 pub use error::CoreError;
+pub use parallel::Parallelism;
 pub use report::{SolveStatus, StageTimings, StepReport};
 pub use rows::{ConstraintKey, ConstraintRows};
 pub use sets::{Ball, BoxSet, HalfSpace, HalfSpaces, SeparableAbs};

@@ -94,6 +94,16 @@ impl ConstraintRows {
         (&self.cols[a..b], &self.coefs[a..b])
     }
 
+    /// Where each row starts in [`ConstraintRows::columns`] (one more entry than rows).
+    pub fn row_starts(&self) -> &[usize] {
+        &self.row_start
+    }
+
+    /// The columns of all gradient entries, row after row.
+    pub fn columns(&self) -> &[usize] {
+        &self.cols
+    }
+
     /// Number of stored gradient entries.
     pub fn nnz(&self) -> usize {
         self.cols.len()

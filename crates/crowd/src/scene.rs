@@ -148,6 +148,9 @@ pub enum SolverKind {
     Apgd,
     /// Clarabel's interior point only (reference).
     Clarabel,
+    /// Our interior point (sparse Cholesky normal equations, symbolic analysis reused while
+    /// the contact pattern holds), with Clarabel as fallback.
+    Interior,
     /// Chosen from the number of people at the start: Clarabel (with APGD as fallback) up to
     /// [`SolverKind::AUTO_CLARABEL_MAX_PEOPLE`], APGD (with Clarabel as fallback) above. The
     /// step report names the solver each step used.
@@ -190,6 +193,9 @@ fn default_kappa() -> f64 {
 fn default_violation() -> f64 {
     1e-6
 }
+fn default_threads() -> usize {
+    1
+}
 fn default_cell() -> f64 {
     0.1
 }
@@ -213,6 +219,10 @@ pub struct SolverSettings {
     /// The broad phase.
     #[serde(default)]
     pub broad_phase: BroadPhaseChoice,
+    /// Threads for the projection (0: every core). Results do not depend on it beyond the
+    /// certified tolerance.
+    #[serde(default = "default_threads")]
+    pub threads: usize,
 }
 
 impl Default for SolverSettings {
@@ -223,6 +233,7 @@ impl Default for SolverSettings {
             max_violation: default_violation(),
             grid_cell: default_cell(),
             broad_phase: BroadPhaseChoice::Auto,
+            threads: default_threads(),
         }
     }
 }

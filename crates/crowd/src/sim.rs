@@ -6,7 +6,11 @@ use moreau_core::StepReport;
 use moreau_integrate::{
     AdaptiveStep, EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepController,
 };
-use moreau_solve::{Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, ProjectionSolver};
+use moreau_core::Parallelism;
+use moreau_solve::{
+    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
+    ProjectionSolver,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -360,12 +364,21 @@ impl Simulation {
                 Apgd::new(ApgdSettings::default())
                     .map_err(moreau_integrate::IntegrateError::from)?,
             ),
+            SolverKind::Interior => Box::new(
+                InteriorPoint::new(
+                    InteriorPointSettings::builder()
+                        .parallelism(Parallelism::threads(scene.solver.threads))
+                        .build()
+                        .map_err(moreau_integrate::IntegrateError::from)?,
+                )
+                .map_err(moreau_integrate::IntegrateError::from)?,
+            ),
             SolverKind::Clarabel | SolverKind::Auto => {
                 Box::new(ClarabelReference::new(ClarabelSettings::default()))
             }
         };
         let mut correction = LinearizedProjection::new(constraints, solver, settings)?;
-        if kind == SolverKind::Apgd {
+        if matches!(kind, SolverKind::Apgd | SolverKind::Interior) {
             correction = correction.with_fallback(Box::new(ClarabelReference::new(
                 ClarabelSettings::default(),
             )));

@@ -33,6 +33,9 @@ pub enum SolveError {
         /// Why it is rejected.
         reason: &'static str,
     },
+    /// The sparse factorization could not be set up (out of memory, index overflow).
+    #[error("sparse factorization: {0}")]
+    Factorization(String),
     /// The reference interior-point solver refused the problem.
     #[error("clarabel: {0}")]
     Clarabel(String),

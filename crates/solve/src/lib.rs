@@ -9,10 +9,14 @@ mod apgd;
 mod certificate;
 mod clarabel_ref;
 mod error;
+mod interior;
 mod problem;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
 pub use certificate::{Certificate, certify};
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
 pub use error::SolveError;
+pub use interior::{
+    FactorizationCounts, InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder,
+};
 pub use problem::{ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target};

@@ -2,8 +2,8 @@
 
 use moreau_core::{ConstraintRows, SolveStatus};
 use moreau_solve::{
-    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, ProjectionProblem, ProjectionSolution,
-    ProjectionSolver, Target, certify,
+    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
+    ProjectionProblem, ProjectionSolution, ProjectionSolver, Target, certify,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -176,6 +176,9 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
     };
     let mut apgd = Apgd::new(ApgdSettings::default()).unwrap();
     let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
+    // One interior point for all cases: its pattern and symbolic analysis must follow the
+    // changing sizes and sparsity.
+    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
     for case in 0..cases {
         let inst = random_instance(&mut rng, kind);
         let p = ProjectionProblem {
@@ -183,7 +186,11 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
             jacobian: &inst.rows,
             b: &inst.b,
         };
-        for solver in [&mut apgd as &mut dyn ProjectionSolver, &mut clarabel] {
+        for solver in [
+            &mut apgd as &mut dyn ProjectionSolver,
+            &mut clarabel,
+            &mut interior,
+        ] {
             let mut sol = ProjectionSolution::default();
             let rep = solver
                 .solve(
@@ -237,7 +244,7 @@ fn all_degeneracies_together_meet_kkt() {
 }
 
 #[test]
-fn a_violated_zero_row_is_reported_infeasible_by_both() {
+fn a_violated_zero_row_is_reported_infeasible_by_all() {
     let mut rows = ConstraintRows::new(2);
     rows.push(0, 0.0, [(0, 1.0)]);
     rows.push(1, 0.0, []);
@@ -261,6 +268,12 @@ fn a_violated_zero_row_is_reported_infeasible_by_both() {
             .solve(&p, t, &mut sol)
             .unwrap()
             .status,
+        SolveStatus::Infeasible
+    );
+    let mut sol = ProjectionSolution::default();
+    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    assert_eq!(
+        interior.solve(&p, t, &mut sol).unwrap().status,
         SolveStatus::Infeasible
     );
 }

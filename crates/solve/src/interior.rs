@@ -1,0 +1,704 @@
+//! A primal–dual interior point in velocity space: Newton systems `I + Jᵀ D J` factorized by
+//! faer's sparse Cholesky, the symbolic analysis reused while the contact pattern holds.
+//!
+//! The problem `min ½|v − w|² s.t. s = b + J v ≥ 0` has the KKT system
+//! `v − w − Jᵀλ = 0`, `s − b − J v = 0`, `s ∘ λ = 0`, `s, λ ≥ 0`. Eliminating `Δs` and `Δλ`
+//! from the Newton step leaves the normal equations `(I + Jᵀ D J) Δv = r` with
+//! `D = diag(λ / s)`: symmetric positive definite for every `D ≥ 0` (it is at least the
+//! identity), so redundant contacts — more active rows than a jammed person has degrees of
+//! freedom — cost nothing, where the dual Hessian `J Jᵀ` of an active-set method is singular.
+//! Mehrotra's predictor–corrector takes two solves per factorization.
+//!
+//! What is separated: the *pattern* of `I + Jᵀ D J` (built when the rows' columns change,
+//! reused otherwise), the *symbolic* Cholesky (AMD ordering, elimination tree, supernodes —
+//! recomputed only when the pattern changes), and the *numeric* factorization (every
+//! iteration). Scratch memory is sized when the symbolic analysis changes.
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par, Side};
+use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
+
+use crate::certificate::certify;
+use crate::error::SolveError;
+use crate::problem::{
+    ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
+};
+
+/// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct InteriorPointSettings {
+    /// Iteration (factorization) budget per solve.
+    pub max_iterations: usize,
+    /// Fraction of the step to the boundary of `s, λ ≥ 0` taken each iteration, in (0, 1).
+    pub step_fraction: f64,
+    /// Threads for the numeric factorization and the triangular solves.
+    pub parallelism: Parallelism,
+}
+
+impl Default for InteriorPointSettings {
+    fn default() -> Self {
+        Self {
+            max_iterations: 100,
+            step_fraction: 0.99,
+            parallelism: Parallelism::SEQUENTIAL,
+        }
+    }
+}
+
+impl InteriorPointSettings {
+    /// A builder starting from the defaults.
+    pub fn builder() -> InteriorPointSettingsBuilder {
+        InteriorPointSettingsBuilder(Self::default())
+    }
+
+    /// Checks every setting.
+    pub fn validate(&self) -> Result<(), SolveError> {
+        if self.max_iterations == 0 {
+            return Err(SolveError::InvalidSetting {
+                field: "max_iterations",
+                value: "0".into(),
+                reason: "must be ≥ 1",
+            });
+        }
+        if !(self.step_fraction > 0.0 && self.step_fraction < 1.0) {
+            return Err(SolveError::InvalidSetting {
+                field: "step_fraction",
+                value: self.step_fraction.to_string(),
+                reason: "must be in (0, 1)",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Builder of [`InteriorPointSettings`].
+#[derive(Debug, Clone)]
+pub struct InteriorPointSettingsBuilder(InteriorPointSettings);
+
+impl InteriorPointSettingsBuilder {
+    /// Iteration budget per solve.
+    pub fn max_iterations(mut self, n: usize) -> Self {
+        self.0.max_iterations = n;
+        self
+    }
+    /// Fraction to the boundary.
+    pub fn step_fraction(mut self, f: f64) -> Self {
+        self.0.step_fraction = f;
+        self
+    }
+    /// Threads for the factorization.
+    pub fn parallelism(mut self, p: Parallelism) -> Self {
+        self.0.parallelism = p;
+        self
+    }
+    /// Validates and returns the settings.
+    pub fn build(self) -> Result<InteriorPointSettings, SolveError> {
+        self.0.validate()?;
+        Ok(self.0)
+    }
+}
+
+/// What the factorization machinery did over the solver's life (for benchmarks).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FactorizationCounts {
+    /// Patterns of `I + Jᵀ D J` built (the rows' columns changed).
+    pub patterns: usize,
+    /// Symbolic analyses (the pattern changed).
+    pub analyses: usize,
+    /// Numeric factorizations.
+    pub factorizations: usize,
+}
+
+/// One triangle of `I + Jᵀ D J` in compressed columns, in a given symmetric ordering, and
+/// where each product `D_i a_ia a_ib` of row `i` of `J` lands in it.
+#[derive(Debug, Clone, Default)]
+struct NormalPattern {
+    n: usize,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    diag: Vec<usize>,
+    // For each row of J, each ordered pair (a, b) of its entries with col_a ≥ col_b, in
+    // traversal order: where the product lands in `row_idx`.
+    slots: Vec<usize>,
+    // scratch for building
+    count: Vec<usize>,
+    fill: Vec<usize>,
+}
+
+/// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
+/// in the order [`NormalPattern::assemble`] visits them.
+fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
+    for i in 0..j.len() {
+        let cols = j.row(i).0;
+        for &ca in cols {
+            for &cb in cols {
+                if ca >= cb {
+                    f(ca, cb);
+                }
+            }
+        }
+    }
+}
+
+impl NormalPattern {
+    /// Builds the pattern of `j` with unknown `c` at position `at[c]` (identity without
+    /// `at`), storing the upper triangle (row ≤ column) when `upper`, else the lower one;
+    /// with `slots`, also where each product lands.
+    fn build(&mut self, j: &ConstraintRows, at: Option<&[usize]>, upper: bool, slots: bool) {
+        let n = j.dim();
+        self.n = n;
+        let place = |ca: usize, cb: usize| -> (usize, usize) {
+            let (pa, pb) = match at {
+                Some(at) => (at[ca], at[cb]),
+                None => (ca, cb),
+            };
+            let (lo, hi) = if pa <= pb { (pa, pb) } else { (pb, pa) };
+            if upper { (lo, hi) } else { (hi, lo) } // (row, column)
+        };
+        // Bucket the entries by column, then sort and deduplicate each column.
+        self.count.clear();
+        self.count.resize(n + 1, 1); // the diagonal
+        for_each_product(j, |ca, cb| self.count[place(ca, cb).1] += 1);
+        let mut total = 0;
+        for c in self.count.iter_mut() {
+            let k = *c;
+            *c = total;
+            total += k;
+        }
+        self.fill.clear();
+        self.fill.resize(total, 0);
+        {
+            let (count, fill) = (&mut self.count, &mut self.fill);
+            for c in 0..n {
+                fill[count[c]] = c;
+                count[c] += 1;
+            }
+            for_each_product(j, |ca, cb| {
+                let (r, c) = place(ca, cb);
+                fill[count[c]] = r;
+                count[c] += 1;
+            });
+        }
+        // count[c] is now the end of column c's bucket and the start of column c + 1's.
+        self.col_ptr.clear();
+        self.row_idx.clear();
+        let mut start = 0;
+        for c in 0..n {
+            let end = self.count[c];
+            let bucket = &mut self.fill[start..end];
+            bucket.sort_unstable();
+            self.col_ptr.push(self.row_idx.len());
+            let mut last = usize::MAX;
+            for &r in bucket.iter() {
+                if r != last {
+                    self.row_idx.push(r);
+                    last = r;
+                }
+            }
+            start = end;
+        }
+        self.col_ptr.push(self.row_idx.len());
+        self.diag.clear();
+        self.slots.clear();
+        if !slots {
+            return;
+        }
+        let find = |col_ptr: &[usize], row_idx: &[usize], r: usize, c: usize| {
+            let (a, b) = (col_ptr[c], col_ptr[c + 1]);
+            a + row_idx[a..b]
+                .binary_search(&r)
+                .expect("every product has a slot in the pattern")
+        };
+        for c in 0..n {
+            self.diag.push(find(&self.col_ptr, &self.row_idx, c, c));
+        }
+        let (col_ptr, row_idx, out) = (&self.col_ptr, &self.row_idx, &mut self.slots);
+        for_each_product(j, |ca, cb| {
+            let (r, c) = place(ca, cb);
+            out.push(find(col_ptr, row_idx, r, c));
+        });
+    }
+
+    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
+    }
+
+    /// `values = triangle(I + Jᵀ diag(d) J)`.
+    fn assemble(&self, j: &ConstraintRows, d: &[f64], values: &mut Vec<f64>) {
+        values.clear();
+        values.resize(self.row_idx.len(), 0.0);
+        for &p in &self.diag {
+            values[p] = 1.0;
+        }
+        let mut k = 0;
+        for (i, &di) in d.iter().enumerate() {
+            let (cols, coefs) = j.row(i);
+            for (&ca, &aa) in cols.iter().zip(coefs) {
+                for (&cb, &ab) in cols.iter().zip(coefs) {
+                    if ca >= cb {
+                        values[self.slots[k]] += di * aa * ab;
+                        k += 1;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// faer's workspace, sized at each symbolic analysis.
+struct Scratch(MemBuffer);
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Scratch")
+    }
+}
+
+/// Mehrotra's predictor–corrector interior point on the velocity-form projection, with
+/// sparse Cholesky normal equations. Its answers are certified by [`certify`].
+#[derive(Debug)]
+pub struct InteriorPoint {
+    settings: InteriorPointSettings,
+    // The structure of J the analysis below was made for.
+    j_row_start: Vec<usize>,
+    j_cols: Vec<usize>,
+    // The unpermuted lower triangle (input of the ordering), the fill-reducing ordering,
+    // and the permuted triangle that is factorized (no permutation per factorization).
+    natural: NormalPattern,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    pattern: NormalPattern,
+    symbolic: Option<SymbolicCholesky<usize>>,
+    counts: FactorizationCounts,
+    h: Vec<f64>,
+    l: Vec<f64>,
+    mem: Scratch,
+    // per-row
+    s: Vec<f64>,
+    d: Vec<f64>,
+    rp: Vec<f64>,
+    rc: Vec<f64>,
+    ds: Vec<f64>,
+    dl: Vec<f64>,
+    ds_aff: Vec<f64>,
+    dl_aff: Vec<f64>,
+    scratch_m: Vec<f64>,
+    // per-unknown
+    rd: Vec<f64>,
+    dv: Vec<f64>,
+    scratch_n: Vec<f64>,
+}
+
+impl InteriorPoint {
+    /// A solver with validated settings.
+    pub fn new(settings: InteriorPointSettings) -> Result<Self, SolveError> {
+        settings.validate()?;
+        Ok(Self {
+            settings,
+            j_row_start: Vec::new(),
+            j_cols: Vec::new(),
+            natural: NormalPattern::default(),
+            perm: Vec::new(),
+            perm_inv: Vec::new(),
+            pattern: NormalPattern::default(),
+            symbolic: None,
+            counts: FactorizationCounts::default(),
+            h: Vec::new(),
+            l: Vec::new(),
+            mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
+            s: Vec::new(),
+            d: Vec::new(),
+            rp: Vec::new(),
+            rc: Vec::new(),
+            ds: Vec::new(),
+            dl: Vec::new(),
+            ds_aff: Vec::new(),
+            dl_aff: Vec::new(),
+            scratch_m: Vec::new(),
+            rd: Vec::new(),
+            dv: Vec::new(),
+            scratch_n: Vec::new(),
+        })
+    }
+
+    /// Patterns, analyses and factorizations done so far.
+    pub fn counts(&self) -> FactorizationCounts {
+        self.counts
+    }
+
+    fn par(&self) -> Par {
+        if self.settings.parallelism.is_sequential() {
+            Par::Seq
+        } else {
+            Par::rayon(self.settings.parallelism.get())
+        }
+    }
+
+    fn size(&mut self, m: usize, n: usize) {
+        for v in [
+            &mut self.s,
+            &mut self.d,
+            &mut self.rp,
+            &mut self.rc,
+            &mut self.ds,
+            &mut self.dl,
+            &mut self.ds_aff,
+            &mut self.dl_aff,
+            &mut self.scratch_m,
+        ] {
+            v.clear();
+            v.resize(m, 0.0);
+        }
+        for v in [&mut self.rd, &mut self.dv, &mut self.scratch_n] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+    }
+
+    /// Makes the ordering, the pattern and the symbolic analysis fit `j`; nothing is redone
+    /// while the columns of `j`'s rows stay the same.
+    fn analyse(&mut self, j: &ConstraintRows) -> Result<(), SolveError> {
+        if self.symbolic.is_some()
+            && self.pattern.n == j.dim()
+            && self.j_row_start == j.row_starts()
+            && self.j_cols == j.columns()
+        {
+            return Ok(());
+        }
+        self.j_row_start.clear();
+        self.j_row_start.extend_from_slice(j.row_starts());
+        self.j_cols.clear();
+        self.j_cols.extend_from_slice(j.columns());
+        let n = j.dim();
+
+        // Fill-reducing ordering (AMD) of the natural pattern.
+        self.natural.build(j, None, false, false);
+        self.perm.clear();
+        self.perm.resize(n, 0);
+        self.perm_inv.clear();
+        self.perm_inv.resize(n, 0);
+        let nnz = self.natural.row_idx.len();
+        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(n, nnz));
+        amd::order_maybe_unsorted(
+            &mut self.perm,
+            &mut self.perm_inv,
+            self.natural.symbolic(),
+            amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+
+        // The permuted upper triangle: faer's simplicial factorization reads it without a
+        // copy (and its symbolic analysis without an ordering reads the upper triangle).
+        // The supernodal variant measured slower on crowds (benches/README.md): their
+        // factors are thin, 2×2-blocked and have few wide supernodes.
+        self.pattern.build(j, Some(&self.perm_inv), true, true);
+        self.counts.patterns += 1;
+        let symbolic = factorize_symbolic_cholesky(
+            self.pattern.symbolic(),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        let par = self.par();
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, par),
+        ]);
+        self.mem = Scratch(MemBuffer::new(req));
+        self.l.clear();
+        self.l.resize(symbolic.len_val(), 0.0);
+        self.symbolic = Some(symbolic);
+        self.counts.analyses += 1;
+        Ok(())
+    }
+
+    /// Factorizes `I + Jᵀ D J`; false when it is not numerically positive definite.
+    fn factorize(&mut self, j: &ConstraintRows) -> bool {
+        self.pattern.assemble(j, &self.d, &mut self.h);
+        let par = self.par();
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
+        self.counts.factorizations += 1;
+        symbolic
+            .factorize_numeric_llt(
+                &mut self.l,
+                a,
+                Side::Upper,
+                LltRegularization::default(),
+                par,
+                MemStack::new(&mut self.mem.0),
+                Default::default(),
+            )
+            .is_ok()
+    }
+
+    /// One Newton direction for the complementarity right-hand side in `self.rc`:
+    /// `(I + JᵀDJ) Δv = −r_d + Jᵀ(r_c/s + D r_p)`, `Δs = JΔv − r_p`, `Δλ = (r_c − λΔs)/s`.
+    fn direction(&mut self, j: &ConstraintRows, lam: &[f64]) {
+        for i in 0..self.s.len() {
+            self.scratch_m[i] = self.rc[i] / self.s[i] + self.d[i] * self.rp[i];
+        }
+        for (dv, rd) in self.dv.iter_mut().zip(&self.rd) {
+            *dv = -rd;
+        }
+        j.mul_transpose_add(&self.scratch_m, &mut self.dv);
+        let par = self.par();
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        let n = self.dv.len();
+        // The factor is of P H Pᵀ: solve for P Δv.
+        for (k, &c) in self.perm.iter().enumerate() {
+            self.scratch_n[k] = self.dv[c];
+        }
+        LltRef::new(symbolic, &self.l).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut self.scratch_n, n, 1),
+            par,
+            MemStack::new(&mut self.mem.0),
+        );
+        for (k, &c) in self.perm.iter().enumerate() {
+            self.dv[c] = self.scratch_n[k];
+        }
+        j.mul(&self.dv, &mut self.ds);
+        for i in 0..self.s.len() {
+            self.ds[i] -= self.rp[i];
+            self.dl[i] = (self.rc[i] - lam[i] * self.ds[i]) / self.s[i];
+        }
+    }
+
+    /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0` and `λ + αΔλ ≥ 0`.
+    fn max_step(s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
+        let mut alpha: f64 = 1.0;
+        for i in 0..s.len() {
+            if ds[i] < 0.0 {
+                alpha = alpha.min(-s[i] / ds[i]);
+            }
+            if dl[i] < 0.0 {
+                alpha = alpha.min(-lam[i] / dl[i]);
+            }
+        }
+        alpha
+    }
+}
+
+impl ProjectionSolver for InteriorPoint {
+    fn name(&self) -> &'static str {
+        "interior"
+    }
+
+    fn solve(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        sol: &mut ProjectionSolution,
+    ) -> Result<SolveReport, SolveError> {
+        p.validate()?;
+        let (m, n) = (p.rows(), p.dim());
+        let j = p.jacobian;
+        sol.resize_for(p);
+        self.size(m, n);
+        let (v, lam) = (&mut sol.v, &mut sol.lambda);
+        v.copy_from_slice(p.w);
+
+        let infeasible = (0..m).any(|i| j.row_norm_sq(i) == 0.0 && p.b[i] < -target.violation);
+        if m == 0 || infeasible {
+            lam.iter_mut().for_each(|l| *l = 0.0);
+            let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+            let status = if infeasible {
+                SolveStatus::Infeasible
+            } else {
+                SolveStatus::Converged
+            };
+            return Ok(SolveReport {
+                status,
+                gap: cert.gap,
+                violation: cert.violation,
+                iterations: 0,
+                active: 0,
+            });
+        }
+        self.analyse(j)?;
+
+        // Starting point (Mehrotra's heuristic on v = w): shift the slacks of the
+        // unconstrained velocity into the interior, then balance s and λ.
+        j.mul(p.w, &mut self.s);
+        let mut min_s = f64::INFINITY;
+        let mut mean_abs = 0.0;
+        for (s, b) in self.s.iter_mut().zip(p.b) {
+            *s += b;
+            min_s = min_s.min(*s);
+            mean_abs += s.abs();
+        }
+        mean_abs /= m as f64;
+        let scale = if mean_abs > 0.0 { mean_abs } else { 1.0 };
+        let shift = (-1.5 * min_s).max(0.0);
+        self.s.iter_mut().for_each(|s| *s += shift);
+        lam.iter_mut().for_each(|l| *l = scale);
+        let sl: f64 = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum();
+        let (sum_s, sum_l): (f64, f64) = (self.s.iter().sum(), lam.iter().sum());
+        let (bump_s, bump_l) = (0.5 * sl / sum_l, 0.5 * sl / sum_s.max(f64::MIN_POSITIVE));
+        for (s, l) in self.s.iter_mut().zip(lam.iter_mut()) {
+            *s = (*s + bump_s).max(1e-8 * scale);
+            *l += bump_l;
+        }
+
+        let tau = self.settings.step_fraction;
+        let mut iterations = 0;
+        let status;
+        let cert = loop {
+            // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
+            for k in 0..n {
+                self.rd[k] = v[k] - p.w[k];
+            }
+            self.scratch_n.iter_mut().for_each(|x| *x = 0.0);
+            j.mul_transpose_add(lam, &mut self.scratch_n);
+            for k in 0..n {
+                self.rd[k] -= self.scratch_n[k];
+            }
+            j.mul(v, &mut self.rp);
+            for i in 0..m {
+                self.rp[i] = self.s[i] - p.b[i] - self.rp[i];
+            }
+            let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+            if cert.gap <= target.gap && cert.violation <= target.violation {
+                status = SolveStatus::Converged;
+                break cert;
+            }
+            if iterations == self.settings.max_iterations {
+                status = SolveStatus::MaxIterations;
+                break cert;
+            }
+            iterations += 1;
+            let mu = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum::<f64>() / m as f64;
+            for i in 0..m {
+                self.d[i] = lam[i] / self.s[i];
+            }
+            if !self.factorize(j) {
+                status = SolveStatus::NumericalError;
+                break cert;
+            }
+            // Predictor (affine scaling).
+            for i in 0..m {
+                self.rc[i] = -self.s[i] * lam[i];
+            }
+            self.direction(j, lam);
+            let alpha_aff = Self::max_step(&self.s, &self.ds, lam, &self.dl);
+            let mu_aff = (0..m)
+                .map(|i| (self.s[i] + alpha_aff * self.ds[i]) * (lam[i] + alpha_aff * self.dl[i]))
+                .sum::<f64>()
+                / m as f64;
+            let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
+            std::mem::swap(&mut self.ds, &mut self.ds_aff);
+            std::mem::swap(&mut self.dl, &mut self.dl_aff);
+            // Corrector (centring and second order).
+            for i in 0..m {
+                self.rc[i] =
+                    -self.s[i] * lam[i] - self.ds_aff[i] * self.dl_aff[i] + sigma * mu;
+            }
+            self.direction(j, lam);
+            let alpha = (tau * Self::max_step(&self.s, &self.ds, lam, &self.dl)).min(1.0);
+            if !(alpha > 0.0) || self.dv.iter().any(|x| !x.is_finite()) {
+                status = SolveStatus::NumericalError;
+                break cert;
+            }
+            for k in 0..n {
+                v[k] += alpha * self.dv[k];
+            }
+            for i in 0..m {
+                self.s[i] += alpha * self.ds[i];
+                lam[i] += alpha * self.dl[i];
+            }
+        };
+        // Active: rows whose multiplier dominates their slack (complementarity decides).
+        let active = (0..m).filter(|&i| lam[i] > self.s[i]).count();
+        Ok(SolveReport {
+            status,
+            gap: cert.gap,
+            violation: cert.violation,
+            iterations,
+            active,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn solve(rows: &ConstraintRows, w: &[f64], b: &[f64]) -> (SolveReport, ProjectionSolution) {
+        let p = ProjectionProblem {
+            w,
+            jacobian: rows,
+            b,
+        };
+        let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = ip
+            .solve(
+                &p,
+                Target {
+                    gap: 1e-14,
+                    violation: 1e-12,
+                },
+                &mut sol,
+            )
+            .unwrap();
+        (rep, sol)
+    }
+
+    #[test]
+    fn projects_onto_a_half_plane_in_closed_form() {
+        // v ≥ (1, ·) from w = (−1, 2): the projection is (1, 2) with λ = 2.
+        let mut rows = ConstraintRows::new(2);
+        rows.push(0, 0.0, [(0, 1.0)]);
+        let (rep, sol) = solve(&rows, &[-1.0, 2.0], &[-1.0]);
+        assert!(rep.status.is_converged(), "{rep:?}");
+        assert!((sol.v[0] - 1.0).abs() < 1e-6 && (sol.v[1] - 2.0).abs() < 1e-9);
+        assert!((sol.lambda[0] - 2.0).abs() < 1e-5);
+        assert_eq!(rep.active, 1);
+    }
+
+    #[test]
+    fn redundant_rows_keep_the_normal_matrix_definite() {
+        // The same constraint three times plus a parallel weaker one: J Jᵀ is singular.
+        let mut rows = ConstraintRows::new(2);
+        for k in 0..3 {
+            rows.push(k, 0.0, [(0, 1.0), (1, 1.0)]);
+        }
+        rows.push(3, 0.0, [(0, 2.0), (1, 2.0)]);
+        let b = [-2.0, -2.0, -2.0, -1.0];
+        let (rep, sol) = solve(&rows, &[0.0, 0.0], &b);
+        assert!(rep.status.is_converged(), "{rep:?}");
+        // projection of 0 onto x + y ≥ 2 is (1, 1)
+        assert!((sol.v[0] - 1.0).abs() < 1e-6 && (sol.v[1] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_zero_row_that_cannot_hold_is_infeasible() {
+        let mut rows = ConstraintRows::new(1);
+        rows.push(0, 0.0, []);
+        let (rep, _) = solve(&rows, &[0.0], &[-1.0]);
+        assert_eq!(rep.status, SolveStatus::Infeasible);
+    }
+
+    #[test]
+    fn bad_settings_name_the_field() {
+        let e = InteriorPointSettings::builder()
+            .step_fraction(1.0)
+            .build()
+            .unwrap_err();
+        assert!(e.to_string().contains("step_fraction"), "{e}");
+    }
+}
