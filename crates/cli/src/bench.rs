@@ -55,6 +55,12 @@ struct Row {
     ms_median: f64,
     ms_assemble: f64,
     ms_solve: f64,
+    /// Within the solve: orderings and symbolic analyses.
+    #[serde(default)]
+    ms_analyse: f64,
+    /// Within the solve: numeric factorizations and triangular solves.
+    #[serde(default)]
+    ms_factorize: f64,
     ms_other: f64,
     iterations: f64,
     max_eps: f64,
@@ -153,12 +159,15 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
         sim.step(0.05)?;
     }
     let (mut total, mut assemble, mut solve) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut analyse, mut factorize) = (Vec::new(), Vec::new());
     let (mut rows, mut active, mut iterations, mut eps, mut viol) = (0.0, 0.0, 0.0, 0.0f64, 0.0f64);
     for _ in 0..args.steps {
         let r = sim.step(0.05)?;
         total.push(1e3 * r.timings.total);
         assemble.push(1e3 * r.timings.assemble);
         solve.push(1e3 * r.timings.solve);
+        analyse.push(1e3 * r.timings.solve_analyse);
+        factorize.push(1e3 * r.timings.solve_factorize);
         rows += r.assembled as f64;
         active += r.active as f64;
         iterations += r.iterations as f64;
@@ -180,6 +189,8 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
         ms_median: t,
         ms_assemble: a,
         ms_solve: s,
+        ms_analyse: median(analyse),
+        ms_factorize: median(factorize),
         ms_other: t - a - s,
         iterations: iterations / k,
         max_eps: eps,
@@ -223,7 +234,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(
-        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>8} {:>7}",
+        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>8} {:>7}",
         "people",
         "m²",
         "rows",
@@ -231,6 +242,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         "ms/step",
         "assemble",
         "solve",
+        "analyse",
+        "factor",
         "other",
         "iter",
         "max ε",
@@ -272,7 +285,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         let row: Row = serde_json::from_slice(&out.stdout)?;
         println!(
-            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>8.0} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
+            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>8.0} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
             row.people,
             row.area_m2,
             row.rows_per_step,
@@ -280,6 +293,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             row.ms_median,
             row.ms_assemble,
             row.ms_solve,
+            row.ms_analyse,
+            row.ms_factorize,
             row.ms_other,
             row.iterations,
             row.max_eps,

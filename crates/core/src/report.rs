@@ -38,8 +38,12 @@ pub struct StageTimings {
     pub predict: f64,
     /// Finding and assembling the constraints near the state.
     pub assemble: f64,
-    /// The projection solve.
+    /// The projection solve (all of it, including the two sub-stages below).
     pub solve: f64,
+    /// Within `solve`: orderings and symbolic analyses of sparse factorizations.
+    pub solve_analyse: f64,
+    /// Within `solve`: numeric factorizations and triangular solves.
+    pub solve_factorize: f64,
     /// The check after the step that nothing outside the assembled set was crossed.
     pub verify: f64,
     /// The whole step.

@@ -301,6 +301,10 @@ impl StepController {
                 second.violation = second.violation.max(first.violation);
                 second.timings.total += whole.timings.total + first.timings.total;
                 second.timings.solve += whole.timings.solve + first.timings.solve;
+                second.timings.solve_analyse +=
+                    whole.timings.solve_analyse + first.timings.solve_analyse;
+                second.timings.solve_factorize +=
+                    whole.timings.solve_factorize + first.timings.solve_factorize;
                 second.timings.assemble += whole.timings.assemble + first.timings.assemble;
                 second.timings.predict += whole.timings.predict + first.timings.predict;
                 second.timings.verify += whole.timings.verify + first.timings.verify;

@@ -239,11 +239,15 @@ impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<
                 && let Some(fb) = self.fallback.as_mut()
             {
                 report.iterations += rep.iterations;
+                report.timings.solve_analyse += rep.time_analyse;
+                report.timings.solve_factorize += rep.time_factorize;
                 rep = fb.solve(&problem, target, &mut self.solution)?;
                 report.solver = fb.name();
             }
             report.timings.solve += solve_start.elapsed().as_secs_f64();
             report.iterations += rep.iterations;
+            report.timings.solve_analyse += rep.time_analyse;
+            report.timings.solve_factorize += rep.time_factorize;
             report.status = rep.status;
             report.eps = 2.0 * mu * mu * rep.gap;
             report.violation = mu * rep.violation;

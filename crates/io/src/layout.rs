@@ -84,6 +84,10 @@ pub struct StepRow {
     pub time_solve: f64,
     /// Certificate and post-step check (s).
     pub time_verify: f64,
+    /// Within `time_solve`: orderings and symbolic analyses (s).
+    pub time_solve_analyse: f64,
+    /// Within `time_solve`: numeric factorizations and triangular solves (s).
+    pub time_solve_factorize: f64,
     /// The whole step (s).
     pub time_total: f64,
 }
@@ -112,6 +116,8 @@ impl From<&StepReport> for StepRow {
             time_assemble: r.timings.assemble,
             time_solve: r.timings.solve,
             time_verify: r.timings.verify,
+            time_solve_analyse: r.timings.solve_analyse,
+            time_solve_factorize: r.timings.solve_factorize,
             time_total: r.timings.total,
         }
     }

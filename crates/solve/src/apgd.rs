@@ -288,6 +288,7 @@ impl ProjectionSolver for Apgd {
             violation: viol,
             iterations,
             active,
+            ..SolveReport::default()
         })
     }
 }

@@ -128,6 +128,7 @@ impl ProjectionSolver for ClarabelReference {
             violation: cert.violation,
             iterations: out.iterations as usize,
             active: cert.active,
+            ..SolveReport::default()
         })
     }
 }

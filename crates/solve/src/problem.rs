@@ -96,6 +96,10 @@ pub struct SolveReport {
     pub iterations: usize,
     /// Rows with `λ_i > 0`.
     pub active: usize,
+    /// Seconds in orderings and symbolic analyses (sparse factorizations only).
+    pub time_analyse: f64,
+    /// Seconds in numeric factorizations and triangular solves.
+    pub time_factorize: f64,
 }
 
 /// A solver of [`ProjectionProblem`]s.
