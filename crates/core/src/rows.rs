@@ -104,6 +104,11 @@ impl ConstraintRows {
         &self.cols
     }
 
+    /// The coefficients of all gradient entries, row after row.
+    pub fn coefficients(&self) -> &[f64] {
+        &self.coefs
+    }
+
     /// Number of stored gradient entries.
     pub fn nnz(&self) -> usize {
         self.cols.len()

@@ -30,6 +30,7 @@ use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 
 use crate::certificate::certify;
 use crate::error::SolveError;
+use crate::workers::Workers;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
@@ -154,32 +155,70 @@ fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
     }
 }
 
-/// Numbers the runs of adjacent unknowns that appear in exactly the same rows of `j`
-/// (`group_of[c]`, increasing in `c`) and returns how many runs there are.
-fn column_groups(j: &ConstraintRows, group_of: &mut Vec<usize>, rows_of: &mut Vec<usize>) -> usize {
-    let n = j.dim();
-    // The rows of each column, by a counting sort of J's entries (rows come out sorted).
-    let mut start = vec![0usize; n + 1];
-    for &c in j.columns() {
-        start[c + 1] += 1;
-    }
-    for c in 0..n {
-        start[c + 1] += start[c];
-    }
-    rows_of.clear();
-    rows_of.resize(j.nnz(), 0);
-    let mut next = start.clone();
-    for i in 0..j.len() {
-        for &c in j.row(i).0 {
-            rows_of[next[c]] = i;
-            next[c] += 1;
+/// The structure of `Jᵀ`: for each unknown, the rows it appears in (ascending) and where
+/// its coefficient is stored in `J`. Products `Jᵀy` gather per unknown, so they split over
+/// threads without changing the order of any sum.
+#[derive(Debug, Clone, Default)]
+struct Transpose {
+    col_start: Vec<usize>,
+    rows: Vec<usize>,
+    entries: Vec<usize>,
+}
+
+impl Transpose {
+    fn build(&mut self, j: &ConstraintRows) {
+        let n = j.dim();
+        self.col_start.clear();
+        self.col_start.resize(n + 1, 0);
+        for &c in j.columns() {
+            self.col_start[c + 1] += 1;
+        }
+        for c in 0..n {
+            self.col_start[c + 1] += self.col_start[c];
+        }
+        self.rows.clear();
+        self.rows.resize(j.nnz(), 0);
+        self.entries.clear();
+        self.entries.resize(j.nnz(), 0);
+        let starts = j.row_starts();
+        let mut next = self.col_start.clone();
+        for i in 0..j.len() {
+            for e in starts[i]..starts[i + 1] {
+                let c = j.columns()[e];
+                self.rows[next[c]] = i;
+                self.entries[next[c]] = e;
+                next[c] += 1;
+            }
         }
     }
+
+    /// `(Jᵀ y)_c`.
+    fn dot(&self, coefs: &[f64], y: &[f64], c: usize) -> f64 {
+        (self.col_start[c]..self.col_start[c + 1])
+            .map(|k| coefs[self.entries[k]] * y[self.rows[k]])
+            .sum()
+    }
+
+    /// The rows of unknown `c`.
+    fn rows_of(&self, c: usize) -> &[usize] {
+        &self.rows[self.col_start[c]..self.col_start[c + 1]]
+    }
+}
+
+/// `(J x)_i`.
+fn row_dot(j: &ConstraintRows, x: &[f64], i: usize) -> f64 {
+    let (c, a) = j.row(i);
+    c.iter().zip(a).map(|(&c, &a)| a * x[c]).sum()
+}
+
+/// Numbers the runs of adjacent unknowns that appear in exactly the same rows
+/// (`group_of[c]`, increasing in `c`) and returns how many runs there are.
+fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
+    let n = jt.col_start.len() - 1;
     group_of.clear();
     let mut groups = 0;
     for c in 0..n {
-        let same = c > 0 && rows_of[start[c - 1]..start[c]] == rows_of[start[c]..start[c + 1]];
-        if !same {
+        if c == 0 || jt.rows_of(c - 1) != jt.rows_of(c) {
             groups += 1;
         }
         group_of.push(groups - 1);
@@ -319,7 +358,8 @@ pub struct InteriorPoint {
     group_start: Vec<usize>,
     group_perm: Vec<usize>,
     group_perm_inv: Vec<usize>,
-    scratch_idx: Vec<usize>,
+    jt: Transpose,
+    workers: Workers,
     pattern: NormalPattern,
     symbolic: Option<SymbolicCholesky<usize>>,
     side: Side,
@@ -349,7 +389,7 @@ impl InteriorPoint {
     pub fn new(settings: InteriorPointSettings) -> Result<Self, SolveError> {
         settings.validate()?;
         Ok(Self {
-            settings,
+            settings: settings.clone(),
             j_row_start: Vec::new(),
             j_cols: Vec::new(),
             natural: NormalPattern::default(),
@@ -359,7 +399,8 @@ impl InteriorPoint {
             group_start: Vec::new(),
             group_perm: Vec::new(),
             group_perm_inv: Vec::new(),
-            scratch_idx: Vec::new(),
+            jt: Transpose::default(),
+            workers: Workers::new(settings.parallelism)?,
             pattern: NormalPattern::default(),
             symbolic: None,
             side: Side::Upper,
@@ -435,7 +476,8 @@ impl InteriorPoint {
 
         // Fill-reducing ordering (AMD) of the pattern compressed to groups of adjacent
         // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
-        let groups = column_groups(j, &mut self.group_of, &mut self.scratch_idx);
+        self.jt.build(j);
+        let groups = column_groups(&self.jt, &mut self.group_of);
         self.natural
             .build(j, Some((&self.group_of, groups)), false, false);
         let nnz = self.natural.row_idx.len();
@@ -539,50 +581,39 @@ impl InteriorPoint {
     /// One Newton direction for the complementarity right-hand side in `self.rc`:
     /// `(I + JᵀDJ) Δv = −r_d + Jᵀ(r_c/s + D r_p)`, `Δs = JΔv − r_p`, `Δλ = (r_c − λΔs)/s`.
     fn direction(&mut self, j: &ConstraintRows, lam: &[f64]) {
-        for i in 0..self.s.len() {
-            self.scratch_m[i] = self.rc[i] / self.s[i] + self.d[i] * self.rp[i];
-        }
-        for (dv, rd) in self.dv.iter_mut().zip(&self.rd) {
-            *dv = -rd;
-        }
-        j.mul_transpose_add(&self.scratch_m, &mut self.dv);
+        let w = &self.workers;
+        let (s, d, rp, rc) = (&self.s, &self.d, &self.rp, &self.rc);
+        w.map(&mut self.scratch_m, |i, _| rc[i] / s[i] + d[i] * rp[i]);
+        // Δv's right-hand side −r_d + Jᵀ(r_c/s + D r_p) in natural order (memory in
+        // order), then permuted into the factor's order.
+        let (y, rd, jt, coefs) = (&self.scratch_m, &self.rd, &self.jt, j.coefficients());
+        w.map(&mut self.dv, |c, _| jt.dot(coefs, y, c) - rd[c]);
+        let (dv, perm) = (&self.dv, &self.perm);
+        w.map(&mut self.scratch_n, |k, _| dv[perm[k]]);
+        let clock = Instant::now();
         let par = self.par();
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let n = self.dv.len();
-        // The factor is of P H Pᵀ: solve for P Δv.
-        let clock = Instant::now();
-        for (k, &c) in self.perm.iter().enumerate() {
-            self.scratch_n[k] = self.dv[c];
-        }
         LltRef::new(symbolic, &self.l).solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut self.scratch_n, n, 1),
             par,
             MemStack::new(&mut self.mem.0),
         );
-        for (k, &c) in self.perm.iter().enumerate() {
-            self.dv[c] = self.scratch_n[k];
-        }
         self.time_factorize += clock.elapsed().as_secs_f64();
-        j.mul(&self.dv, &mut self.ds);
-        for i in 0..self.s.len() {
-            self.ds[i] -= self.rp[i];
-            self.dl[i] = (self.rc[i] - lam[i] * self.ds[i]) / self.s[i];
-        }
+        let (x, perm_inv) = (&self.scratch_n, &self.perm_inv);
+        w.map(&mut self.dv, |c, _| x[perm_inv[c]]);
+        let dv = &self.dv;
+        w.map(&mut self.ds, |i, _| row_dot(j, dv, i) - rp[i]);
+        let ds = &self.ds;
+        w.map(&mut self.dl, |i, _| (rc[i] - lam[i] * ds[i]) / s[i]);
     }
 
     /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0` and `λ + αΔλ ≥ 0`.
-    fn max_step(s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
-        let mut alpha: f64 = 1.0;
-        for i in 0..s.len() {
-            if ds[i] < 0.0 {
-                alpha = alpha.min(-s[i] / ds[i]);
-            }
-            if dl[i] < 0.0 {
-                alpha = alpha.min(-lam[i] / dl[i]);
-            }
-        }
-        alpha
+    fn max_step(w: &Workers, s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
+        let ratio = |x: f64, dx: f64| if dx < 0.0 { -x / dx } else { f64::INFINITY };
+        w.min(s.len(), |i| ratio(s[i], ds[i]).min(ratio(lam[i], dl[i])))
+            .min(1.0)
     }
 }
 
@@ -657,21 +688,19 @@ impl ProjectionSolver for InteriorPoint {
         let mut iterations = 0;
         let status = loop {
             // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
-            for k in 0..n {
-                self.rd[k] = v[k] - p.w[k];
-            }
-            self.scratch_n.iter_mut().for_each(|x| *x = 0.0);
-            j.mul_transpose_add(lam, &mut self.scratch_n);
-            for k in 0..n {
-                self.rd[k] -= self.scratch_n[k];
-            }
-            j.mul(v, &mut self.rp);
-            for i in 0..m {
-                self.rp[i] = self.s[i] - p.b[i] - self.rp[i];
+            let (wk, jt, coefs) = (&self.workers, &self.jt, j.coefficients());
+            {
+                let (v, lam): (&[f64], &[f64]) = (v, lam);
+                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(coefs, lam, c));
+                let s = &self.s;
+                wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
             }
             // Once the residuals vanish the certificate is sᵀλ: below the target gap is
             // when it is worth computing.
-            let sl = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum::<f64>();
+            let sl = {
+                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
+                wk.sum(m, |i| s[i] * lam[i])
+            };
             let last = iterations == self.settings.max_iterations;
             if sl <= target.gap || last {
                 let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
@@ -684,42 +713,43 @@ impl ProjectionSolver for InteriorPoint {
             }
             iterations += 1;
             let mu = sl / m as f64;
-            for i in 0..m {
-                self.d[i] = lam[i] / self.s[i];
+            {
+                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
+                self.workers.map(&mut self.d, |i, _| lam[i] / s[i]);
+                // Predictor (affine scaling).
+                self.workers.map(&mut self.rc, |i, _| -s[i] * lam[i]);
             }
             if !self.factorize(j) {
                 break SolveStatus::NumericalError;
             }
-            // Predictor (affine scaling).
-            for i in 0..m {
-                self.rc[i] = -self.s[i] * lam[i];
-            }
             self.direction(j, lam);
-            let alpha_aff = Self::max_step(&self.s, &self.ds, lam, &self.dl);
-            let mu_aff = (0..m)
-                .map(|i| (self.s[i] + alpha_aff * self.ds[i]) * (lam[i] + alpha_aff * self.dl[i]))
-                .sum::<f64>()
-                / m as f64;
+            let wk = &self.workers;
+            let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
+            let alpha_aff = Self::max_step(wk, s, ds, lam, dl);
+            let lam_ref: &[f64] = lam;
+            let mu_aff = wk.sum(m, |i| {
+                (s[i] + alpha_aff * ds[i]) * (lam_ref[i] + alpha_aff * dl[i])
+            }) / m as f64;
             let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
             std::mem::swap(&mut self.ds, &mut self.ds_aff);
             std::mem::swap(&mut self.dl, &mut self.dl_aff);
             // Corrector (centring and second order).
-            for i in 0..m {
-                self.rc[i] =
-                    -self.s[i] * lam[i] - self.ds_aff[i] * self.dl_aff[i] + sigma * mu;
+            {
+                let (s, dsa, dla) = (&self.s, &self.ds_aff, &self.dl_aff);
+                let lam: &[f64] = lam;
+                self.workers
+                    .map(&mut self.rc, |i, _| -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu);
             }
             self.direction(j, lam);
-            let alpha = (tau * Self::max_step(&self.s, &self.ds, lam, &self.dl)).min(1.0);
+            let wk = &self.workers;
+            let alpha = tau * Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
             if !(alpha > 0.0) || self.dv.iter().any(|x| !x.is_finite()) {
                 break SolveStatus::NumericalError;
             }
-            for k in 0..n {
-                v[k] += alpha * self.dv[k];
-            }
-            for i in 0..m {
-                self.s[i] += alpha * self.ds[i];
-                lam[i] += alpha * self.dl[i];
-            }
+            let (dv, ds, dl) = (&self.dv, &self.ds, &self.dl);
+            wk.map(v, |k, x| x + alpha * dv[k]);
+            wk.map(&mut self.s, |i, x| x + alpha * ds[i]);
+            wk.map(lam, |i, x| x + alpha * dl[i]);
         };
         let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         // Active: rows whose multiplier dominates their slack (complementarity decides).

@@ -1,0 +1,102 @@
+//! Deterministic data parallelism for the solvers: fixed chunks, partial sums added in chunk
+//! order, so that no result depends on the number of threads.
+
+use moreau_core::Parallelism;
+use rayon::prelude::*;
+
+use crate::error::SolveError;
+
+/// Items per chunk. Fixed, not derived from the thread count: sums are formed per chunk and
+/// then added in chunk order, the same way on one thread or many.
+const CHUNK: usize = 4096;
+
+/// A thread pool of the requested size, or the calling thread alone.
+pub(crate) struct Workers {
+    pool: Option<rayon::ThreadPool>,
+}
+
+impl std::fmt::Debug for Workers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.pool {
+            None => f.write_str("Workers(1)"),
+            Some(p) => write!(f, "Workers({})", p.current_num_threads()),
+        }
+    }
+}
+
+impl Workers {
+    /// Workers for `parallelism`.
+    pub(crate) fn new(parallelism: Parallelism) -> Result<Self, SolveError> {
+        if parallelism.is_sequential() {
+            return Ok(Self { pool: None });
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(parallelism.get())
+            .build()
+            .map_err(|_| SolveError::InvalidSetting {
+                field: "parallelism",
+                value: parallelism.get().to_string(),
+                reason: "the thread pool could not be built",
+            })?;
+        Ok(Self { pool: Some(pool) })
+    }
+
+    /// `out[i] = f(i, out[i])` for every `i`.
+    pub(crate) fn map(&self, out: &mut [f64], f: impl Fn(usize, f64) -> f64 + Sync) {
+        let body = |(c, chunk): (usize, &mut [f64])| {
+            for (k, x) in chunk.iter_mut().enumerate() {
+                *x = f(c * CHUNK + k, *x);
+            }
+        };
+        match &self.pool {
+            None => out.chunks_mut(CHUNK).enumerate().for_each(body),
+            Some(pool) => pool.install(|| out.par_chunks_mut(CHUNK).enumerate().for_each(body)),
+        }
+    }
+
+    /// `Σ_{i < n} f(i)`, summed per chunk and then over chunks in order.
+    pub(crate) fn sum(&self, n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
+        let chunk = |c: usize| (c * CHUNK..((c + 1) * CHUNK).min(n)).map(&f).sum::<f64>();
+        let chunks = n.div_ceil(CHUNK);
+        match &self.pool {
+            None => (0..chunks).map(chunk).sum(),
+            Some(pool) => pool
+                .install(|| (0..chunks).into_par_iter().map(chunk).collect::<Vec<f64>>())
+                .into_iter()
+                .sum(),
+        }
+    }
+
+    /// `min_{i < n} f(i)` (order does not matter for a minimum).
+    pub(crate) fn min(&self, n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
+        match &self.pool {
+            None => (0..n).map(f).fold(f64::INFINITY, f64::min),
+            Some(pool) => pool.install(|| {
+                (0..n)
+                    .into_par_iter()
+                    .with_min_len(CHUNK)
+                    .map(&f)
+                    .reduce(|| f64::INFINITY, f64::min)
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sums_do_not_depend_on_the_thread_count() {
+        let n = 10 * CHUNK + 17;
+        let f = |i: usize| ((i * 7919) % 1000) as f64 * 1e-3 + 1e-17 * i as f64;
+        let one = Workers::new(Parallelism::SEQUENTIAL).unwrap();
+        let two = Workers::new(Parallelism::threads(2)).unwrap();
+        assert_eq!(one.sum(n, f).to_bits(), two.sum(n, f).to_bits());
+        assert_eq!(one.min(n, f), two.min(n, f));
+        let (mut a, mut b) = (vec![1.0; n], vec![1.0; n]);
+        one.map(&mut a, |i, x| x + f(i));
+        two.map(&mut b, |i, x| x + f(i));
+        assert_eq!(a, b);
+    }
+}
