@@ -109,11 +109,12 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
 
 fn solver_text(sim: &Simulation) -> String {
     let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
-    let solver = match (sim.scene().solver.kind, sim.solver_kind()) {
-        (SolverKind::Clarabel, _) => "Clarabel alone",
-        (_, SolverKind::Clarabel) => "Clarabel with APGD as fallback",
-        (_, SolverKind::Interior) => "our interior point with Clarabel as fallback",
-        _ => "APGD with Clarabel as fallback",
+    let big = sim.total_people() > SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE;
+    let solver = match sim.solver_kind() {
+        SolverKind::Clarabel => "Clarabel alone",
+        SolverKind::Apgd => "APGD with Clarabel as fallback",
+        _ if big => "our interior point with APGD as fallback",
+        _ => "our interior point with Clarabel as fallback",
     };
     format!(
         "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \

@@ -151,24 +151,23 @@ pub enum SolverKind {
     /// Our interior point (sparse Cholesky normal equations, symbolic analysis reused while
     /// the contact pattern holds), with Clarabel as fallback.
     Interior,
-    /// Chosen from the number of people at the start: Clarabel (with APGD as fallback) up to
-    /// [`SolverKind::AUTO_CLARABEL_MAX_PEOPLE`], APGD (with Clarabel as fallback) above. The
-    /// step report names the solver each step used.
+    /// The fastest measured: our interior point at every size measured (150 to 100,000
+    /// people, benches/README.md), with its fallback. The step report names the solver each
+    /// step used.
     Auto,
 }
 
 impl SolverKind {
-    /// The largest crowd `Auto` gives to Clarabel: the largest size measured where it beat our
-    /// APGD (benches/README.md, 2 cores): 3.5× faster on 150 people, 1.8× on 2,000, 2.5× and
-    /// 3× on one jammed projection of 40,000 and 100,000 people (at 10,000 people the two are
-    /// even at h = 0.1 and APGD wins at h = 0.2). Beyond it, memory and the unmeasured.
-    pub const AUTO_CLARABEL_MAX_PEOPLE: usize = 100_000;
+    /// The largest crowd whose interior point gets Clarabel as fallback (APGD above): the
+    /// largest size at which Clarabel was measured (its factorization took 253 MB at 100,000
+    /// people, benches/README.md).
+    pub const CLARABEL_FALLBACK_MAX_PEOPLE: usize = 100_000;
 
-    /// The solver `self` stands for in a crowd of `people`.
-    pub fn resolve(self, people: usize) -> SolverKind {
+    /// The solver `self` stands for in a crowd of `people`. `Auto` is the interior point at
+    /// every size: it beat APGD (4–9×) and Clarabel (2.7–3.2×) at every size measured.
+    pub fn resolve(self, _people: usize) -> SolverKind {
         match self {
-            SolverKind::Auto if people <= Self::AUTO_CLARABEL_MAX_PEOPLE => SolverKind::Clarabel,
-            SolverKind::Auto => SolverKind::Apgd,
+            SolverKind::Auto => SolverKind::Interior,
             kind => kind,
         }
     }

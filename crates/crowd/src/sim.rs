@@ -359,12 +359,18 @@ impl Simulation {
             max_redo: 8,
         };
         let kind = scene.solver.kind.resolve(n);
-        let solver: Box<dyn ProjectionSolver> = match kind {
-            SolverKind::Apgd => Box::new(
+        let apgd = || -> Result<Box<dyn ProjectionSolver>, CrowdError> {
+            Ok(Box::new(
                 Apgd::new(ApgdSettings::default())
                     .map_err(moreau_integrate::IntegrateError::from)?,
-            ),
-            SolverKind::Interior => Box::new(
+            ))
+        };
+        let clarabel = || -> Box<dyn ProjectionSolver> {
+            Box::new(ClarabelReference::new(ClarabelSettings::default()))
+        };
+        let solver: Box<dyn ProjectionSolver> = match kind {
+            SolverKind::Apgd => apgd()?,
+            SolverKind::Interior | SolverKind::Auto => Box::new(
                 InteriorPoint::new(
                     InteriorPointSettings::builder()
                         .parallelism(Parallelism::threads(scene.solver.threads))
@@ -373,22 +379,19 @@ impl Simulation {
                 )
                 .map_err(moreau_integrate::IntegrateError::from)?,
             ),
-            SolverKind::Clarabel | SolverKind::Auto => {
-                Box::new(ClarabelReference::new(ClarabelSettings::default()))
-            }
+            SolverKind::Clarabel => clarabel(),
+        };
+        // The fallback answers when the main solver misses its target: Clarabel while its
+        // memory is small, APGD (no factorization) for the largest crowds.
+        let fallback = match kind {
+            SolverKind::Clarabel => None,
+            SolverKind::Apgd => Some(clarabel()),
+            _ if n <= SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE => Some(clarabel()),
+            _ => Some(apgd()?),
         };
         let mut correction = LinearizedProjection::new(constraints, solver, settings)?;
-        if matches!(kind, SolverKind::Apgd | SolverKind::Interior) {
-            correction = correction.with_fallback(Box::new(ClarabelReference::new(
-                ClarabelSettings::default(),
-            )));
-        } else if scene.solver.kind == SolverKind::Auto {
-            // Clarabel stalls short of tight targets in jams (NumericalError at ε a few times
-            // the target, seen in the evacuation study); APGD then finishes the job.
-            correction = correction.with_fallback(Box::new(
-                Apgd::new(ApgdSettings::default())
-                    .map_err(moreau_integrate::IntegrateError::from)?,
-            ));
+        if let Some(fallback) = fallback {
+            correction = correction.with_fallback(fallback);
         }
         let eps = EpsPolicy::new(scene.solver.eps_kappa, 3.0)?;
         let scheme = Scheme::new(field, correction, eps);
@@ -444,8 +447,8 @@ impl Simulation {
         &self.exit_times
     }
 
-    /// The projection solver in use (`Auto` resolved): `Apgd` has Clarabel as fallback, and
-    /// Clarabel chosen by `Auto` has APGD as fallback.
+    /// The projection solver in use (`Auto` resolved). `Apgd` has Clarabel as fallback;
+    /// `Interior` has Clarabel up to [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`], APGD above.
     pub fn solver_kind(&self) -> SolverKind {
         self.solver
     }

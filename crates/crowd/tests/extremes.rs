@@ -9,61 +9,8 @@
 
 mod common;
 
-use common::{assert_feasible, assert_matches_clarabel};
+use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn};
 use moreau_crowd::{Scene, Simulation};
-
-/// A 6 m × 6 m room with a door of width `door` in the middle of its right wall (0.2 m thick)
-/// and a corridor to x = 8 whose end removes people; `groups` is TOML for `[[groups]]`.
-fn room(door: f64, step: f64, horizon: f64, groups: &str) -> Scene {
-    let (lo, hi) = (3.0 - door / 2.0, 3.0 + door / 2.0);
-    let text = format!(
-        r#"
-name = "extremes"
-seed = 7
-[area]
-outer = [[0.0, 0.0], [6.0, 0.0], [6.0, {lo}], [6.2, {lo}], [6.2, 0.0], [8.0, 0.0],
-         [8.0, 6.0], [6.2, 6.0], [6.2, {hi}], [6.0, {hi}], [6.0, 6.0], [0.0, 6.0]]
-[[exits]]
-name = "out"
-area = [[7.5, 0.0], [8.0, 0.0], [8.0, 6.0], [7.5, 6.0]]
-action = "remove"
-{groups}
-[time]
-horizon = {horizon}
-step = {step}
-output_interval = {step}
-[solver]
-eps_kappa = 1e-3
-max_violation = 1e-6
-grid_cell = 0.1
-"#
-    );
-    Scene::from_toml(&text, "extremes").unwrap()
-}
-
-fn spawn(count: usize, radius: &str, speed: &str) -> String {
-    format!(
-        r#"[[groups]]
-name = "crowd"
-count = {count}
-spawn = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]
-radius = {radius}
-speed = {speed}
-destination = "out"
-"#
-    )
-}
-
-fn listed(name: &str, positions: &[[f64; 2]], radius: f64, speed: f64) -> String {
-    let list: Vec<String> = positions
-        .iter()
-        .map(|p| format!("[{:?}, {:?}]", p[0], p[1]))
-        .collect();
-    format!(
-        "[[groups]]\nname = \"{name}\"\npositions = [{}]\nradius = {radius:?}\nspeed = {speed:?}\ndestination = \"out\"\n",
-        list.join(", ")
-    )
-}
 
 /// Runs the scene over its schedule, checking every step; compares with Clarabel every
 /// `compare_every` steps (when nobody left during the step). Returns the simulation.
@@ -295,21 +242,21 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     );
 }
 
-/// `kind = "auto"` picks Clarabel for a small crowd and APGD for a large one, and every step
-/// report names the solver that answered.
+/// `kind = "auto"` is the interior point at every size, and every step report names the
+/// solver that answered.
 #[test]
-fn auto_picks_the_solver_by_crowd_size_and_says_so() {
+fn auto_picks_the_interior_point_and_says_so() {
     use moreau_crowd::SolverKind;
     let mut small = room(1.2, 0.05, 0.5, &spawn(60, "0.2", "1.0"));
     small.solver.kind = SolverKind::Auto;
     let mut sim = Simulation::new(small).unwrap();
-    assert_eq!(sim.solver_kind(), SolverKind::Clarabel);
+    assert_eq!(sim.solver_kind(), SolverKind::Interior);
     for (mu, _) in sim.schedule() {
-        assert_eq!(sim.step(mu).unwrap().solver, "clarabel");
+        assert_eq!(sim.step(mu).unwrap().solver, "interior");
     }
-    let mut large = hall(SolverKind::AUTO_CLARABEL_MAX_PEOPLE + 1, 1);
+    let mut large = hall(SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE + 1, 1);
     large.solver.kind = SolverKind::Auto;
     let mut sim = Simulation::new(large).unwrap();
-    assert_eq!(sim.solver_kind(), SolverKind::Apgd);
-    assert_eq!(sim.step(0.05).unwrap().solver, "apgd");
+    assert_eq!(sim.solver_kind(), SolverKind::Interior);
+    assert_eq!(sim.step(0.05).unwrap().solver, "interior");
 }

@@ -141,3 +141,56 @@ pub fn assert_matches_clarabel(sim: &Simulation, before: &[f64], report: &StepRe
     );
     dist / (radius_fast + radius_ref)
 }
+
+/// A 6 m × 6 m room with a door of width `door` in the middle of its right wall (0.2 m thick)
+/// and a corridor to x = 8 whose end removes people; `groups` is TOML for `[[groups]]`.
+pub fn room(door: f64, step: f64, horizon: f64, groups: &str) -> Scene {
+    let (lo, hi) = (3.0 - door / 2.0, 3.0 + door / 2.0);
+    let text = format!(
+        r#"
+name = "extremes"
+seed = 7
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, {lo}], [6.2, {lo}], [6.2, 0.0], [8.0, 0.0],
+         [8.0, 6.0], [6.2, 6.0], [6.2, {hi}], [6.0, {hi}], [6.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "out"
+area = [[7.5, 0.0], [8.0, 0.0], [8.0, 6.0], [7.5, 6.0]]
+action = "remove"
+{groups}
+[time]
+horizon = {horizon}
+step = {step}
+output_interval = {step}
+[solver]
+eps_kappa = 1e-3
+max_violation = 1e-6
+grid_cell = 0.1
+"#
+    );
+    Scene::from_toml(&text, "extremes").unwrap()
+}
+
+pub fn spawn(count: usize, radius: &str, speed: &str) -> String {
+    format!(
+        r#"[[groups]]
+name = "crowd"
+count = {count}
+spawn = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]
+radius = {radius}
+speed = {speed}
+destination = "out"
+"#
+    )
+}
+
+pub fn listed(name: &str, positions: &[[f64; 2]], radius: f64, speed: f64) -> String {
+    let list: Vec<String> = positions
+        .iter()
+        .map(|p| format!("[{:?}, {:?}]", p[0], p[1]))
+        .collect();
+    format!(
+        "[[groups]]\nname = \"{name}\"\npositions = [{}]\nradius = {radius:?}\nspeed = {speed:?}\ndestination = \"out\"\n",
+        list.join(", ")
+    )
+}

@@ -1,0 +1,197 @@
+//! The interior point on crowds: its answers against Clarabel's on small scenes, the same
+//! answers for 1 and 2 threads, and the jammed step that Clarabel and APGD could not certify.
+
+mod common;
+
+use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn};
+use moreau_core::Parallelism;
+use moreau_crowd::{Scene, Simulation, SolverKind};
+use moreau_solve::{
+    Apgd, ApgdSettings, InteriorPoint, InteriorPointSettings, ProjectionSolution,
+    ProjectionSolver, Target, certify,
+};
+
+fn interior(mut scene: Scene) -> Scene {
+    scene.solver.kind = SolverKind::Interior;
+    scene
+}
+
+/// Every step checked for overlaps independently and compared with Clarabel (when nobody
+/// left during it).
+fn run_against_clarabel(scene: Scene) -> usize {
+    let mut sim = Simulation::new(scene.clone()).unwrap();
+    let mut compared = 0;
+    for (mu, _) in sim.schedule() {
+        let before = sim.frame().positions.to_vec();
+        let people = sim.frame().ids.len();
+        let report = sim.step(mu).unwrap();
+        assert_eq!(report.solver, "interior", "the fallback answered: {report:?}");
+        assert_feasible(&scene, &sim, &report);
+        if sim.frame().ids.len() == people {
+            assert_matches_clarabel(&sim, &before, &report);
+            compared += 1;
+        }
+    }
+    compared
+}
+
+#[test]
+fn interior_point_matches_clarabel_on_a_queue_at_a_door() {
+    let compared = run_against_clarabel(interior(room(1.2, 0.05, 4.0, &spawn(120, "0.2", "1.0"))));
+    assert!(compared > 40, "{compared}");
+}
+
+#[test]
+fn interior_point_matches_clarabel_in_a_jam_at_a_door_too_narrow() {
+    let compared =
+        run_against_clarabel(interior(room(0.3, 0.05, 3.0, &spawn(75, "0.25", "1.0"))));
+    assert!(compared > 40, "{compared}");
+}
+
+#[test]
+fn interior_point_matches_clarabel_on_degenerate_contacts() {
+    // As in extremes.rs: a chain exactly touching end to end (r = 0.25, spacing 0.5, exact
+    // in binary) whose head touches the wall by the 0.3 m door, disks touching both walls at
+    // the room's corners, a touching pair and a disk pushed into it.
+    let chain: Vec<[f64; 2]> = (0..10).map(|k| [5.75 - 0.5 * k as f64, 3.0]).collect();
+    let groups = format!(
+        "{}{}{}{}",
+        listed("chain", &chain, 0.25, 1.0),
+        listed("corners", &[[0.25, 0.25], [0.25, 5.75]], 0.25, 1.0),
+        listed("pair", &[[3.0, 0.75], [3.0, 1.25]], 0.25, 0.0),
+        listed("wedge", &[[2.0, 1.0]], 0.25, 1.0),
+    );
+    let mut sim = Simulation::new(interior(room(0.3, 0.05, 4.0, &groups))).unwrap();
+    let scene = sim.scene().clone();
+    for (mu, _) in sim.schedule() {
+        let before = sim.frame().positions.to_vec();
+        let report = sim.step(mu).unwrap();
+        assert_eq!(report.solver, "interior");
+        assert_feasible(&scene, &sim, &report);
+        assert_matches_clarabel(&sim, &before, &report);
+    }
+    // The chain's head sits in the door's corners: (x − 6)² + 0.15² = 0.25².
+    let head = &sim.frame().positions[0..2];
+    assert!((head[0] - (6.0 - 0.2)).abs() < 1e-3, "head at {head:?}");
+}
+
+#[test]
+fn interior_point_matches_clarabel_with_radii_one_to_a_hundred() {
+    let groups = format!(
+        "{}{}",
+        spawn(4, "1.0", "0.8"),
+        spawn(250, "0.01", "1.2").replace("\"crowd\"", "\"small\"")
+    );
+    let compared = run_against_clarabel(interior(room(2.4, 0.05, 3.0, &groups)));
+    assert!(compared > 20, "{compared}");
+}
+
+/// A jammed hall run with 1 and with 2 threads: the positions agree within the certified
+/// tolerance (in fact bit for bit: the parallel loops sum in fixed chunks).
+#[test]
+fn thread_count_does_not_change_the_answer() {
+    let side = (3000.0f64 / 2.6).sqrt();
+    let (lo, hi) = (side / 2.0 - 1.0, side / 2.0 + 1.0);
+    let text = format!(
+        r#"
+name = "hall"
+seed = 5
+[area]
+outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
+[[exits]]
+name = "door"
+area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
+action = "remove"
+[[groups]]
+name = "crowd"
+count = 3000
+spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+radius = {{ min = 0.18, max = 0.22 }}
+speed = {{ min = 0.9, max = 1.3 }}
+destination = "door"
+[time]
+horizon = 1.5
+step = 0.05
+output_interval = 0.05
+[solver]
+kind = "interior"
+eps_kappa = 1e-3
+max_violation = 1e-6
+"#,
+        x0 = side + 0.5,
+        x1 = side + 1.0,
+    );
+    let scene = Scene::from_toml(&text, "hall").unwrap();
+    let run = |threads: usize| {
+        let mut s = scene.clone();
+        s.solver.threads = threads;
+        let mut sim = Simulation::new(s).unwrap();
+        let mut eps_sum = 0.0f64;
+        let mut active = 0;
+        for (mu, _) in sim.schedule() {
+            let r = sim.step(mu).unwrap();
+            assert_eq!(r.solver, "interior");
+            eps_sum += r.eps.sqrt();
+            active = active.max(r.active);
+        }
+        (sim.frame().ids.to_vec(), sim.frame().positions.to_vec(), eps_sum, active)
+    };
+    let (ids1, q1, eps1, active) = run(1);
+    let (ids2, q2, eps2, _) = run(2);
+    assert!(active > 1000, "the hall must be jammed: {active} active contacts");
+    assert_eq!(ids1, ids2);
+    // Two ε-projections per step of the same point differ by at most √ε₁ + √ε₂; over the run
+    // the differences add up at most (the projection is non-expansive).
+    let dist = q1
+        .iter()
+        .zip(&q2)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    assert!(dist <= eps1 + eps2, "|q₁ − q₂| = {dist} > {}", eps1 + eps2);
+    assert_eq!(q1, q2, "the parallel loops are meant to be bitwise deterministic");
+    assert_eq!(Parallelism::threads(2).get(), 2);
+}
+
+/// Regression: the evacuation study's jammed step (door 0.8 m, seed 20130707, step 123 at
+/// t = 6.2 s) that Clarabel (NumericalError/MaxIterations short of the target) and APGD
+/// (20,000 iterations) could not certify; the interior point certifies that very problem.
+#[test]
+fn the_jam_step_that_clarabel_and_apgd_could_not_certify_is_certified_by_the_interior_point() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/room-door-0.8-jam.toml");
+    let scene = Scene::from_toml(&std::fs::read_to_string(path).unwrap(), path).unwrap();
+    let mut sim = Simulation::new(scene.clone()).unwrap();
+    let mut failed = None;
+    for (mu, _) in sim.schedule() {
+        if let Err(e) = sim.step(mu) {
+            failed = Some((mu, e.to_string()));
+            break;
+        }
+    }
+    let (mu, error) = failed.expect("Clarabel alone fails on this jam");
+    assert!(error.contains("step 123") && error.contains("not certified"), "{error}");
+
+    let problem = sim.last_projection();
+    let eps_target = scene.solver.eps_kappa * mu.powi(3);
+    let target = Target {
+        gap: eps_target / (2.0 * mu * mu),
+        violation: scene.solver.max_violation / mu,
+    };
+    let mut apgd = Apgd::new(ApgdSettings::default()).unwrap();
+    let mut sol = ProjectionSolution::default();
+    let rep = apgd.solve(&problem, target, &mut sol).unwrap();
+    assert!(!rep.status.is_converged(), "APGD now certifies it: {rep:?}");
+
+    let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut sol = ProjectionSolution::default();
+    let rep = ip.solve(&problem, target, &mut sol).unwrap();
+    assert!(rep.status.is_converged(), "{rep:?}");
+    // The certificate, recomputed here from the returned pair.
+    let (mut sm, mut sn) = (vec![0.0; problem.rows()], vec![0.0; problem.dim()]);
+    let c = certify(&problem, &sol.v, &sol.lambda, &mut sm, &mut sn);
+    assert!(
+        c.gap <= target.gap && c.violation <= target.violation,
+        "{c:?} vs {target:?}"
+    );
+    assert!(sol.lambda.iter().all(|&l| l >= 0.0));
+}
