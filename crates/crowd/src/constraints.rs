@@ -18,6 +18,9 @@ pub struct CrowdConstraints {
     pub(crate) ids: Vec<u32>,
     broad: Box<dyn BroadPhase>,
     pairs: Vec<(u32, u32)>,
+    // The post-step check's rows and keys, reused from step to step.
+    check: ConstraintRows,
+    crossed: Vec<u64>,
 }
 
 impl CrowdConstraints {
@@ -35,6 +38,8 @@ impl CrowdConstraints {
             ids,
             broad,
             pairs: Vec::new(),
+            check: ConstraintRows::default(),
+            crossed: Vec::new(),
         }
     }
 
@@ -57,6 +62,40 @@ impl CrowdConstraints {
 impl ConstraintSet for CrowdConstraints {
     fn dim(&self) -> usize {
         2 * self.radius.len()
+    }
+
+    /// As the default, with the rows kept from step to step, and the assembled keys searched
+    /// only for the (usually no) rows violated beyond `tol`.
+    fn crossed_outside(
+        &mut self,
+        t: f64,
+        q: &[f64],
+        assembled: &ConstraintRows,
+        tol: f64,
+    ) -> usize {
+        let mut check = std::mem::take(&mut self.check);
+        check.clear(self.dim());
+        self.assemble(t, q, -tol, &mut check);
+        self.crossed.clear();
+        self.crossed.extend(
+            check
+                .keys()
+                .iter()
+                .zip(check.values())
+                .filter(|&(_, &g)| g < -tol)
+                .map(|(&k, _)| k),
+        );
+        self.check = check;
+        if self.crossed.is_empty() {
+            return 0;
+        }
+        self.crossed.sort_unstable();
+        let known = assembled
+            .keys()
+            .iter()
+            .filter(|k| self.crossed.binary_search(k).is_ok())
+            .count();
+        self.crossed.len() - known
     }
 
     fn assemble(&mut self, _t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {

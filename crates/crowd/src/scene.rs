@@ -144,7 +144,6 @@ pub struct Time {
 #[serde(rename_all = "kebab-case")]
 pub enum SolverKind {
     /// Accelerated projected gradient, with Clarabel as fallback.
-    #[default]
     Apgd,
     /// Clarabel's interior point only (reference).
     Clarabel,
@@ -153,7 +152,8 @@ pub enum SolverKind {
     Interior,
     /// The fastest measured: our interior point at every size measured (150 to 100,000
     /// people, benches/README.md), with its fallback. The step report names the solver each
-    /// step used.
+    /// step used. The default.
+    #[default]
     Auto,
 }
 
@@ -227,7 +227,7 @@ pub struct SolverSettings {
 impl Default for SolverSettings {
     fn default() -> Self {
         Self {
-            kind: SolverKind::Apgd,
+            kind: SolverKind::Auto,
             eps_kappa: default_kappa(),
             max_violation: default_violation(),
             grid_cell: default_cell(),

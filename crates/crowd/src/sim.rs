@@ -464,6 +464,12 @@ impl Simulation {
         &self.scheme
     }
 
+    /// The scheme, mutably: for benchmarks and tools that time or drive its stages (field,
+    /// constraint assembly, the post-step check) one by one between steps.
+    pub fn scheme_mut(&mut self) -> &mut CrowdScheme {
+        &mut self.scheme
+    }
+
     /// The projection problem of the last step (rows, offsets, prediction), to re-solve it.
     pub fn last_projection(&self) -> moreau_solve::ProjectionProblem<'_> {
         self.scheme

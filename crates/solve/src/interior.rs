@@ -563,17 +563,20 @@ impl InteriorPoint {
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
         self.counts.factorizations += 1;
-        let ok = symbolic
-            .factorize_numeric_llt(
-                &mut self.l,
-                a,
-                self.side,
-                LltRegularization::default(),
-                par,
-                MemStack::new(&mut self.mem.0),
-                Default::default(),
-            )
-            .is_ok();
+        let (l, side, mem) = (&mut self.l, self.side, &mut self.mem.0);
+        let ok = self.workers.install(|| {
+            symbolic
+                .factorize_numeric_llt(
+                    l,
+                    a,
+                    side,
+                    LltRegularization::default(),
+                    par,
+                    MemStack::new(mem),
+                    Default::default(),
+                )
+                .is_ok()
+        });
         self.time_factorize += clock.elapsed().as_secs_f64();
         ok
     }
@@ -594,12 +597,15 @@ impl InteriorPoint {
         let par = self.par();
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let n = self.dv.len();
-        LltRef::new(symbolic, &self.l).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut self.scratch_n, n, 1),
-            par,
-            MemStack::new(&mut self.mem.0),
-        );
+        let (l, x, mem) = (&self.l, &mut self.scratch_n, &mut self.mem.0);
+        w.install(|| {
+            LltRef::new(symbolic, l).solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(x, n, 1),
+                par,
+                MemStack::new(mem),
+            )
+        });
         self.time_factorize += clock.elapsed().as_secs_f64();
         let (x, perm_inv) = (&self.scratch_n, &self.perm_inv);
         w.map(&mut self.dv, |c, _| x[perm_inv[c]]);
@@ -654,6 +660,24 @@ impl ProjectionSolver for InteriorPoint {
                 ..SolveReport::default()
             });
         }
+        // The caller's multipliers (the previous step's, or zeros) may already answer: a
+        // free-flowing crowd, or nobody moving, costs no factorization at all.
+        lam.iter_mut()
+            .for_each(|l| *l = if l.is_finite() { l.max(0.0) } else { 0.0 });
+        j.mul_transpose_add(lam, v);
+        let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+        if c.gap <= target.gap && c.violation <= target.violation {
+            return Ok(SolveReport {
+                status: SolveStatus::Converged,
+                gap: c.gap,
+                violation: c.violation,
+                iterations: 0,
+                active: c.active,
+                ..SolveReport::default()
+            });
+        }
+        v.copy_from_slice(p.w);
+
         let clock = Instant::now();
         self.analyse(j)?;
         let time_analyse = clock.elapsed().as_secs_f64();
@@ -816,6 +840,16 @@ mod tests {
         assert!(rep.status.is_converged(), "{rep:?}");
         // projection of 0 onto x + y ≥ 2 is (1, 1)
         assert!((sol.v[0] - 1.0).abs() < 1e-6 && (sol.v[1] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_feasible_prediction_is_returned_unchanged_without_factorizing() {
+        let mut rows = ConstraintRows::new(2);
+        rows.push(0, 0.0, [(0, 1.0)]);
+        let w = [0.3, -0.7];
+        let (rep, sol) = solve(&rows, &w, &[0.0]);
+        assert_eq!((rep.iterations, rep.active), (0, 0));
+        assert_eq!(sol.v, w);
     }
 
     #[test]

@@ -41,6 +41,15 @@ impl Workers {
         Ok(Self { pool: Some(pool) })
     }
 
+    /// Runs `op` on the workers (faer's `Par::rayon` then splits over them, not over rayon's
+    /// global pool).
+    pub(crate) fn install<R: Send>(&self, op: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            None => op(),
+            Some(pool) => pool.install(op),
+        }
+    }
+
     /// `out[i] = f(i, out[i])` for every `i`.
     pub(crate) fn map(&self, out: &mut [f64], f: impl Fn(usize, f64) -> f64 + Sync) {
         let body = |(c, chunk): (usize, &mut [f64])| {

@@ -1,0 +1,148 @@
+//! Every stage of a crowd step, timed alone on jammed halls (2.6 people/m², one door, after
+//! 3 s of evacuation) of 2,000 and 40,000 people: the desired velocities (predict), the broad
+//! phase and the constraint rows (assemble), the projection by each solver on the same
+//! problem (solve), and the check that nothing outside the assembled rows was crossed
+//! (verify). Accuracy as in the scale table: √ε ≤ 1e-3 r_min, violation ≤ 1e-4 r_min.
+//!
+//! `cargo bench -p moreau-crowd --bench step_stages`
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use moreau_core::{ConstraintRows, ConstraintSet, Field};
+use moreau_crowd::{Scene, Simulation};
+use moreau_solve::{
+    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint,
+    InteriorPointSettings, ProjectionSolution, ProjectionSolver, Target,
+};
+
+const MU: f64 = 0.05;
+
+/// The scale table's hall (crates/cli/src/bench.rs) with `n` people.
+fn hall(n: usize) -> Scene {
+    let side = (n as f64 / 2.6).sqrt();
+    let door = (side / 20.0).max(2.0);
+    let (lo, hi) = (side / 2.0 - door / 2.0, side / 2.0 + door / 2.0);
+    let r_min: f64 = 0.18;
+    let kappa = (1e-3 * r_min).powi(2) / MU.powi(3);
+    let text = format!(
+        r#"
+name = "stage-hall-{n}"
+seed = 2026
+[area]
+outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
+[[exits]]
+name = "door"
+area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
+action = "remove"
+[[groups]]
+name = "crowd"
+count = {n}
+spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+radius = {{ min = {r_min}, max = 0.22 }}
+speed = {{ min = 0.9, max = 1.3 }}
+destination = "door"
+[time]
+horizon = 100.0
+step = {MU}
+output_interval = 1.0
+[solver]
+kind = "interior"
+eps_kappa = {kappa:e}
+max_violation = {violation:e}
+grid_cell = {cell}
+"#,
+        x0 = side + 0.5,
+        x1 = side + 1.0,
+        violation = 1e-4 * r_min,
+        cell = (side / 400.0).max(0.25),
+    );
+    Scene::from_toml(&text, "stage hall").expect("a valid hall")
+}
+
+fn stages(c: &mut Criterion) {
+    let mut group = c.benchmark_group("step_stages");
+    group.sample_size(10);
+    for n in [2_000usize, 40_000] {
+        let mut sim = Simulation::new(hall(n)).expect("hall builds");
+        for _ in 0..60 {
+            sim.step(MU).expect("warm-up step");
+        }
+        let last = sim.step(MU).expect("the measured step");
+        let t = sim.time();
+        let q = sim.frame().positions.to_vec();
+        let scene = sim.scene().clone();
+        let target = Target {
+            gap: last.eps_target / (2.0 * MU * MU),
+            violation: scene.solver.max_violation / MU,
+        };
+        let label = n.to_string();
+
+        // predict: F(t, q)
+        let mut w = vec![0.0; q.len()];
+        group.bench_with_input(BenchmarkId::new("predict", &label), &n, |b, _| {
+            b.iter(|| sim.scheme().field().eval(t, &q, &mut w))
+        });
+
+        // solve: the last step's projection, by each solver
+        let (problem_w, rows, b_off) = {
+            let p = sim.last_projection();
+            (p.w.to_vec(), p.jacobian.clone(), p.b.to_vec())
+        };
+        let problem = moreau_solve::ProjectionProblem {
+            w: &problem_w,
+            jacobian: &rows,
+            b: &b_off,
+        };
+        let mut sol = ProjectionSolution::default();
+        group.bench_with_input(BenchmarkId::new("solve-interior-cold", &label), &n, |b, _| {
+            b.iter(|| {
+                // A new solver: ordering and symbolic analysis included.
+                let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+                let r = ip.solve(&problem, target, &mut sol).unwrap();
+                assert!(r.status.is_converged());
+            })
+        });
+        let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        ip.solve(&problem, target, &mut sol).unwrap();
+        group.bench_with_input(
+            BenchmarkId::new("solve-interior-same-pattern", &label),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    // The rows' pattern is unchanged: numeric factorizations only.
+                    let r = ip.solve(&problem, target, &mut sol).unwrap();
+                    assert!(r.status.is_converged());
+                })
+            },
+        );
+        let mut apgd = Apgd::new(ApgdSettings::default()).unwrap();
+        group.bench_with_input(BenchmarkId::new("solve-apgd-cold", &label), &n, |b, _| {
+            b.iter(|| {
+                sol.lambda.iter_mut().for_each(|l| *l = 0.0);
+                let r = apgd.solve(&problem, target, &mut sol).unwrap();
+                assert!(r.status.is_converged());
+            })
+        });
+        let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
+        group.bench_with_input(BenchmarkId::new("solve-clarabel", &label), &n, |b, _| {
+            b.iter(|| clarabel.solve(&problem, target, &mut sol).unwrap())
+        });
+
+        // assemble and verify, on the simulation's own constraint set
+        let constraints = sim.scheme_mut().correction_mut().constraints_mut();
+        let mut out = ConstraintRows::new(q.len());
+        let margin = constraints.margin(&q, &problem_w, MU);
+        group.bench_with_input(BenchmarkId::new("assemble", &label), &n, |b, _| {
+            b.iter(|| {
+                out.clear(q.len());
+                constraints.assemble(t, &q, margin, &mut out);
+            })
+        });
+        group.bench_with_input(BenchmarkId::new("verify", &label), &n, |b, _| {
+            b.iter(|| constraints.crossed_outside(t, &q, &out, scene.solver.max_violation))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, stages);
+criterion_main!(benches);
