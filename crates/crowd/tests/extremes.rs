@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn};
+use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn, start_index};
 use moreau_crowd::{Scene, Simulation};
 
 /// Runs the scene over its schedule, checking every step; compares with Clarabel every
@@ -123,10 +123,13 @@ fn degenerate_contacts_chain_wedges_and_corners() {
         listed("wedge", &[[2.0, 1.0]], 0.25, 1.0),
     );
     let scene = room(0.3, 0.05, 4.0, &groups);
+    let head_index = start_index(&scene, [5.75, 3.0]);
     let sim = run_checked(scene, Some(4));
     assert!(sim.exit_times().is_empty());
-    // The chain's head sits in the door's corners: (x − 6)² + 0.15² = 0.25².
-    let head = &sim.frame().positions[0..2];
+    // The chain's head (it started at (5.75, 3)) sits in the door's corners:
+    // (x − 6)² + 0.15² = 0.25².
+    let k = head_index;
+    let head = &sim.frame().positions[2 * k..2 * k + 2];
     assert!((head[0] - (6.0 - 0.2)).abs() < 1e-3, "head at {head:?}");
     assert!((head[1] - 3.0).abs() < 1e-3, "head at {head:?}");
 }

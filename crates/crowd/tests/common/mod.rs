@@ -194,3 +194,13 @@ pub fn listed(name: &str, positions: &[[f64; 2]], radius: f64, speed: f64) -> St
         list.join(", ")
     )
 }
+
+/// Where the person who starts at `p` is stored (people are numbered along a space-filling
+/// curve, not in the order the scene lists them); panics if nobody starts there.
+pub fn start_index(scene: &Scene, p: [f64; 2]) -> usize {
+    let sim = Simulation::new(scene.clone()).unwrap();
+    let q = sim.frame().positions;
+    (0..q.len() / 2)
+        .find(|&k| q[2 * k] == p[0] && q[2 * k + 1] == p[1])
+        .expect("somebody starts there")
+}
