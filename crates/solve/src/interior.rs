@@ -35,6 +35,10 @@ use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
 
+/// The index type of the sparse structures: half the memory of `usize`, enough for
+/// 4·10⁹ entries (checked when a pattern is built).
+type Index = u32;
+
 /// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct InteriorPointSettings {
@@ -129,15 +133,15 @@ pub struct FactorizationCounts {
 #[derive(Debug, Clone, Default)]
 struct NormalPattern {
     n: usize,
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
+    col_ptr: Vec<Index>,
+    row_idx: Vec<Index>,
     diag: Vec<usize>,
     // For each row of J, each ordered pair (a, b) of its entries with col_a ≥ col_b, in
     // traversal order: where the product lands in `row_idx`.
-    slots: Vec<usize>,
+    slots: Vec<Index>,
     // scratch for building
     count: Vec<usize>,
-    fill: Vec<usize>,
+    fill: Vec<Index>,
 }
 
 /// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
@@ -161,8 +165,8 @@ fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
 #[derive(Debug, Clone, Default)]
 struct Transpose {
     col_start: Vec<usize>,
-    rows: Vec<usize>,
-    entries: Vec<usize>,
+    rows: Vec<Index>,
+    entries: Vec<Index>,
 }
 
 impl Transpose {
@@ -185,8 +189,8 @@ impl Transpose {
         for i in 0..j.len() {
             for e in starts[i]..starts[i + 1] {
                 let c = j.columns()[e];
-                self.rows[next[c]] = i;
-                self.entries[next[c]] = e;
+                self.rows[next[c]] = i as Index;
+                self.entries[next[c]] = e as Index;
                 next[c] += 1;
             }
         }
@@ -195,12 +199,12 @@ impl Transpose {
     /// `(Jᵀ y)_c`.
     fn dot(&self, coefs: &[f64], y: &[f64], c: usize) -> f64 {
         (self.col_start[c]..self.col_start[c + 1])
-            .map(|k| coefs[self.entries[k]] * y[self.rows[k]])
+            .map(|k| coefs[self.entries[k] as usize] * y[self.rows[k] as usize])
             .sum()
     }
 
     /// The rows of unknown `c`.
-    fn rows_of(&self, c: usize) -> &[usize] {
+    fn rows_of(&self, c: usize) -> &[Index] {
         &self.rows[self.col_start[c]..self.col_start[c + 1]]
     }
 }
@@ -257,12 +261,12 @@ impl NormalPattern {
         {
             let (count, fill) = (&mut self.count, &mut self.fill);
             for c in 0..n {
-                fill[count[c]] = c;
+                fill[count[c]] = c as Index;
                 count[c] += 1;
             }
             for_each_product(j, |ca, cb| {
                 let (r, c) = place(ca, cb);
-                fill[count[c]] = r;
+                fill[count[c]] = r as Index;
                 count[c] += 1;
             });
         }
@@ -274,8 +278,8 @@ impl NormalPattern {
             let end = self.count[c];
             let bucket = &mut self.fill[start..end];
             bucket.sort_unstable();
-            self.col_ptr.push(self.row_idx.len());
-            let mut last = usize::MAX;
+            self.col_ptr.push(self.row_idx.len() as Index);
+            let mut last = Index::MAX;
             for &r in bucket.iter() {
                 if r != last {
                     self.row_idx.push(r);
@@ -284,16 +288,16 @@ impl NormalPattern {
             }
             start = end;
         }
-        self.col_ptr.push(self.row_idx.len());
+        self.col_ptr.push(self.row_idx.len() as Index);
         self.diag.clear();
         self.slots.clear();
         if !slots {
             return;
         }
-        let find = |col_ptr: &[usize], row_idx: &[usize], r: usize, c: usize| {
-            let (a, b) = (col_ptr[c], col_ptr[c + 1]);
+        let find = |col_ptr: &[Index], row_idx: &[Index], r: usize, c: usize| {
+            let (a, b) = (col_ptr[c] as usize, col_ptr[c + 1] as usize);
             a + row_idx[a..b]
-                .binary_search(&r)
+                .binary_search(&(r as Index))
                 .expect("every product has a slot in the pattern")
         };
         for c in 0..n {
@@ -302,11 +306,11 @@ impl NormalPattern {
         let (col_ptr, row_idx, out) = (&self.col_ptr, &self.row_idx, &mut self.slots);
         for_each_product(j, |ca, cb| {
             let (r, c) = place(ca, cb);
-            out.push(find(col_ptr, row_idx, r, c));
+            out.push(find(col_ptr, row_idx, r, c) as Index);
         });
     }
 
-    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
+    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
         SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
     }
 
@@ -323,7 +327,7 @@ impl NormalPattern {
             for (&ca, &aa) in cols.iter().zip(coefs) {
                 for (&cb, &ab) in cols.iter().zip(coefs) {
                     if ca >= cb {
-                        values[self.slots[k]] += di * aa * ab;
+                        values[self.slots[k] as usize] += di * aa * ab;
                         k += 1;
                     }
                 }
@@ -356,12 +360,12 @@ pub struct InteriorPoint {
     perm_inv: Vec<usize>,
     group_of: Vec<usize>,
     group_start: Vec<usize>,
-    group_perm: Vec<usize>,
-    group_perm_inv: Vec<usize>,
+    group_perm: Vec<Index>,
+    group_perm_inv: Vec<Index>,
     jt: Transpose,
     workers: Workers,
     pattern: NormalPattern,
-    symbolic: Option<SymbolicCholesky<usize>>,
+    symbolic: Option<SymbolicCholesky<Index>>,
     side: Side,
     counts: FactorizationCounts,
     time_factorize: f64,
@@ -473,6 +477,18 @@ impl InteriorPoint {
         self.j_cols.clear();
         self.j_cols.extend_from_slice(j.columns());
         let n = j.dim();
+        let starts = j.row_starts();
+        let products: usize = n + (0..j.len())
+            .map(|i| {
+                let k = starts[i + 1] - starts[i];
+                k * (k + 1) / 2
+            })
+            .sum::<usize>();
+        if products.max(j.nnz()) > Index::MAX as usize {
+            return Err(SolveError::Factorization(format!(
+                "{products} products in I + JᵀDJ: more than 32-bit indices hold"
+            )));
+        }
 
         // Fill-reducing ordering (AMD) of the pattern compressed to groups of adjacent
         // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
@@ -485,7 +501,7 @@ impl InteriorPoint {
         self.group_perm.resize(groups, 0);
         self.group_perm_inv.clear();
         self.group_perm_inv.resize(groups, 0);
-        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<usize>(groups, nnz));
+        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(groups, nnz));
         amd::order_maybe_unsorted(
             &mut self.group_perm,
             &mut self.group_perm_inv,
@@ -505,6 +521,7 @@ impl InteriorPoint {
         }
         self.perm.clear();
         for &g in &self.group_perm {
+            let g = g as usize;
             self.perm
                 .extend(self.group_start[g]..self.group_start[g + 1]);
         }
