@@ -367,8 +367,13 @@ impl Simulation {
         let kind = scene.solver.kind.resolve(n);
         let apgd = || -> Result<Box<dyn ProjectionSolver>, CrowdError> {
             Ok(Box::new(
-                Apgd::new(ApgdSettings::default())
-                    .map_err(moreau_integrate::IntegrateError::from)?,
+                Apgd::new(
+                    ApgdSettings::builder()
+                        .parallelism(Parallelism::threads(scene.solver.threads))
+                        .build()
+                        .map_err(moreau_integrate::IntegrateError::from)?,
+                )
+                .map_err(moreau_integrate::IntegrateError::from)?,
             ))
         };
         let clarabel = || -> Box<dyn ProjectionSolver> {

@@ -1,8 +1,10 @@
 //! Accelerated projected gradient on the dual (FISTA with adaptive restart and backtracking).
 
-use moreau_core::SolveStatus;
+use moreau_core::{Parallelism, SolveStatus};
 
 use crate::error::SolveError;
+use crate::products::{Transpose, row_dot_sum};
+use crate::workers::Workers;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
@@ -16,6 +18,8 @@ pub struct ApgdSettings {
     pub power_iterations: usize,
     /// Restart the momentum when it points uphill (O'Donoghue–Candès gradient test).
     pub adaptive_restart: bool,
+    /// Threads for the products and vector updates (the same bits on any count).
+    pub parallelism: Parallelism,
 }
 
 impl Default for ApgdSettings {
@@ -24,6 +28,7 @@ impl Default for ApgdSettings {
             max_iterations: 20_000,
             power_iterations: 12,
             adaptive_restart: true,
+            parallelism: Parallelism::SEQUENTIAL,
         }
     }
 }
@@ -74,6 +79,11 @@ impl ApgdSettingsBuilder {
         self.0.adaptive_restart = on;
         self
     }
+    /// Threads for the products and vector updates.
+    pub fn parallelism(mut self, p: Parallelism) -> Self {
+        self.0.parallelism = p;
+        self
+    }
     /// Validates and returns the settings.
     pub fn build(self) -> Result<ApgdSettings, SolveError> {
         self.0.validate()?;
@@ -86,9 +96,11 @@ impl ApgdSettingsBuilder {
 /// The dual gradient is `s = b + J(w + Jᵀλ)`, the primal slack itself, so each iteration costs
 /// one product with `Jᵀ` and one with `J`; the extrapolated point's `s` and `Jᵀy` follow by
 /// linearity. Scratch memory is sized once and reused.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug)]
 pub struct Apgd {
     settings: ApgdSettings,
+    workers: Workers,
+    jt: Transpose,
     // per-row scratch
     lam_next: Vec<f64>,
     y: Vec<f64>,
@@ -106,8 +118,17 @@ impl Apgd {
     pub fn new(settings: ApgdSettings) -> Result<Self, SolveError> {
         settings.validate()?;
         Ok(Self {
+            workers: Workers::new(settings.parallelism)?,
             settings,
-            ..Self::default()
+            jt: Transpose::default(),
+            lam_next: Vec::new(),
+            y: Vec::new(),
+            s: Vec::new(),
+            s_next: Vec::new(),
+            s_y: Vec::new(),
+            u: Vec::new(),
+            u_next: Vec::new(),
+            u_y: Vec::new(),
         })
     }
 
@@ -129,19 +150,18 @@ impl Apgd {
     }
 
     /// `u = Jᵀλ`, `s = b + J(w + u)`.
-    fn slack(p: &ProjectionProblem<'_>, lam: &[f64], u: &mut [f64], s: &mut [f64]) {
-        u.iter_mut().for_each(|x| *x = 0.0);
-        p.jacobian.mul_transpose_add(lam, u);
-        for (ui, wi) in u.iter_mut().zip(p.w) {
-            *ui += wi; // temporarily v = w + Jᵀλ
-        }
-        p.jacobian.mul(u, s);
-        for (si, bi) in s.iter_mut().zip(p.b) {
-            *si += bi;
-        }
-        for (ui, wi) in u.iter_mut().zip(p.w) {
-            *ui -= wi;
-        }
+    fn slack(
+        w: &Workers,
+        jt: &Transpose,
+        p: &ProjectionProblem<'_>,
+        lam: &[f64],
+        u: &mut [f64],
+        s: &mut [f64],
+    ) {
+        let coefs = p.jacobian.coefficients();
+        w.map(u, |c, _| jt.dot(coefs, lam, c));
+        let u: &[f64] = u;
+        w.map(s, |i, _| p.b[i] + row_dot_sum(p.jacobian, p.w, u, i));
     }
 
     /// A lower estimate of `‖J Jᵀ‖₂` by power iteration from a fixed start (deterministic).
@@ -168,14 +188,17 @@ impl Apgd {
     }
 }
 
-fn gap_and_violation(lam: &[f64], s: &[f64]) -> (f64, f64) {
-    let mut gap = 0.0;
-    let mut viol: f64 = 0.0;
-    for (&l, &s) in lam.iter().zip(s) {
-        gap += l * s.max(0.0);
-        viol = viol.max(-s);
-    }
+fn gap_and_violation(w: &Workers, lam: &[f64], s: &[f64]) -> (f64, f64) {
+    let gap = w.sum(s.len(), |i| lam[i] * s[i].max(0.0));
+    let viol = (-w.min(s.len(), |i| s[i])).max(0.0);
     (gap, viol)
+}
+
+impl Default for Apgd {
+    /// Default settings, one thread.
+    fn default() -> Self {
+        Self::new(ApgdSettings::default()).expect("the default settings are valid")
+    }
 }
 
 impl ProjectionSolver for Apgd {
@@ -206,8 +229,10 @@ impl ProjectionSolver for Apgd {
             self.estimate_lipschitz(p).max(f64::MIN_POSITIVE)
         };
 
-        Self::slack(p, lam, &mut self.u, &mut self.s);
-        let (mut gap, mut viol) = gap_and_violation(lam, &self.s);
+        self.jt.build(p.jacobian);
+        let wk = &self.workers;
+        Self::slack(wk, &self.jt, p, lam, &mut self.u, &mut self.s);
+        let (mut gap, mut viol) = gap_and_violation(wk, lam, &self.s);
         let mut iterations = 0;
         let mut status = SolveStatus::MaxIterations;
         if infeasible {
@@ -224,31 +249,21 @@ impl ProjectionSolver for Apgd {
                 // Projected gradient step from y, with backtracking on the quadratic bound
                 // φ(λ⁺) ≤ φ(y) + ∇φ(y)ᵀd + L/2 |d|², i.e. |Jᵀd|² ≤ L |d|².
                 loop {
-                    for i in 0..m {
-                        self.lam_next[i] = (self.y[i] - self.s_y[i] / lip).max(0.0);
-                    }
-                    Self::slack(p, &self.lam_next, &mut self.u_next, &mut self.s_next);
-                    let d_sq: f64 = self
-                        .lam_next
-                        .iter()
-                        .zip(&self.y)
-                        .map(|(a, b)| (a - b) * (a - b))
-                        .sum();
-                    let jd_sq: f64 = self
-                        .u_next
-                        .iter()
-                        .zip(&self.u_y)
-                        .map(|(a, b)| (a - b) * (a - b))
-                        .sum();
+                    let (y, s_y) = (&self.y, &self.s_y);
+                    wk.map(&mut self.lam_next, |i, _| (y[i] - s_y[i] / lip).max(0.0));
+                    Self::slack(wk, &self.jt, p, &self.lam_next, &mut self.u_next, &mut self.s_next);
+                    let (ln, un, uy) = (&self.lam_next, &self.u_next, &self.u_y);
+                    let d_sq = wk.sum(m, |i| (ln[i] - y[i]) * (ln[i] - y[i]));
+                    let jd_sq = wk.sum(n, |c| (un[c] - uy[c]) * (un[c] - uy[c]));
                     if jd_sq <= lip * d_sq * (1.0 + 1e-12) || d_sq == 0.0 {
                         break;
                     }
                     lip *= 2.0;
                 }
-                (gap, viol) = gap_and_violation(&self.lam_next, &self.s_next);
-                let uphill: f64 = (0..m)
-                    .map(|i| (self.y[i] - self.lam_next[i]) * (self.lam_next[i] - lam[i]))
-                    .sum();
+                (gap, viol) = gap_and_violation(wk, &self.lam_next, &self.s_next);
+                let (y, ln) = (&self.y, &self.lam_next);
+                let lam_now: &[f64] = lam;
+                let uphill = wk.sum(m, |i| (y[i] - ln[i]) * (ln[i] - lam_now[i]));
                 if gap <= target.gap && viol <= target.violation {
                     lam.copy_from_slice(&self.lam_next);
                     self.s.copy_from_slice(&self.s_next);
@@ -264,13 +279,11 @@ impl ProjectionSolver for Apgd {
                 } else {
                     let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
                     let beta = (t - 1.0) / t_next;
-                    for i in 0..m {
-                        self.y[i] = self.lam_next[i] + beta * (self.lam_next[i] - lam[i]);
-                        self.s_y[i] = self.s_next[i] + beta * (self.s_next[i] - self.s[i]);
-                    }
-                    for j in 0..n {
-                        self.u_y[j] = self.u_next[j] + beta * (self.u_next[j] - self.u[j]);
-                    }
+                    let (ln, sn, un) = (&self.lam_next, &self.s_next, &self.u_next);
+                    let (l0, s0, u0): (&[f64], &[f64], &[f64]) = (lam, &self.s, &self.u);
+                    wk.map(&mut self.y, |i, _| ln[i] + beta * (ln[i] - l0[i]));
+                    wk.map(&mut self.s_y, |i, _| sn[i] + beta * (sn[i] - s0[i]));
+                    wk.map(&mut self.u_y, |c, _| un[c] + beta * (un[c] - u0[c]));
                     t = t_next;
                 }
                 std::mem::swap(lam, &mut self.lam_next);

@@ -11,6 +11,7 @@ mod clarabel_ref;
 mod error;
 mod interior;
 mod problem;
+mod products;
 mod workers;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};

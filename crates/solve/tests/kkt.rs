@@ -1,6 +1,6 @@
 //! Projection solvers against the KKT conditions and against an exact active-set enumeration.
 
-use moreau_core::{ConstraintRows, SolveStatus};
+use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
     Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
     ProjectionProblem, ProjectionSolution, ProjectionSolver, Target, certify,
@@ -338,4 +338,79 @@ fn settings_are_validated() {
         )
         .unwrap_err();
     assert!(e.to_string().contains("non-finite w at index 0"), "{e}");
+}
+
+/// On 1 and 2 threads: APGD gives the same bits (its parallel loops sum in fixed chunks);
+/// the interior point's answers agree within their certified radii (faer's parallel
+/// supernodal factorization, which it picks on this random problem, sums in another order).
+/// Problems larger than one chunk (4,096 rows) so that the loops do split.
+#[test]
+fn one_and_two_threads_give_the_same_answer() {
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let n = 6000;
+    // Feasible by construction: b = s0 − J v0 with s0 ≥ 0 (a third exactly 0).
+    let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let mut rows = ConstraintRows::new(n);
+    let mut b = Vec::new();
+    for i in 0..9000 {
+        let (c1, c2) = (rng.random_range(0..n), rng.random_range(0..n));
+        if c1 == c2 {
+            continue;
+        }
+        let a2 = -rng.random_range(0.5..1.5);
+        rows.push(i, 0.0, [(c1, 1.0), (c2, a2)]);
+        let s0 = if rng.random_bool(0.3) { 0.0 } else { rng.random_range(0.0..0.5) };
+        b.push(s0 - v0[c1] - a2 * v0[c2]);
+    }
+    let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let solve = |threads: usize, interior: bool| {
+        let par = Parallelism::threads(threads);
+        let mut solver: Box<dyn ProjectionSolver> = if interior {
+            Box::new(
+                InteriorPoint::new(
+                    InteriorPointSettings::builder()
+                        .parallelism(par)
+                        .build()
+                        .unwrap(),
+                )
+                .unwrap(),
+            )
+        } else {
+            Box::new(Apgd::new(ApgdSettings::builder().parallelism(par).build().unwrap()).unwrap())
+        };
+        let mut sol = ProjectionSolution::default();
+        let rep = solver.solve(&p, t, &mut sol).unwrap();
+        assert!(rep.status.is_converged(), "{rep:?}");
+        assert!(rep.iterations > 0);
+        (sol, rep)
+    };
+    let ((one, _), (two, _)) = (solve(1, false), solve(2, false));
+    assert_eq!(one.v, two.v, "APGD");
+    assert_eq!(one.lambda, two.lambda, "APGD");
+    // ½|v − v*|² ≤ gap + |λ*|₁·violation for each answer (λ* approximated by the answer's λ).
+    let ((one, r1), (two, r2)) = (solve(1, true), solve(2, true));
+    let l1: f64 = one.lambda.iter().sum();
+    let radius = |r: &moreau_solve::SolveReport| (2.0 * (r.gap + l1 * r.violation)).sqrt();
+    let dist = one
+        .v
+        .iter()
+        .zip(&two.v)
+        .map(|(a, b)| (a - b) * (a - b))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        dist <= radius(&r1) + radius(&r2),
+        "interior: |v₁ − v₂| = {dist} > {} + {}",
+        radius(&r1),
+        radius(&r2)
+    );
 }
