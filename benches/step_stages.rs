@@ -10,8 +10,8 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use moreau_core::{ConstraintRows, ConstraintSet, Field};
 use moreau_crowd::{Scene, Simulation};
 use moreau_solve::{
-    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint,
-    InteriorPointSettings, ProjectionSolution, ProjectionSolver, Target,
+    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
+    ProjectionSolution, ProjectionSolver, Target,
 };
 
 const MU: f64 = 0.05;
@@ -93,14 +93,18 @@ fn stages(c: &mut Criterion) {
             b: &b_off,
         };
         let mut sol = ProjectionSolution::default();
-        group.bench_with_input(BenchmarkId::new("solve-interior-cold", &label), &n, |b, _| {
-            b.iter(|| {
-                // A new solver: ordering and symbolic analysis included.
-                let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
-                let r = ip.solve(&problem, target, &mut sol).unwrap();
-                assert!(r.status.is_converged());
-            })
-        });
+        group.bench_with_input(
+            BenchmarkId::new("solve-interior-cold", &label),
+            &n,
+            |b, _| {
+                b.iter(|| {
+                    // A new solver: ordering and symbolic analysis included.
+                    let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+                    let r = ip.solve(&problem, target, &mut sol).unwrap();
+                    assert!(r.status.is_converged());
+                })
+            },
+        );
         let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
         ip.solve(&problem, target, &mut sol).unwrap();
         group.bench_with_input(

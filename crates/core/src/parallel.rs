@@ -19,9 +19,8 @@ impl Parallelism {
 
     /// `threads` threads; `0` means every core the machine reports.
     pub fn threads(threads: usize) -> Self {
-        let threads = NonZeroUsize::new(threads).unwrap_or_else(|| {
-            std::thread::available_parallelism().unwrap_or(NonZeroUsize::MIN)
-        });
+        let threads = NonZeroUsize::new(threads)
+            .unwrap_or_else(|| std::thread::available_parallelism().unwrap_or(NonZeroUsize::MIN));
         Self { threads }
     }
 

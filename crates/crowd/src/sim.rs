@@ -2,11 +2,11 @@
 
 use std::collections::HashMap;
 
+use moreau_core::Parallelism;
 use moreau_core::StepReport;
 use moreau_integrate::{
     AdaptiveStep, EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepController,
 };
-use moreau_core::Parallelism;
 use moreau_solve::{
     Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
     ProjectionSolver,
@@ -681,7 +681,9 @@ fn spatial_order(pos: &[[f64; 2]], cell: f64) -> Vec<usize> {
         x = (x | (x << 2)) & 0x3333_3333_3333_3333;
         (x | (x << 1)) & 0x5555_5555_5555_5555
     }
-    let lo = pos.iter().fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
+    let lo = pos
+        .iter()
+        .fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
     let key = |p: &[f64; 2]| {
         let ix = ((p[0] - lo[0]) / cell) as u64;
         let iy = ((p[1] - lo[1]) / cell) as u64;

@@ -7,8 +7,8 @@ use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn, star
 use moreau_core::Parallelism;
 use moreau_crowd::{Scene, Simulation, SolverKind};
 use moreau_solve::{
-    Apgd, ApgdSettings, InteriorPoint, InteriorPointSettings, ProjectionSolution,
-    ProjectionSolver, Target, certify,
+    Apgd, ApgdSettings, InteriorPoint, InteriorPointSettings, ProjectionSolution, ProjectionSolver,
+    Target, certify,
 };
 
 fn interior(mut scene: Scene) -> Scene {
@@ -25,7 +25,10 @@ fn run_against_clarabel(scene: Scene) -> usize {
         let before = sim.frame().positions.to_vec();
         let people = sim.frame().ids.len();
         let report = sim.step(mu).unwrap();
-        assert_eq!(report.solver, "interior", "the fallback answered: {report:?}");
+        assert_eq!(
+            report.solver, "interior",
+            "the fallback answered: {report:?}"
+        );
         assert_feasible(&scene, &sim, &report);
         if sim.frame().ids.len() == people {
             assert_matches_clarabel(&sim, &before, &report);
@@ -43,8 +46,7 @@ fn interior_point_matches_clarabel_on_a_queue_at_a_door() {
 
 #[test]
 fn interior_point_matches_clarabel_in_a_jam_at_a_door_too_narrow() {
-    let compared =
-        run_against_clarabel(interior(room(0.3, 0.05, 3.0, &spawn(75, "0.25", "1.0"))));
+    let compared = run_against_clarabel(interior(room(0.3, 0.05, 3.0, &spawn(75, "0.25", "1.0"))));
     assert!(compared > 40, "{compared}");
 }
 
@@ -139,11 +141,19 @@ max_violation = 1e-6
             eps_sum += r.eps.sqrt();
             active = active.max(r.active);
         }
-        (sim.frame().ids.to_vec(), sim.frame().positions.to_vec(), eps_sum, active)
+        (
+            sim.frame().ids.to_vec(),
+            sim.frame().positions.to_vec(),
+            eps_sum,
+            active,
+        )
     };
     let (ids1, q1, eps1, active) = run(1);
     let (ids2, q2, eps2, _) = run(2);
-    assert!(active > 1000, "the hall must be jammed: {active} active contacts");
+    assert!(
+        active > 1000,
+        "the hall must be jammed: {active} active contacts"
+    );
     assert_eq!(ids1, ids2);
     // Two ε-projections per step of the same point differ by at most √ε₁ + √ε₂; over the run
     // the differences add up at most (the projection is non-expansive).
@@ -162,7 +172,10 @@ max_violation = 1e-6
 /// (20,000 iterations) could not certify; the interior point certifies that very problem.
 #[test]
 fn the_jam_step_that_clarabel_and_apgd_could_not_certify_is_certified_by_the_interior_point() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/room-door-0.8-jam.toml");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/room-door-0.8-jam.toml"
+    );
     let scene = Scene::from_toml(&std::fs::read_to_string(path).unwrap(), path).unwrap();
     let mut sim = Simulation::new(scene.clone()).unwrap();
     let mut failed = None;
@@ -173,7 +186,10 @@ fn the_jam_step_that_clarabel_and_apgd_could_not_certify_is_certified_by_the_int
         }
     }
     let (mu, error) = failed.expect("Clarabel alone fails on this jam");
-    assert!(error.contains("step 123") && error.contains("not certified"), "{error}");
+    assert!(
+        error.contains("step 123") && error.contains("not certified"),
+        "{error}"
+    );
 
     let problem = sim.last_projection();
     let eps_target = scene.solver.eps_kappa * mu.powi(3);

@@ -3,11 +3,11 @@
 use moreau_core::{Parallelism, SolveStatus};
 
 use crate::error::SolveError;
-use crate::products::{Transpose, row_dot_sum};
-use crate::workers::Workers;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
+use crate::products::{Transpose, row_dot_sum};
+use crate::workers::Workers;
 
 /// Settings of [`Apgd`]; build them with [`ApgdSettings::builder`].
 #[derive(Debug, Clone, PartialEq)]
@@ -251,7 +251,14 @@ impl ProjectionSolver for Apgd {
                 loop {
                     let (y, s_y) = (&self.y, &self.s_y);
                     wk.map(&mut self.lam_next, |i, _| (y[i] - s_y[i] / lip).max(0.0));
-                    Self::slack(wk, &self.jt, p, &self.lam_next, &mut self.u_next, &mut self.s_next);
+                    Self::slack(
+                        wk,
+                        &self.jt,
+                        p,
+                        &self.lam_next,
+                        &mut self.u_next,
+                        &mut self.s_next,
+                    );
                     let (ln, un, uy) = (&self.lam_next, &self.u_next, &self.u_y);
                     let d_sq = wk.sum(m, |i| (ln[i] - y[i]) * (ln[i] - y[i]));
                     let jd_sq = wk.sum(n, |c| (un[c] - uy[c]) * (un[c] - uy[c]));

@@ -9,10 +9,11 @@
 //! freedom — cost nothing, where the dual Hessian `J Jᵀ` of an active-set method is singular.
 //! Mehrotra's predictor–corrector takes two solves per factorization.
 //!
-//! What is separated: the *pattern* of `I + Jᵀ D J` (built when the rows' columns change,
-//! reused otherwise), the *symbolic* Cholesky (AMD ordering, elimination tree, supernodes —
-//! recomputed only when the pattern changes), and the *numeric* factorization (every
-//! iteration). Scratch memory is sized when the symbolic analysis changes.
+//! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
+//! rows, a person's x and y), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
+//! row's products land, and faer's *symbolic* Cholesky — all three redone only when the
+//! columns of `J`'s rows change — and the *numeric* factorization, every iteration. Scratch
+//! memory is sized at each symbolic analysis.
 
 use std::time::Instant;
 
@@ -30,11 +31,11 @@ use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 
 use crate::certificate::certify;
 use crate::error::SolveError;
-use crate::products::{Index, Transpose, row_dot};
-use crate::workers::Workers;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
+use crate::products::{Index, Transpose, row_dot};
+use crate::workers::Workers;
 
 /// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
 #[derive(Debug, Clone, PartialEq)]
@@ -175,7 +176,13 @@ impl NormalPattern {
     /// Builds the pattern of `j` with unknown `c` at position `at[c]` (identity without
     /// `at`), storing the upper triangle (row ≤ column) when `upper`, else the lower one;
     /// with `slots`, also where each product lands.
-    fn build(&mut self, j: &ConstraintRows, at: Option<(&[usize], usize)>, upper: bool, slots: bool) {
+    fn build(
+        &mut self,
+        j: &ConstraintRows,
+        at: Option<(&[usize], usize)>,
+        upper: bool,
+        slots: bool,
+    ) {
         let n = at.map_or(j.dim(), |a| a.1);
         self.n = n;
         let at = at.map(|a| a.0);
@@ -419,12 +426,13 @@ impl InteriorPoint {
         self.j_cols.extend_from_slice(j.columns());
         let n = j.dim();
         let starts = j.row_starts();
-        let products: usize = n + (0..j.len())
-            .map(|i| {
-                let k = starts[i + 1] - starts[i];
-                k * (k + 1) / 2
-            })
-            .sum::<usize>();
+        let products: usize = n
+            + (0..j.len())
+                .map(|i| {
+                    let k = starts[i + 1] - starts[i];
+                    k * (k + 1) / 2
+                })
+                .sum::<usize>();
         if products.max(j.nnz()) > Index::MAX as usize {
             return Err(SolveError::Factorization(format!(
                 "{products} products in I + JᵀDJ: more than 32-bit indices hold"
@@ -494,7 +502,8 @@ impl InteriorPoint {
         self.side = match symbolic.raw() {
             SymbolicCholeskyRaw::Simplicial(_) => Side::Upper,
             SymbolicCholeskyRaw::Supernodal(_) => {
-                self.pattern.build(j, Some((&self.perm_inv, n)), false, true);
+                self.pattern
+                    .build(j, Some((&self.perm_inv, n)), false, true);
                 Side::Lower
             }
         };
@@ -719,8 +728,9 @@ impl ProjectionSolver for InteriorPoint {
             {
                 let (s, dsa, dla) = (&self.s, &self.ds_aff, &self.dl_aff);
                 let lam: &[f64] = lam;
-                self.workers
-                    .map(&mut self.rc, |i, _| -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu);
+                self.workers.map(&mut self.rc, |i, _| {
+                    -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu
+                });
             }
             self.direction(j, lam);
             let wk = &self.workers;

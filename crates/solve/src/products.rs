@@ -63,7 +63,6 @@ pub(crate) fn row_dot(j: &ConstraintRows, x: &[f64], i: usize) -> f64 {
     c.iter().zip(a).map(|(&c, &a)| a * x[c]).sum()
 }
 
-
 /// `(J (x + y))_i`.
 pub(crate) fn row_dot_sum(j: &ConstraintRows, x: &[f64], y: &[f64], i: usize) -> f64 {
     let (c, a) = j.row(i);

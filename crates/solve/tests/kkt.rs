@@ -359,7 +359,11 @@ fn one_and_two_threads_give_the_same_answer() {
         }
         let a2 = -rng.random_range(0.5..1.5);
         rows.push(i, 0.0, [(c1, 1.0), (c2, a2)]);
-        let s0 = if rng.random_bool(0.3) { 0.0 } else { rng.random_range(0.0..0.5) };
+        let s0 = if rng.random_bool(0.3) {
+            0.0
+        } else {
+            rng.random_range(0.0..0.5)
+        };
         b.push(s0 - v0[c1] - a2 * v0[c2]);
     }
     let w: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
