@@ -148,7 +148,8 @@ pub enum SolverKind {
     /// Clarabel's interior point only (reference).
     Clarabel,
     /// Our interior point (sparse Cholesky normal equations, symbolic analysis reused while
-    /// the contact pattern holds), with Clarabel as fallback.
+    /// the contact pattern holds), with Clarabel as fallback up to
+    /// [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`] people and APGD above.
     Interior,
     /// The fastest measured: our interior point at every size measured (150 to 100,000
     /// people, benches/README.md), with its fallback. The step report names the solver each
