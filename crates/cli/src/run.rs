@@ -113,6 +113,12 @@ fn solver_text(sim: &Simulation) -> String {
     let solver = match sim.solver_kind() {
         SolverKind::Clarabel => "Clarabel alone",
         SolverKind::Apgd => "APGD with Clarabel as fallback",
+        SolverKind::Auto if big => {
+            "APGD while contacts are sparse, our interior point once dense, APGD as fallback"
+        }
+        SolverKind::Auto => {
+            "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
+        }
         _ if big => "our interior point with APGD as fallback",
         _ => "our interior point with Clarabel as fallback",
     };

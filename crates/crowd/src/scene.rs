@@ -151,27 +151,19 @@ pub enum SolverKind {
     /// the contact pattern holds), with Clarabel as fallback up to
     /// [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`] people and APGD above.
     Interior,
-    /// The fastest measured: our interior point at every size measured (150 to 100,000
-    /// people, benches/README.md), with its fallback. The step report names the solver each
-    /// step used. The default.
+    /// Chosen for each projection (`moreau_solve::AutoSolver`): APGD while few rows were
+    /// active in the previous step (free flow: 1.4× faster there), our interior point once
+    /// contacts are dense (jams: 3–9× faster), with the interior point's fallbacks. The step
+    /// report names the solver that answered. The default.
     #[default]
     Auto,
 }
 
 impl SolverKind {
-    /// The largest crowd whose interior point gets Clarabel as fallback (APGD above): the
+    /// The largest crowd whose interior point (or `Auto`) gets Clarabel as fallback (APGD above): the
     /// largest size at which Clarabel was measured (its factorization took 253 MB at 100,000
     /// people, benches/README.md).
     pub const CLARABEL_FALLBACK_MAX_PEOPLE: usize = 100_000;
-
-    /// The solver `self` stands for in a crowd of `people`. `Auto` is the interior point at
-    /// every size: it beat APGD (4–9×) and Clarabel (2.7–3.2×) at every size measured.
-    pub fn resolve(self, _people: usize) -> SolverKind {
-        match self {
-            SolverKind::Auto => SolverKind::Interior,
-            kind => kind,
-        }
-    }
 }
 
 /// Which broad phase.

@@ -8,8 +8,8 @@ use moreau_integrate::{
     AdaptiveStep, EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepController,
 };
 use moreau_solve::{
-    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
-    ProjectionSolver,
+    Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings,
+    InteriorPoint, InteriorPointSettings, ProjectionSolver,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -364,7 +364,7 @@ impl Simulation {
             max_violation: scene.solver.max_violation,
             max_redo: 8,
         };
-        let kind = scene.solver.kind.resolve(n);
+        let kind = scene.solver.kind;
         let apgd = || -> Result<Box<dyn ProjectionSolver>, CrowdError> {
             Ok(Box::new(
                 Apgd::new(
@@ -381,7 +381,14 @@ impl Simulation {
         };
         let solver: Box<dyn ProjectionSolver> = match kind {
             SolverKind::Apgd => apgd()?,
-            SolverKind::Interior | SolverKind::Auto => Box::new(
+            SolverKind::Auto => Box::new(
+                AutoSolver::new(AutoSettings {
+                    parallelism: Parallelism::threads(scene.solver.threads),
+                    ..AutoSettings::default()
+                })
+                .map_err(moreau_integrate::IntegrateError::from)?,
+            ),
+            SolverKind::Interior => Box::new(
                 InteriorPoint::new(
                     InteriorPointSettings::builder()
                         .parallelism(Parallelism::threads(scene.solver.threads))
@@ -458,8 +465,9 @@ impl Simulation {
         &self.exit_times
     }
 
-    /// The projection solver in use (`Auto` resolved). `Apgd` has Clarabel as fallback;
-    /// `Interior` has Clarabel up to [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`], APGD above.
+    /// The projection solver in use. `Apgd` has Clarabel as fallback; `Interior` and `Auto`
+    /// have Clarabel up to [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`] people, APGD above.
+    /// With `Auto` each step report names the solver that answered.
     pub fn solver_kind(&self) -> SolverKind {
         self.solver
     }

@@ -245,21 +245,35 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     );
 }
 
-/// `kind = "auto"` is the interior point at every size, and every step report names the
-/// solver that answered.
+/// `kind = "auto"` takes APGD while contacts are sparse and the interior point in a jam, and
+/// every step report names the solver that answered.
 #[test]
-fn auto_picks_the_interior_point_and_says_so() {
+fn auto_picks_apgd_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
     use moreau_crowd::SolverKind;
-    let mut small = room(1.2, 0.05, 0.5, &spawn(60, "0.2", "1.0"));
-    small.solver.kind = SolverKind::Auto;
-    let mut sim = Simulation::new(small).unwrap();
-    assert_eq!(sim.solver_kind(), SolverKind::Interior);
-    for (mu, _) in sim.schedule() {
-        assert_eq!(sim.step(mu).unwrap().solver, "interior");
-    }
-    let mut large = hall(SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE + 1, 1);
-    large.solver.kind = SolverKind::Auto;
-    let mut sim = Simulation::new(large).unwrap();
-    assert_eq!(sim.solver_kind(), SolverKind::Interior);
-    assert_eq!(sim.step(0.05).unwrap().solver, "interior");
+    // Free flow: a few people far apart walking to a wide door.
+    let mut free = room(1.2, 0.05, 0.5, &spawn(10, "0.2", "1.0"));
+    free.solver.kind = SolverKind::Auto;
+    let mut sim = Simulation::new(free).unwrap();
+    assert_eq!(sim.solver_kind(), SolverKind::Auto);
+    let solvers: Vec<&str> = sim
+        .schedule()
+        .into_iter()
+        .map(|(mu, _)| sim.step(mu).unwrap().solver)
+        .collect();
+    assert!(solvers.iter().all(|&s| s == "apgd"), "{solvers:?}");
+    // A jam at a door too narrow to pass: dense contacts after the first steps.
+    let mut jam = room(0.3, 0.05, 4.0, &spawn(75, "0.25", "1.0"));
+    jam.solver.kind = SolverKind::Auto;
+    let mut sim = Simulation::new(jam).unwrap();
+    let solvers: Vec<&str> = sim
+        .schedule()
+        .into_iter()
+        .map(|(mu, _)| sim.step(mu).unwrap().solver)
+        .collect();
+    // Once the crowd presses on the wall (the second half of the run) every step is dense.
+    let half = solvers.len() / 2;
+    assert!(
+        solvers[half..].iter().all(|&s| s == "interior"),
+        "{solvers:?}"
+    );
 }

@@ -6,6 +6,7 @@
 //! report an accuracy they have not proved.
 
 mod apgd;
+mod auto;
 mod certificate;
 mod clarabel_ref;
 mod error;
@@ -15,6 +16,7 @@ mod products;
 mod workers;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
+pub use auto::{AutoSettings, AutoSolver};
 pub use certificate::{Certificate, certify};
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
 pub use error::SolveError;
