@@ -1,4 +1,5 @@
-//! How many threads a stage may use, passed as a value (never read from the environment).
+//! How many threads a stage may use, passed as a value (never read from environment variables
+//! or a global pool).
 
 use std::num::NonZeroUsize;
 

@@ -343,6 +343,13 @@ impl Scene {
                 return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
             }
         }
+        if s.threads > 1024 {
+            return Err(CrowdError::invalid(
+                "solver.threads",
+                s.threads,
+                "at most 1024 (0: every core)",
+            ));
+        }
         if self.exits.is_empty() {
             return Err(CrowdError::invalid(
                 "exits",

@@ -44,6 +44,10 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ),
         ("zero-step.toml", &["time.step", "0", "> 0"]),
         (
+            "too-many-threads.toml",
+            &["solver.threads", "100000", "at most 1024"],
+        ),
+        (
             "unknown-destination.toml",
             &["groups[0].destination", "window", "no exit"],
         ),
