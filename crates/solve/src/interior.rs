@@ -721,7 +721,12 @@ impl ProjectionSolver for InteriorPoint {
             let mu_aff = wk.sum(m, |i| {
                 (s[i] + alpha_aff * ds[i]) * (lam_ref[i] + alpha_aff * dl[i])
             }) / m as f64;
-            let sigma = (mu_aff / mu).clamp(0.0, 1.0).powi(3);
+            // (μ = 0 only when sᵀλ underflowed: no centring then, not a NaN.)
+            let sigma = if mu > 0.0 {
+                (mu_aff / mu).clamp(0.0, 1.0).powi(3)
+            } else {
+                0.0
+            };
             std::mem::swap(&mut self.ds, &mut self.ds_aff);
             std::mem::swap(&mut self.dl, &mut self.dl_aff);
             // Corrector (centring and second order).
