@@ -8,7 +8,7 @@
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use moreau_core::{ConstraintRows, ConstraintSet, Field};
-use moreau_crowd::{Scene, Simulation};
+use moreau_crowd::{Hall, Scene, Simulation, SolverKind, SolverSettings};
 use moreau_solve::{
     Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
     ProjectionSolution, ProjectionSolver, Target,
@@ -18,44 +18,18 @@ const MU: f64 = 0.05;
 
 /// The scale table's hall (crates/cli/src/bench.rs) with `n` people.
 fn hall(n: usize) -> Scene {
-    let side = (n as f64 / 2.6).sqrt();
-    let door = (side / 20.0).max(2.0);
-    let (lo, hi) = (side / 2.0 - door / 2.0, side / 2.0 + door / 2.0);
     let r_min: f64 = 0.18;
-    let kappa = (1e-3 * r_min).powi(2) / MU.powi(3);
-    let text = format!(
-        r#"
-name = "stage-hall-{n}"
-seed = 2026
-[area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
-[[exits]]
-name = "door"
-area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
-action = "remove"
-[[groups]]
-name = "crowd"
-count = {n}
-spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
-radius = {{ min = {r_min}, max = 0.22 }}
-speed = {{ min = 0.9, max = 1.3 }}
-destination = "door"
-[time]
-horizon = 100.0
-step = {MU}
-output_interval = 1.0
-[solver]
-kind = "interior"
-eps_kappa = {kappa:e}
-max_violation = {violation:e}
-grid_cell = {cell}
-"#,
-        x0 = side + 0.5,
-        x1 = side + 1.0,
-        violation = 1e-4 * r_min,
-        cell = (side / 400.0).max(0.25),
-    );
-    Scene::from_toml(&text, "stage hall").expect("a valid hall")
+    let mut hall = Hall::new(n, 2.6);
+    hall.horizon = 100.0;
+    hall.output_interval = 1.0;
+    hall.solver = SolverSettings {
+        kind: SolverKind::Interior,
+        eps_kappa: (1e-3 * r_min).powi(2) / MU.powi(3),
+        max_violation: 1e-4 * r_min,
+        grid_cell: (hall.side() / 400.0).max(0.25),
+        ..SolverSettings::default()
+    };
+    hall.scene().expect("a valid hall")
 }
 
 fn stages(c: &mut Criterion) {

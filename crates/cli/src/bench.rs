@@ -8,7 +8,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use moreau_crowd::{Scene, Simulation};
+use moreau_crowd::{Hall, Scene, Simulation, SolverKind, SolverSettings};
 use moreau_solve::{
     ClarabelReference, ClarabelSettings, ProjectionSolution, ProjectionSolver, Target,
 };
@@ -36,8 +36,8 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 40_000)]
     clarabel_at: usize,
     /// The fast solver measured (`interior`, `apgd`, `auto`, `clarabel`).
-    #[arg(long, default_value = "interior")]
-    kind: String,
+    #[arg(long, default_value = "interior", value_parser = parse_kind)]
+    kind: SolverKind,
     /// Threads for the projection (0: every core).
     #[arg(long, default_value_t = 1)]
     threads: usize,
@@ -80,52 +80,21 @@ struct Comparison {
     target_gap: f64,
 }
 
-/// The hall: a square of `n / density` m² with one door in the right wall.
+/// The hall of `n` people at the table's accuracy: `√ε ≤ 1e-3 r_min` at μ = 0.05, i.e.
+/// `κ μ³ = (1e-3 r_min)²`, and violation ≤ 1e-4 r_min.
 fn hall(args: &BenchArgs, n: usize) -> Result<Scene> {
-    let (density, warmup, steps) = (args.density, args.warmup, args.steps);
-    let side = (n as f64 / density).sqrt();
-    let door = (side / 20.0).max(2.0);
-    let (lo, hi) = (side / 2.0 - door / 2.0, side / 2.0 + door / 2.0);
-    let r_min = 0.18;
-    // √ε ≤ 1e-3 r_min at μ = 0.05: κ μ³ = (1e-3 r_min)².
-    let kappa = (1e-3 * r_min) * (1e-3 * r_min) / 0.05f64.powi(3);
-    let text = format!(
-        r#"
-name = "bench-hall-{n}"
-seed = 2026
-[area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
-[[exits]]
-name = "door"
-area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
-action = "remove"
-[[groups]]
-name = "crowd"
-count = {n}
-spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
-radius = {{ min = {r_min}, max = 0.22 }}
-speed = {{ min = 0.9, max = 1.3 }}
-destination = "door"
-[time]
-horizon = {horizon}
-step = 0.05
-output_interval = 0.05
-[solver]
-kind = "{kind}"
-threads = {threads}
-eps_kappa = {kappa:e}
-max_violation = {violation:e}
-grid_cell = {cell}
-"#,
-        x0 = side + 0.5,
-        x1 = side + 1.0,
-        horizon = 0.05 * (warmup + steps) as f64,
-        violation = 1e-4 * r_min,
-        cell = (side / 400.0).max(0.25),
-        kind = args.kind,
-        threads = args.threads,
-    );
-    Ok(Scene::from_toml(&text, "bench hall")?)
+    let r_min: f64 = 0.18;
+    let mut hall = Hall::new(n, args.density);
+    hall.horizon = 0.05 * (args.warmup + args.steps) as f64;
+    hall.solver = SolverSettings {
+        kind: args.kind,
+        threads: args.threads,
+        eps_kappa: (1e-3 * r_min).powi(2) / 0.05f64.powi(3),
+        max_violation: 1e-4 * r_min,
+        grid_cell: (hall.side() / 400.0).max(0.25),
+        ..SolverSettings::default()
+    };
+    Ok(hall.scene()?)
 }
 
 fn peak_rss_mb() -> f64 {
@@ -271,7 +240,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 "--clarabel-at",
                 &args.clarabel_at.to_string(),
                 "--kind",
-                &args.kind,
+                kind_name(args.kind),
                 "--threads",
                 &args.threads.to_string(),
             ])
@@ -331,4 +300,25 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn parse_kind(s: &str) -> Result<SolverKind, String> {
+    match s {
+        "interior" => Ok(SolverKind::Interior),
+        "apgd" => Ok(SolverKind::Apgd),
+        "auto" => Ok(SolverKind::Auto),
+        "clarabel" => Ok(SolverKind::Clarabel),
+        _ => Err(format!(
+            "unknown solver kind {s:?}: interior, apgd, auto or clarabel"
+        )),
+    }
+}
+
+fn kind_name(kind: SolverKind) -> &'static str {
+    match kind {
+        SolverKind::Interior => "interior",
+        SolverKind::Apgd => "apgd",
+        SolverKind::Auto => "auto",
+        SolverKind::Clarabel => "clarabel",
+    }
 }

@@ -10,6 +10,7 @@ mod constraints;
 mod error;
 mod field;
 mod geometry;
+mod hall;
 mod scene;
 mod sim;
 
@@ -20,5 +21,6 @@ pub use constraints::CrowdConstraints;
 pub use error::CrowdError;
 pub use field::{DesiredVelocity, DistanceField};
 pub use geometry::{Polygon, Segment};
-pub use scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind};
+pub use hall::Hall;
+pub use scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind, SolverSettings};
 pub use sim::{Frame, Simulation};

@@ -10,7 +10,7 @@
 mod common;
 
 use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn, start_index};
-use moreau_crowd::{Scene, Simulation};
+use moreau_crowd::{Hall, Scene, Simulation, SolverSettings};
 
 /// Runs the scene over its schedule, checking every step; compares with Clarabel every
 /// `compare_every` steps (when nobody left during the step). Returns the simulation.
@@ -166,41 +166,19 @@ fn a_non_positive_or_nan_step_is_refused() {
     assert_eq!(sim.steps(), 0);
 }
 
-/// A hall with one wide door, `n` people at about 1.6 people/m² (radii 0.18–0.22).
+/// A hall with a 4 m door, `n` people at 1.6 people/m² (radii 0.18–0.22).
 fn hall(n: usize, steps: usize) -> Scene {
-    let side = (n as f64 / 1.6).sqrt();
-    let (lo, hi) = (side / 2.0 - 2.0, side / 2.0 + 2.0);
-    let text = format!(
-        r#"
-name = "hall-{n}"
-seed = 11
-[area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
-[[exits]]
-name = "door"
-area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
-action = "remove"
-[[groups]]
-name = "crowd"
-count = {n}
-spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
-radius = {{ min = 0.18, max = 0.22 }}
-speed = {{ min = 0.9, max = 1.3 }}
-destination = "door"
-[time]
-horizon = {horizon}
-step = 0.05
-output_interval = 0.05
-[solver]
-eps_kappa = 1e-2
-max_violation = 1e-5
-grid_cell = 0.5
-"#,
-        x0 = side + 0.5,
-        x1 = side + 1.0,
-        horizon = 0.05 * steps as f64,
-    );
-    Scene::from_toml(&text, "hall").unwrap()
+    let mut hall = Hall::new(n, 1.6);
+    hall.door = 4.0;
+    hall.seed = 11;
+    hall.horizon = 0.05 * steps as f64;
+    hall.solver = SolverSettings {
+        eps_kappa: 1e-2,
+        max_violation: 1e-5,
+        grid_cell: 0.5,
+        ..SolverSettings::default()
+    };
+    hall.scene().unwrap()
 }
 
 #[test]

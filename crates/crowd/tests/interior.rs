@@ -5,7 +5,7 @@ mod common;
 
 use common::{assert_feasible, assert_matches_clarabel, listed, room, spawn, start_index};
 use moreau_core::Parallelism;
-use moreau_crowd::{Scene, Simulation, SolverKind};
+use moreau_crowd::{Hall, Scene, Simulation, SolverKind, SolverSettings};
 use moreau_solve::{
     Apgd, ApgdSettings, InteriorPoint, InteriorPointSettings, ProjectionSolution, ProjectionSolver,
     Target, certify,
@@ -97,38 +97,17 @@ fn interior_point_matches_clarabel_with_radii_one_to_a_hundred() {
 /// keep the bits.)
 #[test]
 fn thread_count_does_not_change_the_answer() {
-    let side = (3000.0f64 / 2.6).sqrt();
-    let (lo, hi) = (side / 2.0 - 1.0, side / 2.0 + 1.0);
-    let text = format!(
-        r#"
-name = "hall"
-seed = 5
-[area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
-[[exits]]
-name = "door"
-area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
-action = "remove"
-[[groups]]
-name = "crowd"
-count = 3000
-spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
-radius = {{ min = 0.18, max = 0.22 }}
-speed = {{ min = 0.9, max = 1.3 }}
-destination = "door"
-[time]
-horizon = 1.5
-step = 0.05
-output_interval = 0.05
-[solver]
-kind = "interior"
-eps_kappa = 1e-3
-max_violation = 1e-6
-"#,
-        x0 = side + 0.5,
-        x1 = side + 1.0,
-    );
-    let scene = Scene::from_toml(&text, "hall").unwrap();
+    let mut hall = Hall::new(3000, 2.6);
+    hall.door = 2.0;
+    hall.seed = 5;
+    hall.horizon = 1.5;
+    hall.solver = SolverSettings {
+        kind: SolverKind::Interior,
+        eps_kappa: 1e-3,
+        max_violation: 1e-6,
+        ..SolverSettings::default()
+    };
+    let scene = hall.scene().unwrap();
     let run = |threads: usize| {
         let mut s = scene.clone();
         s.solver.threads = threads;
