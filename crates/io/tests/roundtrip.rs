@@ -6,8 +6,10 @@ use std::path::PathBuf;
 use moreau_core::{SolveStatus, StepReport};
 use moreau_io::{IoError, Overwrite, RunFile, RunHeader, RunWriter};
 
+/// `name` in a directory of its own: tests run in parallel, and one checks that its directory
+/// holds no `.partial` file while another may be laying one out.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("moreau-io-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("moreau-io-{}-{name}.d", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join(name);
     let _ = std::fs::remove_file(&p);
