@@ -36,7 +36,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 40_000)]
     clarabel_at: usize,
     /// The fast solver measured (`interior`, `apgd`, `auto`, `clarabel`).
-    #[arg(long, default_value = "interior", value_parser = parse_kind)]
+    #[arg(long, default_value = "interior")]
     kind: SolverKind,
     /// Threads for the projection (0: every core).
     #[arg(long, default_value_t = 1)]
@@ -240,7 +240,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 "--clarabel-at",
                 &args.clarabel_at.to_string(),
                 "--kind",
-                kind_name(args.kind),
+                args.kind.as_str(),
                 "--threads",
                 &args.threads.to_string(),
             ])
@@ -300,25 +300,4 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-fn parse_kind(s: &str) -> Result<SolverKind, String> {
-    match s {
-        "interior" => Ok(SolverKind::Interior),
-        "apgd" => Ok(SolverKind::Apgd),
-        "auto" => Ok(SolverKind::Auto),
-        "clarabel" => Ok(SolverKind::Clarabel),
-        _ => Err(format!(
-            "unknown solver kind {s:?}: interior, apgd, auto or clarabel"
-        )),
-    }
-}
-
-fn kind_name(kind: SolverKind) -> &'static str {
-    match kind {
-        SolverKind::Interior => "interior",
-        SolverKind::Apgd => "apgd",
-        SolverKind::Auto => "auto",
-        SolverKind::Clarabel => "clarabel",
-    }
 }

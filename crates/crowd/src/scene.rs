@@ -159,7 +159,27 @@ pub enum SolverKind {
     Auto,
 }
 
+impl std::str::FromStr for SolverKind {
+    type Err = String;
+
+    /// The names scene files use (`apgd`, `clarabel`, `interior`, `auto`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        use serde::de::IntoDeserializer;
+        Self::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| e.to_string())
+    }
+}
+
 impl SolverKind {
+    /// The name scene files use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SolverKind::Apgd => "apgd",
+            SolverKind::Clarabel => "clarabel",
+            SolverKind::Interior => "interior",
+            SolverKind::Auto => "auto",
+        }
+    }
+
     /// The largest crowd whose interior point (or `Auto`) gets Clarabel as fallback (APGD above): the
     /// largest size at which Clarabel was measured (its factorization took 253 MB at 100,000
     /// people, benches/README.md).
@@ -539,5 +559,37 @@ impl Scene {
             .iter()
             .map(|g| g.radius.max())
             .fold(0.0, f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solver_kind_names_are_the_scene_file_names() {
+        for kind in [
+            SolverKind::Apgd,
+            SolverKind::Clarabel,
+            SolverKind::Interior,
+            SolverKind::Auto,
+        ] {
+            let settings = SolverSettings {
+                kind,
+                ..SolverSettings::default()
+            };
+            let text = toml::to_string(&settings).unwrap();
+            assert!(
+                text.contains(&format!("kind = \"{}\"", kind.as_str())),
+                "{text}"
+            );
+            assert_eq!(kind.as_str().parse::<SolverKind>(), Ok(kind));
+        }
+        assert!(
+            "newton"
+                .parse::<SolverKind>()
+                .unwrap_err()
+                .contains("newton")
+        );
     }
 }

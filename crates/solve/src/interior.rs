@@ -114,9 +114,7 @@ impl InteriorPointSettingsBuilder {
 /// What the factorization machinery did over the solver's life (for benchmarks).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FactorizationCounts {
-    /// Patterns of `I + Jᵀ D J` built (the rows' columns changed).
-    pub patterns: usize,
-    /// Symbolic analyses (the pattern changed).
+    /// Orderings, patterns and symbolic analyses (the columns of the rows changed).
     pub analyses: usize,
     /// Numeric factorizations.
     pub factorizations: usize,
@@ -196,7 +194,7 @@ impl NormalPattern {
         };
         // Bucket the entries by column, then sort and deduplicate each column.
         self.count.clear();
-        self.count.resize(n + 1, 1); // the diagonal
+        self.count.resize(n, 1); // the diagonal
         for_each_product(j, |ca, cb| self.count[place(ca, cb).1] += 1);
         let mut total = 0;
         for c in self.count.iter_mut() {
@@ -485,7 +483,6 @@ impl InteriorPoint {
         // The supernodal variant measured slower on crowds (benches/README.md): their
         // factors are thin, 2×2-blocked and have few wide supernodes.
         self.pattern.build(j, Some((&self.perm_inv, n)), true, true);
-        self.counts.patterns += 1;
         let symbolic = factorize_symbolic_cholesky(
             self.pattern.symbolic(),
             Side::Upper,
@@ -823,6 +820,41 @@ mod tests {
         let (rep, sol) = solve(&rows, &w, &[0.0]);
         assert_eq!((rep.iterations, rep.active), (0, 0));
         assert_eq!(sol.v, w);
+    }
+
+    #[test]
+    fn the_analysis_is_reused_while_the_rows_keep_their_columns() {
+        let target = Target {
+            gap: 1e-12,
+            violation: 1e-12,
+        };
+        let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        let mut rows = ConstraintRows::new(3);
+        rows.push(0, 0.0, [(0, 1.0), (1, -1.0)]);
+        rows.push(1, 0.0, [(1, 1.0), (2, -1.0)]);
+        let w = [-1.0, 0.0, 1.0];
+        let mut solve = |rows: &ConstraintRows, b: &[f64]| {
+            let p = ProjectionProblem {
+                w: &w,
+                jacobian: rows,
+                b,
+            };
+            let mut sol = ProjectionSolution::default();
+            let rep = ip.solve(&p, target, &mut sol).unwrap();
+            assert!(rep.status.is_converged() && rep.iterations > 0, "{rep:?}");
+            ip.counts()
+        };
+        let first = solve(&rows, &[0.0, 0.0]);
+        assert_eq!(first.analyses, 1);
+        // Other values (offsets), same columns: numeric factorizations only.
+        let second = solve(&rows, &[-0.5, 0.1]);
+        assert_eq!(second.analyses, 1);
+        assert!(second.factorizations > first.factorizations);
+        // A row with other columns: analysed again.
+        let mut other = ConstraintRows::new(3);
+        other.push(0, 0.0, [(0, 1.0), (2, -1.0)]);
+        other.push(1, 0.0, [(1, 1.0), (2, -1.0)]);
+        assert_eq!(solve(&other, &[0.0, 0.0]).analyses, 2);
     }
 
     #[test]

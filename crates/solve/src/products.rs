@@ -15,6 +15,7 @@ pub(crate) struct Transpose {
     pub(crate) col_start: Vec<usize>,
     rows: Vec<Index>,
     entries: Vec<Index>,
+    next: Vec<usize>, // scratch for building
 }
 
 impl Transpose {
@@ -33,13 +34,15 @@ impl Transpose {
         self.entries.clear();
         self.entries.resize(j.nnz(), 0);
         let starts = j.row_starts();
-        let mut next = self.col_start.clone();
+        self.next.clear();
+        self.next.extend_from_slice(&self.col_start);
         for i in 0..j.len() {
             for e in starts[i]..starts[i + 1] {
                 let c = j.columns()[e];
-                self.rows[next[c]] = i as Index;
-                self.entries[next[c]] = e as Index;
-                next[c] += 1;
+                let k = self.next[c];
+                self.rows[k] = i as Index;
+                self.entries[k] = e as Index;
+                self.next[c] += 1;
             }
         }
     }
