@@ -303,6 +303,7 @@ impl ProjectionSolver for Apgd {
         }
         let active = sol.lambda.iter().filter(|&&l| l > 0.0).count();
         Ok(SolveReport {
+            solver: self.name(),
             status,
             gap,
             violation: viol,

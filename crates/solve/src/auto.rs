@@ -35,14 +35,13 @@ impl Default for AutoSettings {
 
 /// Picks APGD or the interior point for each projection from the warm start's share of
 /// active rows (a multiplier above 10⁻⁶ of the largest); a solve APGD does not finish within
-/// its budget goes on with the interior point. [`ProjectionSolver::name`] names the solver
-/// whose answer the last solve returned.
+/// its budget goes on with the interior point. Each [`SolveReport::solver`] names the solver
+/// whose answer it is.
 #[derive(Debug)]
 pub struct AutoSolver {
     settings: AutoSettings,
     apgd: Apgd,
     interior: InteriorPoint,
-    last: &'static str,
 }
 
 impl AutoSolver {
@@ -70,7 +69,6 @@ impl AutoSolver {
             settings,
             apgd,
             interior,
-            last: "interior",
         })
     }
 
@@ -91,7 +89,7 @@ impl AutoSolver {
 
 impl ProjectionSolver for AutoSolver {
     fn name(&self) -> &'static str {
-        self.last
+        "auto"
     }
 
     fn solve(
@@ -104,14 +102,12 @@ impl ProjectionSolver for AutoSolver {
         if Self::warm_active_share(p, sol) < self.settings.sparse_contacts {
             let rep = self.apgd.solve(p, target, sol)?;
             if rep.status.is_converged() {
-                self.last = "apgd";
                 return Ok(rep);
             }
             spent = rep.iterations;
         }
         let mut rep = self.interior.solve(p, target, sol)?;
         rep.iterations += spent;
-        self.last = "interior";
         Ok(rep)
     }
 }

@@ -63,6 +63,7 @@ impl ProjectionSolver for ClarabelReference {
         if m == 0 {
             sol.v.copy_from_slice(p.w);
             return Ok(SolveReport {
+                solver: self.name(),
                 status: SolveStatus::Converged,
                 ..SolveReport::default()
             });
@@ -123,6 +124,7 @@ impl ProjectionSolver for ClarabelReference {
             _ => SolveStatus::NumericalError,
         };
         Ok(SolveReport {
+            solver: self.name(),
             status,
             gap: cert.gap,
             violation: cert.violation,

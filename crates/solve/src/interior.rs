@@ -616,6 +616,7 @@ impl ProjectionSolver for InteriorPoint {
                 SolveStatus::Converged
             };
             return Ok(SolveReport {
+                solver: self.name(),
                 status,
                 gap: cert.gap,
                 violation: cert.violation,
@@ -632,6 +633,7 @@ impl ProjectionSolver for InteriorPoint {
         let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         if c.gap <= target.gap && c.violation <= target.violation {
             return Ok(SolveReport {
+                solver: self.name(),
                 status: SolveStatus::Converged,
                 gap: c.gap,
                 violation: c.violation,
@@ -749,6 +751,7 @@ impl ProjectionSolver for InteriorPoint {
         // Active: rows whose multiplier dominates their slack (complementarity decides).
         let active = (0..m).filter(|&i| lam[i] > self.s[i]).count();
         Ok(SolveReport {
+            solver: self.name(),
             status,
             gap: cert.gap,
             violation: cert.violation,

@@ -4,10 +4,15 @@
 //! ([`ProjectionSolver`]), and every answer certified by the same [`certify`]: the duality gap
 //! of the returned pair `(v, λ)` and the largest violation of `b + J v ≥ 0`. Solvers never
 //! report an accuracy they have not proved.
+//!
+//! Which solver a run uses is a [`SolverKind`] (the names scene files use), and
+//! [`SolverKind::build`] is the one factory: the solver, its fallback chain and the rule of
+//! `auto`. A new solver is one file and one line in the factory below.
 
 mod apgd;
 mod auto;
 mod certificate;
+mod chain;
 mod clarabel_ref;
 mod error;
 mod interior;
@@ -18,9 +23,153 @@ mod workers;
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
 pub use auto::{AutoSettings, AutoSolver};
 pub use certificate::{Certificate, certify};
+pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
 pub use error::SolveError;
 pub use interior::{
     FactorizationCounts, InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder,
 };
 pub use problem::{ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target};
+
+use moreau_core::Parallelism;
+use serde::{Deserialize, Serialize};
+
+/// Which projection solver; the serde names are the ones scene files use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum SolverKind {
+    /// Accelerated projected gradient ([`Apgd`]), with Clarabel as fallback.
+    Apgd,
+    /// Clarabel's interior point alone (the reference).
+    Clarabel,
+    /// Our interior point ([`InteriorPoint`]: sparse Cholesky normal equations, symbolic
+    /// analysis reused while the contact pattern holds), with the large-problem fallback.
+    Interior,
+    /// Chosen for each projection ([`AutoSolver`]): APGD while few rows were active in the
+    /// previous step, our interior point once contacts are dense, with the interior point's
+    /// fallback. Each report names the solver that answered. The default.
+    #[default]
+    Auto,
+}
+
+impl std::str::FromStr for SolverKind {
+    type Err = String;
+
+    /// The names scene files use (`apgd`, `clarabel`, `interior`, `auto`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        use serde::de::IntoDeserializer;
+        Self::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| e.to_string())
+    }
+}
+
+impl SolverKind {
+    /// Every kind, in the order of the documentation.
+    pub const ALL: [SolverKind; 4] = [
+        SolverKind::Apgd,
+        SolverKind::Clarabel,
+        SolverKind::Interior,
+        SolverKind::Auto,
+    ];
+
+    /// The largest problem (unknowns) whose factorizing solvers get Clarabel as fallback;
+    /// APGD above: Clarabel's factorization took 253 MB at 100,000 people, 200,000 unknowns
+    /// (benches/README.md), the largest size at which it was measured.
+    pub const CLARABEL_FALLBACK_MAX_UNKNOWNS: usize = 200_000;
+
+    /// The name scene files use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SolverKind::Apgd => "apgd",
+            SolverKind::Clarabel => "clarabel",
+            SolverKind::Interior => "interior",
+            SolverKind::Auto => "auto",
+        }
+    }
+
+    /// The solver of this kind, with its fallback, for problems of about `unknowns` unknowns.
+    pub fn build(
+        self,
+        parallelism: Parallelism,
+        unknowns: usize,
+    ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
+        let apgd = || -> Result<Box<dyn ProjectionSolver>, SolveError> {
+            let settings = ApgdSettings::builder().parallelism(parallelism).build()?;
+            Ok(Box::new(Apgd::new(settings)?))
+        };
+        let clarabel = || -> Box<dyn ProjectionSolver> {
+            Box::new(ClarabelReference::new(ClarabelSettings::default()))
+        };
+        let large = unknowns > Self::CLARABEL_FALLBACK_MAX_UNKNOWNS;
+        let (primary, fallback): (Box<dyn ProjectionSolver>, _) = match self {
+            SolverKind::Clarabel => return Ok(clarabel()),
+            SolverKind::Apgd => (apgd()?, clarabel()),
+            SolverKind::Interior => {
+                let settings = InteriorPointSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?;
+                (
+                    Box::new(InteriorPoint::new(settings)?),
+                    if large { apgd()? } else { clarabel() },
+                )
+            }
+            SolverKind::Auto => (
+                Box::new(AutoSolver::new(AutoSettings {
+                    parallelism,
+                    ..AutoSettings::default()
+                })?),
+                if large { apgd()? } else { clarabel() },
+            ),
+        };
+        Ok(Box::new(WithFallback::new(primary, fallback)))
+    }
+
+    /// What [`build`](Self::build) makes, in words (for run files and `--help`).
+    pub fn describe(self, unknowns: usize) -> &'static str {
+        let large = unknowns > Self::CLARABEL_FALLBACK_MAX_UNKNOWNS;
+        match (self, large) {
+            (SolverKind::Clarabel, _) => "Clarabel alone",
+            (SolverKind::Apgd, _) => "APGD with Clarabel as fallback",
+            (SolverKind::Interior, false) => "our interior point with Clarabel as fallback",
+            (SolverKind::Interior, true) => "our interior point with APGD as fallback",
+            (SolverKind::Auto, false) => {
+                "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
+            }
+            (SolverKind::Auto, true) => {
+                "APGD while contacts are sparse, our interior point once dense, APGD as fallback"
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solver_kind_names_are_the_scene_file_names() {
+        #[derive(Serialize)]
+        struct S {
+            kind: SolverKind,
+        }
+        for kind in SolverKind::ALL {
+            let text = toml::to_string(&S { kind }).unwrap();
+            assert_eq!(text.trim(), format!("kind = \"{}\"", kind.as_str()));
+            assert_eq!(kind.as_str().parse::<SolverKind>(), Ok(kind));
+            let solver = kind.build(Parallelism::SEQUENTIAL, 10).unwrap();
+            assert_eq!(
+                solver.name(),
+                if kind == SolverKind::Clarabel {
+                    "clarabel"
+                } else {
+                    kind.as_str()
+                }
+            );
+        }
+        assert!(
+            "newton"
+                .parse::<SolverKind>()
+                .unwrap_err()
+                .contains("newton")
+        );
+    }
+}

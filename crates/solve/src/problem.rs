@@ -83,9 +83,12 @@ impl ProjectionSolution {
     }
 }
 
-/// How a solve ended and what it proved.
+/// How a solve ended, what it proved, and which solver answered.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SolveReport {
+    /// The solver whose answer this is (for a chain or an automatic choice, the one that
+    /// answered, not the one first asked).
+    pub solver: &'static str,
     /// How the solve ended.
     pub status: SolveStatus,
     /// The certified duality gap of the returned pair (velocity units squared).
@@ -106,7 +109,8 @@ pub struct SolveReport {
 ///
 /// `solution.lambda`, when it has one entry per row on entry, is the warm start.
 pub trait ProjectionSolver: std::fmt::Debug + Send {
-    /// A short name for reports.
+    /// A short name for reports (what the solver is, not who answered a given solve: that is
+    /// [`SolveReport::solver`]).
     fn name(&self) -> &'static str;
     /// Solves `problem` to `target`; the report's status says whether the target was met.
     fn solve(
