@@ -3,7 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use moreau_crowd::{Scene, Simulation};
+use moreau_core::StepReport;
+use moreau_crowd::{Observer, ObserverError, Scene, Simulation};
 
 use crate::FmuError;
 
@@ -211,12 +212,23 @@ pub const DEFAULT_SCENE: &str = "room-150.toml";
 #[derive(Debug)]
 pub struct CrowdModel {
     sim: Simulation,
-    step: f64,
     time: f64,
     eps: f64,
     mean_speed: f64,
+    min_gap: Option<f64>,
     people: usize,
     before: Vec<f64>,
+    after: Vec<f64>,
+}
+
+/// Keeps the certified ε of the last step.
+struct LastEps<'a>(&'a mut f64);
+
+impl Observer for LastEps<'_> {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        *self.0 = report.eps;
+        Ok(())
+    }
 }
 
 impl CrowdModel {
@@ -255,17 +267,17 @@ impl CrowdModel {
                 settings.desired_speed_factor
             )));
         }
-        let step = scene.time.step;
         let sim = Simulation::new(scene)?;
         let people = sim.total_people();
         let mut model = Self {
             sim,
-            step,
             time: settings.start_time,
             eps: 0.0,
             mean_speed: 0.0,
+            min_gap: None,
             people,
             before: Vec::new(),
+            after: Vec::new(),
         };
         model.apply(settings)?;
         Ok(model)
@@ -294,13 +306,14 @@ impl CrowdModel {
         if self.sim.exit_open(0).is_some() {
             self.sim.set_exit_open(0, settings.door_open)?;
         }
+        self.min_gap = None;
         Ok(())
     }
 
-    /// Steps from `t` to `t + h` with internal steps of the scene's step (the last one
-    /// shortened to land on `t + h`; one that differs from the step by rounding only is taken
-    /// as the step, so that communication steps that are multiples of it give the internal
-    /// steps of a native run).
+    /// Steps from `t` to `t + h` as the native driver steps (the scene's fixed step, the last
+    /// one before each output time or communication point shortened, or adaptive steps when
+    /// the scene sets `time.tol`), so that communication steps that are multiples of the step
+    /// give the internal steps of a native run.
     pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         if (t - self.time).abs() > 1e-9 * t.abs().max(1.0) {
             return Err(FmuError::Setting(format!(
@@ -308,38 +321,19 @@ impl CrowdModel {
                 self.time
             )));
         }
-        self.before.clear();
-        self.before.resize(2 * self.people, f64::NAN);
-        let f = self.sim.frame();
-        for (k, &id) in f.ids.iter().enumerate() {
-            self.before[2 * id as usize] = f.positions[2 * k];
-            self.before[2 * id as usize + 1] = f.positions[2 * k + 1];
-        }
-        let n = ((h / self.step) - 1e-9).ceil().max(1.0) as usize;
-        for k in 0..n {
-            let mut mu = if k + 1 < n {
-                self.step
-            } else {
-                h - self.step * (n - 1) as f64
-            };
-            if (mu - self.step).abs() <= 1e-12 * self.step {
-                mu = self.step;
-            }
-            let report = self.sim.step(mu)?;
-            self.eps = report.eps;
-        }
+        self.before.resize(2 * self.people, 0.0);
+        self.sim.frame().positions_by_id(&mut self.before);
+        self.min_gap = None;
+        self.sim
+            .advance_to(self.sim.time() + h, &mut LastEps(&mut self.eps))?;
         self.time = t + h;
         // Mean speed of the people present before and after the communication step.
-        let f = self.sim.frame();
+        self.after.resize(2 * self.people, 0.0);
+        self.sim.frame().positions_by_id(&mut self.after);
         let (mut sum, mut count) = (0.0, 0usize);
-        for (k, &id) in f.ids.iter().enumerate() {
-            let (x0, y0) = (
-                self.before[2 * id as usize],
-                self.before[2 * id as usize + 1],
-            );
-            if x0.is_finite() {
-                sum += ((f.positions[2 * k] - x0).powi(2) + (f.positions[2 * k + 1] - y0).powi(2))
-                    .sqrt();
+        for (b, a) in self.before.chunks_exact(2).zip(self.after.chunks_exact(2)) {
+            if b[0].is_finite() && a[0].is_finite() {
+                sum += ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
                 count += 1;
             }
         }
@@ -351,12 +345,13 @@ impl CrowdModel {
         Ok(())
     }
 
-    /// A Real output.
-    pub fn real(&self, vr: u32) -> Option<f64> {
+    /// A Real output (the smallest gap is computed once per configuration, at its first read).
+    pub fn real(&mut self, vr: u32) -> Option<f64> {
         Some(match vr {
             vr::MEAN_SPEED => self.mean_speed,
             vr::MIN_GAP => {
-                let gap = self.sim.min_gap(1.0);
+                let sim = &mut self.sim;
+                let gap = *self.min_gap.get_or_insert_with(|| sim.min_gap(1.0));
                 if gap.is_finite() { gap } else { 1.0 }
             }
             vr::EPS => self.eps,
@@ -366,7 +361,7 @@ impl CrowdModel {
 
     /// An Integer output.
     pub fn integer(&self, vr: u32) -> Option<i32> {
-        let passed = self.sim.exit_times().len();
+        let passed = self.sim.exit_records().len();
         Some(match vr {
             vr::PEOPLE_INSIDE => (self.people - passed) as i32,
             vr::PEOPLE_EVACUATED => passed as i32,
@@ -377,25 +372,11 @@ impl CrowdModel {
 
     /// Positions `[x0, y0, x1, y1, ...]` by person id (NaN when gone) into `out`.
     pub fn positions(&self, out: &mut [f64]) {
-        out.fill(f64::NAN);
-        let f = self.sim.frame();
-        for (k, &id) in f.ids.iter().enumerate() {
-            let i = id as usize;
-            if 2 * i + 1 < out.len() {
-                out[2 * i] = f.positions[2 * k];
-                out[2 * i + 1] = f.positions[2 * k + 1];
-            }
-        }
+        self.sim.frame().positions_by_id(out);
     }
 
     /// Radii by person id (NaN when gone) into `out`.
     pub fn radii(&self, out: &mut [f64]) {
-        out.fill(f64::NAN);
-        let f = self.sim.frame();
-        for (k, &id) in f.ids.iter().enumerate() {
-            if let Some(r) = out.get_mut(id as usize) {
-                *r = f.radii[k];
-            }
-        }
+        self.sim.frame().radii_by_id(out);
     }
 }

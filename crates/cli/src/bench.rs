@@ -8,7 +8,8 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use moreau_crowd::{Hall, Scene, Simulation, SolverKind, SolverSettings};
+use moreau_core::StepReport;
+use moreau_crowd::{Hall, Observer, ObserverError, Scene, Simulation, SolverKind, SolverSettings};
 use moreau_solve::{
     ClarabelReference, ClarabelSettings, ProjectionSolution, ProjectionSolver, Target,
 };
@@ -85,7 +86,7 @@ struct Comparison {
 fn hall(args: &BenchArgs, n: usize) -> Result<Scene> {
     let r_min: f64 = 0.18;
     let mut hall = Hall::new(n, args.density);
-    hall.horizon = 0.05 * (args.warmup + args.steps) as f64;
+    hall.horizon = 0.05 * (args.warmup + args.steps + 1) as f64;
     hall.solver = SolverSettings {
         kind: args.kind,
         threads: args.threads,
@@ -124,14 +125,13 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     let side = (n as f64 / args.density).sqrt();
     let mut sim = Simulation::new(scene)?;
     let setup = start.elapsed().as_secs_f64();
-    for _ in 0..args.warmup {
-        sim.step(0.05)?;
-    }
+    sim.advance_to(0.05 * args.warmup as f64, &mut ())?;
+    let mut measured = Reports::default();
+    sim.advance_to(0.05 * (args.warmup + args.steps) as f64, &mut measured)?;
     let (mut total, mut assemble, mut solve) = (Vec::new(), Vec::new(), Vec::new());
     let (mut analyse, mut factorize) = (Vec::new(), Vec::new());
     let (mut rows, mut active, mut iterations, mut eps, mut viol) = (0.0, 0.0, 0.0, 0.0f64, 0.0f64);
-    for _ in 0..args.steps {
-        let r = sim.step(0.05)?;
+    for r in &measured.0 {
         total.push(1e3 * r.timings.total);
         assemble.push(1e3 * r.timings.assemble);
         solve.push(1e3 * r.timings.solve);
@@ -170,10 +170,23 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     })
 }
 
+/// Keeps every step report.
+#[derive(Default)]
+struct Reports(Vec<StepReport>);
+
+impl Observer for Reports {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        self.0.push(report.clone());
+        Ok(())
+    }
+}
+
 /// One more step with the fast solver, then its projection again with Clarabel.
 fn compare(sim: &mut Simulation) -> Result<Comparison> {
     let mu = 0.05;
-    let r = sim.step(mu)?;
+    let mut last = Reports::default();
+    sim.advance_to(sim.time() + mu, &mut last)?;
+    let r = last.0.pop().context("no step taken")?;
     let problem = sim.last_projection();
     let target = Target {
         gap: r.eps_target / (2.0 * mu * mu),

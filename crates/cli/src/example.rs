@@ -27,22 +27,28 @@ pub fn example_8_1(a: f64, b: f64, x0: f64, h0: f64, t_end: f64) -> Result<()> {
         let field = FnField::new(1, move |_t, x: &[f64], out: &mut [f64]| {
             out[0] = -(a + 1.0) * x[0] + b
         });
-        let half_line = HalfSpaces::new(vec![HalfSpace::new(vec![-1.0], 0.0)?])?;
+        let mut half_line = HalfSpaces::new(vec![HalfSpace::new(vec![-1.0], 0.0)?])?;
         let correction = LinearizedProjection::new(
-            half_line,
             Apgd::new(ApgdSettings::default())?,
             LinearizedSettings::default(),
         )?;
-        let mut scheme = Scheme::new(field, correction, EpsPolicy::default());
+        let mut scheme = Scheme::new(correction, EpsPolicy::default());
         let mut x = [x0];
         let (mut err, mut iters, mut eps, mut steps) = (0.0_f64, 0usize, 0.0_f64, 0usize);
         scheme
-            .run(0.0, &mut x, &StepSequence::Fixed { h, t_end }, |r, x| {
-                err = err.max((x[0] - exact_8_1(a, b, x0, r.t)).abs());
-                iters += r.iterations;
-                eps = eps.max(r.eps);
-                steps += 1;
-            })
+            .run(
+                &field,
+                &mut half_line,
+                0.0,
+                &mut x,
+                &StepSequence::Fixed { h, t_end },
+                |r, x| {
+                    err = err.max((x[0] - exact_8_1(a, b, x0, r.t)).abs());
+                    iters += r.iterations;
+                    eps = eps.max(r.eps);
+                    steps += 1;
+                },
+            )
             .with_context(|| format!("run with h = {h}"))?;
         let order = prev.map_or(String::from("-"), |(ph, pe)| {
             format!("{:.3}", (pe / err).ln() / (ph / h).ln())

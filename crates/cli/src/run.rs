@@ -7,8 +7,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use moreau_crowd::{Scene, Simulation, SolverKind};
-use moreau_integrate::{AdaptiveSettings, ErrorEstimate, StepController};
+use moreau_core::{RunStats, StepReport};
+use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
+use moreau_integrate::ErrorEstimate;
 use moreau_io::{Overwrite, RunFile, RunHeader, RunWriter};
 use serde::Serialize;
 
@@ -53,20 +54,22 @@ pub enum Estimate {
     Velocity,
 }
 
-/// The adaptive controller for a scene and `--tol`, with the output interval as largest step.
-pub fn controller(scene: &Scene, tol: f64, estimate: Estimate) -> Result<StepController> {
-    let mut settings = AdaptiveSettings::new(tol);
-    settings.mu_max = settings
-        .mu_max
-        .min(scene.time.output_interval)
-        .min(scene.time.horizon);
-    settings.mu_first = scene.time.step.min(settings.mu_max);
-    settings.mu_min = settings.mu_min.min(settings.mu_first);
-    settings.estimate = match estimate {
-        Estimate::Doubling => ErrorEstimate::StepDoubling,
-        Estimate::Velocity => ErrorEstimate::VelocityChange,
-    };
-    StepController::new(settings).context("--tol")
+impl Estimate {
+    /// The integrator's name for it.
+    pub fn error_estimate(self) -> ErrorEstimate {
+        match self {
+            Estimate::Doubling => ErrorEstimate::StepDoubling,
+            Estimate::Velocity => ErrorEstimate::VelocityChange,
+        }
+    }
+}
+
+/// `scene` with adaptive steps of tolerance `tol` (the scene's `time.tol`, `time.estimate`).
+pub fn adaptive(scene: &Scene, tol: f64, estimate: Estimate) -> Scene {
+    let mut scene = scene.clone();
+    scene.time.tol = Some(tol);
+    scene.time.estimate = Some(estimate.error_estimate());
+    scene
 }
 
 /// What a run reports at its end (the `--summary-json` object and the file's `summary`).
@@ -109,19 +112,7 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
 
 fn solver_text(sim: &Simulation) -> String {
     let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
-    let big = sim.total_people() > SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE;
-    let solver = match sim.solver_kind() {
-        SolverKind::Clarabel => "Clarabel alone",
-        SolverKind::Apgd => "APGD with Clarabel as fallback",
-        SolverKind::Auto if big => {
-            "APGD while contacts are sparse, our interior point once dense, APGD as fallback"
-        }
-        SolverKind::Auto => {
-            "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
-        }
-        _ if big => "our interior point with APGD as fallback",
-        _ => "our interior point with Clarabel as fallback",
-    };
+    let solver = sim.solver_kind().describe(2 * sim.total_people());
     format!(
         "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \
          broad phase {:?}, up to 8 redone steps per step\n",
@@ -145,7 +136,11 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         // Before the (possibly long) set-up: a bad path fails at once.
         moreau_io::check_output(path, overwrite)?;
     }
-    let (scene, origin) = load_scene(args)?;
+    let (mut scene, origin) = load_scene(args)?;
+    if let Some(tol) = args.tol {
+        scene = adaptive(&scene, tol, args.estimate);
+        scene.validate().context("--tol")?;
+    }
     let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
     let people = sim.total_people();
     let frame = sim.frame();
@@ -175,10 +170,6 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         None => None,
     };
 
-    let mut stepping = match args.tol {
-        Some(tol) => Stepping::Adaptive(controller(sim.scene(), tol, args.estimate)?),
-        None => Stepping::Fixed(sim.schedule()),
-    };
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
     } else {
@@ -196,8 +187,16 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
-    let mut stats = Stats::default();
-    let outcome = drive(&mut sim, &mut stepping, writer.as_mut(), &bar, &mut stats);
+    let mut record = Record {
+        writer: writer.as_mut(),
+        bar: &bar,
+        stats: RunStats::default(),
+        frames: 0,
+        exits: 0,
+        people,
+    };
+    let outcome = sim.run(&mut record);
+    let (stats, frames) = (record.stats, record.frames);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 
@@ -210,25 +209,29 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         output: args.output.as_ref().map(|p| p.display().to_string()),
         status: status.clone(),
         people,
-        passed_exit: sim.exit_times().len(),
-        not_yet_out: people - sim.exit_times().len(),
+        passed_exit: sim.exit_records().len(),
+        not_yet_out: people - sim.exit_records().len(),
         steps: stats.steps,
-        frames: stats.frames,
+        frames,
         simulated_time: sim.time(),
         wall_seconds: wall,
         ms_per_step: 1e3 * wall / stats.steps.max(1) as f64,
         steps_per_second: stats.steps as f64 / wall.max(1e-12),
-        iterations_per_step: stats.iterations as f64 / stats.steps.max(1) as f64,
+        iterations_per_step: stats.iterations_per_step(),
         max_eps: stats.max_eps,
         max_violation: stats.max_violation,
         steps_redone: stats.redone,
         steps_rejected: stats.rejected,
-        tol: args.tol,
+        tol: sim.scene().time.tol,
         broad_phase: format!("{:?}", sim.broad_phase()),
-        solvers: stats.solvers.clone(),
+        solvers: stats
+            .solvers
+            .iter()
+            .map(|&(s, n)| (s.to_string(), n))
+            .collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("plain data");
-    let mut failed = outcome.err();
+    let mut failed: Option<anyhow::Error> = outcome.err().map(anyhow::Error::from);
     if let Some(w) = writer
         && let Err(e) = w.finish(&status, &json)
     {
@@ -269,100 +272,51 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
 }
 
-#[derive(Debug, Default)]
-struct Stats {
-    steps: usize,
+/// What `moreau run` does as the run goes: writes steps, exits and frames to the file, adds
+/// up the steps, moves the progress bar.
+struct Record<'a> {
+    writer: Option<&'a mut RunWriter>,
+    bar: &'a ProgressBar,
+    stats: RunStats,
     frames: usize,
-    iterations: usize,
-    max_eps: f64,
-    max_violation: f64,
-    redone: usize,
-    rejected: usize,
-    solvers: Vec<(String, usize)>,
+    exits: usize,
+    people: usize,
 }
 
-/// How the run chooses its steps.
-pub enum Stepping {
-    /// The scene's schedule: `(μ_k, frame after it?)`.
-    Fixed(Vec<(f64, bool)>),
-    /// Chosen by a controller; frames every output interval.
-    Adaptive(StepController),
-}
-
-/// The step loop: steps, records steps and exits, writes frames, moves the bar.
-fn drive(
-    sim: &mut Simulation,
-    stepping: &mut Stepping,
-    mut writer: Option<&mut RunWriter>,
-    bar: &ProgressBar,
-    stats: &mut Stats,
-) -> Result<()> {
-    let people = sim.total_people();
-    let time = sim.scene().time;
-    if let Some(w) = writer.as_deref_mut() {
-        let f = sim.frame();
-        w.frame(f.t, f.ids, f.positions)?;
-    }
-    stats.frames += 1;
-    let mut exits_seen = 0;
-    let mut k = 0;
-    loop {
-        let (report, frame) = match stepping {
-            Stepping::Fixed(schedule) => {
-                let Some(&(mu, frame)) = schedule.get(k) else {
-                    break;
-                };
-                (sim.step(mu)?, frame)
-            }
-            Stepping::Adaptive(controller) => {
-                if sim.time() >= time.horizon {
-                    break;
-                }
-                // The next output time; frames land on it exactly.
-                let next = ((stats.frames as f64) * time.output_interval).min(time.horizon);
-                let step = sim.step_adaptive(controller, next)?;
-                stats.rejected += step.rejected;
-                let due = step.report.t >= next;
-                (step.report, due)
-            }
-        };
-        k += 1;
-        stats.steps += 1;
-        stats.iterations += report.iterations;
-        stats.max_eps = stats.max_eps.max(report.eps);
-        stats.max_violation = stats.max_violation.max(report.violation);
-        stats.redone += report.redone;
-        match stats.solvers.iter_mut().find(|(s, _)| s == report.solver) {
-            Some((_, n)) => *n += 1,
-            None => stats.solvers.push((report.solver.to_string(), 1)),
+impl Observer for Record<'_> {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        self.stats.add(report);
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.step(report);
         }
-        let exits = sim.exit_times();
-        if let Some(w) = writer.as_deref_mut() {
-            w.step(&report);
-            for &(id, t) in &exits[exits_seen..] {
-                w.exit(id, t)?;
-            }
-        }
-        exits_seen = exits.len();
-        if frame {
-            if let Some(w) = writer.as_deref_mut() {
-                let f = sim.frame();
-                w.frame(f.t, f.ids, f.positions)?;
-            }
-            stats.frames += 1;
-        }
-        if !bar.is_hidden() {
-            bar.set_position((report.t * 1e3).round() as u64);
-            let rate = k as f64 / bar.elapsed().as_secs_f64().max(1e-9);
-            bar.set_message(format!(
+        if !self.bar.is_hidden() {
+            self.bar.set_position((report.t * 1e3).round() as u64);
+            let rate = self.stats.steps as f64 / self.bar.elapsed().as_secs_f64().max(1e-9);
+            self.bar.set_message(format!(
                 "t = {:7.2} s  {:>8.1} steps/s  {:>7} people left",
                 report.t,
                 rate,
-                people - exits_seen
+                self.people - self.exits
             ));
         }
+        Ok(())
     }
-    Ok(())
+
+    fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
+        self.exits += 1;
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.exit(record.id, record.t)?;
+        }
+        Ok(())
+    }
+
+    fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.frame(f.t, f.ids, f.positions)?;
+        }
+        self.frames += 1;
+        Ok(())
+    }
 }
 
 fn write_summary(target: &Path, json: &str) -> Result<()> {

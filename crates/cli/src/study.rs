@@ -4,10 +4,10 @@
 use std::time::Instant;
 
 use anyhow::{Result, ensure};
-use moreau_core::StepReport;
-use moreau_crowd::{Scene, Simulation};
+use moreau_core::{RunStats, StepReport};
+use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
 
-use crate::run::{Estimate, controller};
+use crate::run::{Estimate, adaptive};
 
 /// How a run chooses its steps.
 pub enum How {
@@ -37,6 +37,41 @@ pub struct Sampled {
     pub wall: f64,
 }
 
+/// Collects everyone's position by id at every frame (the sampling times), and the steps.
+struct Samples {
+    people: usize,
+    states: Vec<Vec<f64>>,
+    passed: Vec<usize>,
+    exits: usize,
+    stats: RunStats,
+}
+
+impl Observer for Samples {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        self.stats.add(report);
+        Ok(())
+    }
+    fn exit(&mut self, _record: &ExitRecord) -> Result<(), ObserverError> {
+        self.exits += 1;
+        Ok(())
+    }
+    fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
+        if f.ids.len() != self.people {
+            return Err(format!(
+                "people left the scene at t = {}: the study compares everyone at every t_i, use \
+                 exits with action = \"continue\"",
+                f.t
+            )
+            .into());
+        }
+        let mut q = vec![0.0; 2 * self.people];
+        f.positions_by_id(&mut q);
+        self.states.push(q);
+        self.passed.push(self.exits);
+        Ok(())
+    }
+}
+
 /// Runs `scene` with `how`, sampled `samples` times; everyone must stay in the scene
 /// (exits with `action = "continue"`) so that runs compare person by person.
 pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
@@ -44,81 +79,51 @@ pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
     let mut scene = scene.clone();
     let interval = scene.time.horizon / samples as f64;
     scene.time.output_interval = interval;
-    if let How::Fixed(h) = how {
-        let per = interval / h;
-        ensure!(
-            (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
-            "step {h} does not divide the sampling interval {interval} (T / samples)"
-        );
-        scene.time.step = *h;
-    }
-    let mut sim = Simulation::new(scene.clone())?;
-    let n = sim.total_people();
-    let grab = |sim: &Simulation| -> Result<Vec<f64>> {
-        let f = sim.frame();
-        ensure!(
-            f.ids.len() == n,
-            "people left the scene at t = {}: the study compares everyone at every t_i, use \
-             exits with action = \"continue\"",
-            f.t
-        );
-        let mut q = vec![0.0; 2 * n];
-        for (k, &id) in f.ids.iter().enumerate() {
-            q[2 * id as usize] = f.positions[2 * k];
-            q[2 * id as usize + 1] = f.positions[2 * k + 1];
+    match how {
+        How::Fixed(h) => {
+            let per = interval / h;
+            ensure!(
+                (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
+                "step {h} does not divide the sampling interval {interval} (T / samples)"
+            );
+            scene.time.step = *h;
+            scene.time.tol = None;
         }
-        Ok(q)
+        How::Adaptive(tol, estimate) => scene = adaptive(&scene, *tol, *estimate),
+    }
+    let mut sim = Simulation::new(scene)?;
+    let mut samples_seen = Samples {
+        people: sim.total_people(),
+        states: Vec::new(),
+        passed: Vec::new(),
+        exits: 0,
+        stats: RunStats::default(),
     };
     let start = Instant::now();
-    let mut out = Sampled {
-        states: vec![grab(&sim)?],
-        passed: vec![0],
-        steps: 0,
-        rejected: 0,
-        iterations: 0,
-        max_eps: 0.0,
-        max_violation: 0.0,
-        wall: 0.0,
-    };
-    let count = |out: &mut Sampled, r: &StepReport| {
-        out.steps += 1;
-        out.iterations += r.iterations;
-        out.max_eps = out.max_eps.max(r.eps);
-        out.max_violation = out.max_violation.max(r.violation);
-    };
-    match how {
-        How::Fixed(_) => {
-            for (mu, frame) in sim.schedule() {
-                let r = sim.step(mu)?;
-                count(&mut out, &r);
-                if frame {
-                    out.states.push(grab(&sim)?);
-                    out.passed.push(sim.exit_times().len());
-                }
-            }
-        }
-        How::Adaptive(tol, estimate) => {
-            let mut c = controller(&scene, *tol, *estimate)?;
-            for i in 1..=samples {
-                let next = (i as f64 * interval).min(scene.time.horizon);
-                while sim.time() < next {
-                    let s = sim.step_adaptive(&mut c, next)?;
-                    count(&mut out, &s.report);
-                    out.rejected += s.rejected;
-                }
-                out.states.push(grab(&sim)?);
-                out.passed.push(sim.exit_times().len());
-            }
-        }
-    }
-    out.wall = start.elapsed().as_secs_f64();
+    sim.run(&mut samples_seen)?;
+    let wall = start.elapsed().as_secs_f64();
+    let Samples {
+        states,
+        passed,
+        stats,
+        ..
+    } = samples_seen;
     ensure!(
-        out.states.len() == samples + 1,
+        states.len() == samples + 1,
         "expected {} states, got {}",
         samples + 1,
-        out.states.len()
+        states.len()
     );
-    Ok(out)
+    Ok(Sampled {
+        states,
+        passed,
+        steps: stats.steps,
+        rejected: stats.rejected,
+        iterations: stats.iterations,
+        max_eps: stats.max_eps,
+        max_violation: stats.max_violation,
+        wall,
+    })
 }
 
 /// Error (24) of Bernicot & Venel: `max_{i ≥ 1} |q_ref(t_i) − q(t_i)|` (Euclidean, all

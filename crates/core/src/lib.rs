@@ -18,7 +18,7 @@ mod traits;
 
 pub use error::CoreError;
 pub use parallel::Parallelism;
-pub use report::{SolveStatus, StageTimings, StepReport};
+pub use report::{RunStats, SolveStatus, StageTimings, StepReport};
 pub use rows::{ConstraintKey, ConstraintRows};
 pub use sets::{Ball, BoxSet, HalfSpace, HalfSpaces, SeparableAbs};
 pub use traits::{ConstraintSet, ConvexPart, ConvexSet, Field, FnField};

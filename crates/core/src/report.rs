@@ -50,6 +50,19 @@ pub struct StageTimings {
     pub total: f64,
 }
 
+impl StageTimings {
+    /// Adds `other`, stage by stage.
+    pub fn add(&mut self, other: &StageTimings) {
+        self.predict += other.predict;
+        self.assemble += other.assemble;
+        self.solve += other.solve;
+        self.solve_analyse += other.solve_analyse;
+        self.solve_factorize += other.solve_factorize;
+        self.verify += other.verify;
+        self.total += other.total;
+    }
+}
+
 /// The record of one accepted step of the catching-up scheme.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StepReport {
@@ -73,10 +86,55 @@ pub struct StepReport {
     pub active: usize,
     /// How often the step was redone because something outside the assembled set was crossed.
     pub redone: usize,
+    /// Trial steps rejected before this one was accepted (adaptive steps).
+    pub rejected: usize,
     /// How the projection solve ended.
     pub status: SolveStatus,
     /// Which solver produced the accepted answer.
     pub solver: &'static str,
     /// Seconds per stage.
     pub timings: StageTimings,
+}
+
+/// The step reports of a run, added up.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunStats {
+    /// Accepted steps.
+    pub steps: usize,
+    /// Trial steps rejected.
+    pub rejected: usize,
+    /// Steps redone with a wider margin.
+    pub redone: usize,
+    /// Solver iterations.
+    pub iterations: usize,
+    /// The largest certified ε (squared length).
+    pub max_eps: f64,
+    /// The largest violation (length).
+    pub max_violation: f64,
+    /// Seconds per stage, summed over the steps.
+    pub timings: StageTimings,
+    /// How many steps each solver answered, in the order they first did.
+    pub solvers: Vec<(&'static str, usize)>,
+}
+
+impl RunStats {
+    /// Adds one step.
+    pub fn add(&mut self, r: &StepReport) {
+        self.steps += 1;
+        self.rejected += r.rejected;
+        self.redone += r.redone;
+        self.iterations += r.iterations;
+        self.max_eps = self.max_eps.max(r.eps);
+        self.max_violation = self.max_violation.max(r.violation);
+        self.timings.add(&r.timings);
+        match self.solvers.iter_mut().find(|(s, _)| *s == r.solver) {
+            Some((_, n)) => *n += 1,
+            None => self.solvers.push((r.solver, 1)),
+        }
+    }
+
+    /// Solver iterations per step.
+    pub fn iterations_per_step(&self) -> f64 {
+        self.iterations as f64 / self.steps.max(1) as f64
+    }
 }

@@ -29,6 +29,9 @@ pub enum CrowdError {
         /// Why it is rejected.
         reason: String,
     },
+    /// An observer stopped the run.
+    #[error("{0}")]
+    Observer(#[source] Box<dyn std::error::Error + Send + Sync>),
     /// The time stepping failed.
     #[error(transparent)]
     Integrate(#[from] moreau_integrate::IntegrateError),

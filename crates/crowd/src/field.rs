@@ -1,9 +1,12 @@
 //! Desired velocities: geodesic distance to each goal (fast marching) and its descent direction.
 
+use std::cell::RefCell;
+
 use moreau_core::Field;
 use ndarray::Array2;
 
-use crate::geometry::Segment;
+use crate::people::{PeopleView, Place};
+use crate::walls::Walls;
 
 /// The geodesic distance to a goal around walls and obstacles, on a grid of square cells, with
 /// the unit descent direction at every cell centre.
@@ -145,36 +148,62 @@ impl DistanceField {
     }
 }
 
-/// The desired velocity `U(q)` of every person: speed × descent direction of the distance to
-/// the person's current goal, slid along any wall the person is touching so that it never
-/// points into a wall. Persons without a goal stand still.
-#[derive(Debug, Clone)]
-pub struct DesiredVelocity {
-    pub(crate) fields: Vec<DistanceField>,
-    pub(crate) walls: Vec<Segment>,
-    pub(crate) speed: Vec<f64>,
-    pub(crate) radius: Vec<f64>,
-    /// Index into `fields`, or `None` for a person who has arrived.
-    pub(crate) goal: Vec<Option<usize>>,
-    /// Multiplies every desired speed (an input of co-simulation).
-    pub speed_factor: f64,
+/// The distance fields a person's place leads to: exit `e`'s own, and its target area's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ExitGoal {
+    /// Index of the field of the distance to the exit.
+    pub exit: usize,
+    /// Index of the field of the distance to the exit's target area, if it has one.
+    pub target: Option<usize>,
 }
 
-impl DesiredVelocity {
+/// The desired velocity `U(q)` of every person: speed × descent direction of the distance to
+/// the person's current goal, slid along any wall the person is touching so that it never
+/// points into a wall. Persons without a goal stand still. Borrowed for a step from the
+/// people, the walls and the distance fields.
+#[derive(Debug)]
+pub struct DesiredVelocity<'a> {
+    /// The distance fields.
+    pub fields: &'a [DistanceField],
+    /// Per exit, its fields.
+    pub goals: &'a [ExitGoal],
+    /// The walls.
+    pub walls: &'a Walls,
+    /// The people.
+    pub people: PeopleView<'a>,
+    /// Multiplies every desired speed (an input of co-simulation).
+    pub speed_factor: f64,
+    /// Scratch for the walls near a person.
+    pub near: &'a RefCell<Vec<u32>>,
+}
+
+impl DesiredVelocity<'_> {
     /// How close to a wall (beyond the radius) the sliding starts.
-    const WALL_RANGE: f64 = 0.05;
+    pub const WALL_RANGE: f64 = 0.05;
+
+    /// The distance field person `i` descends, if any.
+    pub fn goal(&self, i: usize) -> Option<usize> {
+        match self.people.place[i] {
+            Place::ToExit(e) => Some(self.goals[e as usize].exit),
+            Place::ToTarget(e) => self.goals[e as usize].target,
+            Place::Arrived(_) => None,
+        }
+    }
 
     /// The desired velocity of person `i` at `p`.
-    pub fn velocity(&self, i: usize, p: [f64; 2]) -> [f64; 2] {
-        let Some(g) = self.goal[i] else {
+    pub fn velocity(&self, i: usize, p: [f64; 2], near: &mut Vec<u32>) -> [f64; 2] {
+        let Some(g) = self.goal(i) else {
             return [0.0, 0.0];
         };
         let mut d = self.fields[g].direction(p);
-        for wall in &self.walls {
-            let c = wall.closest(p);
+        let r = self.people.radius[i];
+        self.walls.near(p, r + Self::WALL_RANGE, near);
+        let segments = self.walls.segments();
+        for &w in near.iter() {
+            let c = segments[w as usize].closest(p);
             let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
             let dist = (ex * ex + ey * ey).sqrt();
-            if dist > self.radius[i] + Self::WALL_RANGE || dist == 0.0 {
+            if dist > r + Self::WALL_RANGE || dist == 0.0 {
                 continue;
             }
             let n = [ex / dist, ey / dist];
@@ -183,18 +212,19 @@ impl DesiredVelocity {
                 d = [d[0] - into * n[0], d[1] - into * n[1]];
             }
         }
-        let s = self.speed[i] * self.speed_factor;
+        let s = self.people.speed[i] * self.speed_factor;
         [s * d[0], s * d[1]]
     }
 }
 
-impl Field for DesiredVelocity {
+impl Field for DesiredVelocity<'_> {
     fn dim(&self) -> usize {
-        2 * self.speed.len()
+        2 * self.people.id.len()
     }
     fn eval(&self, _t: f64, q: &[f64], out: &mut [f64]) {
-        for i in 0..self.speed.len() {
-            let v = self.velocity(i, [q[2 * i], q[2 * i + 1]]);
+        let mut near = self.near.borrow_mut();
+        for i in 0..self.people.id.len() {
+            let v = self.velocity(i, [q[2 * i], q[2 * i + 1]], &mut near);
             out[2 * i] = v[0];
             out[2 * i + 1] = v[1];
         }

@@ -1,26 +1,40 @@
 //! Crowds as disks that never overlap (Maury–Venel, `seeds/000` §5), on the moreau core.
 //!
-//! A [`Scene`] (TOML) declares the walkable area, exits, groups, time and solver settings;
-//! [`Simulation`] turns it into a field ([`DesiredVelocity`], from geodesic distances) and a
-//! constraint set ([`CrowdConstraints`]: disk–disk and disk–wall rows found by a
-//! [`BroadPhase`]) and steps the catching-up scheme. Only what the scene declares is built.
+//! A [`Scene`] (TOML) declares the walkable area, exits, groups, time and solver settings.
+//! [`Simulation`] places the [`People`] (the one owner of every person's data) and steps them
+//! with the catching-up scheme: the desired velocity ([`DesiredVelocity`], from geodesic
+//! distances) and the feasible set ([`CrowdContacts`]: rows from the [`ContactSource`]s, pairs
+//! of people through a [`BroadPhase`], people and walls through the [`Walls`] index) are
+//! borrowed from the people at every step. [`Simulation::advance_to`] is the one step loop;
+//! [`SimState`] is its state as a value. Only what the scene declares is built.
 
 mod broad;
-mod constraints;
+mod contacts;
 mod error;
+mod exits;
 mod field;
 mod geometry;
 mod hall;
+mod people;
 mod scene;
 mod sim;
+mod spawn;
+mod state;
+mod walls;
 
 pub use broad::{
     BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, choose_broad_phase,
 };
-pub use constraints::CrowdConstraints;
+pub use contacts::{
+    ContactKind, ContactQuery, ContactSource, ContactSources, CrowdContacts, PersonPairs,
+    PersonWalls,
+};
 pub use error::CrowdError;
-pub use field::{DesiredVelocity, DistanceField};
+pub use field::{DesiredVelocity, DistanceField, ExitGoal};
 pub use geometry::{Polygon, Segment};
 pub use hall::Hall;
+pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind, SolverSettings};
-pub use sim::{Frame, Simulation};
+pub use sim::{Frame, Observer, ObserverError, Simulation};
+pub use state::SimState;
+pub use walls::Walls;

@@ -4,6 +4,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use moreau_integrate::{AdaptiveSettings, ErrorEstimate, Stepping};
+pub use moreau_solve::SolverKind;
+
 use crate::error::CrowdError;
 use crate::geometry::{Polygon, Segment};
 
@@ -133,57 +136,36 @@ pub struct Group {
 pub struct Time {
     /// End time (s).
     pub horizon: f64,
-    /// Step `μ` (s).
+    /// Step `μ` (s); with `tol`, the first step tried.
     pub step: f64,
     /// Interval between recorded frames (s).
     pub output_interval: f64,
+    /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
+    /// 1e-6 s and min(0.5 s, output interval, horizon), starting from `step`) and the
+    /// projection accuracy `ε_k = (θ·tol)² μ_k/μ_max` with θ = 0.1. Absent: fixed steps.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tol: Option<f64>,
+    /// The error estimate of adaptive steps (`velocity-change`, the default, or
+    /// `step-doubling`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<ErrorEstimate>,
 }
 
-/// Which projection solver.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum SolverKind {
-    /// Accelerated projected gradient, with Clarabel as fallback.
-    Apgd,
-    /// Clarabel's interior point only (reference).
-    Clarabel,
-    /// Our interior point (sparse Cholesky normal equations, symbolic analysis reused while
-    /// the contact pattern holds), with Clarabel as fallback up to
-    /// [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`] people and APGD above.
-    Interior,
-    /// Chosen for each projection (`moreau_solve::AutoSolver`): APGD while few rows were
-    /// active in the previous step (free flow: 1.4× faster there), our interior point once
-    /// contacts are dense (jams: 3–9× faster), with the interior point's fallbacks. The step
-    /// report names the solver that answered. The default.
-    #[default]
-    Auto,
-}
-
-impl std::str::FromStr for SolverKind {
-    type Err = String;
-
-    /// The names scene files use (`apgd`, `clarabel`, `interior`, `auto`).
-    fn from_str(s: &str) -> Result<Self, String> {
-        use serde::de::IntoDeserializer;
-        Self::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| e.to_string())
+impl Time {
+    /// How the run chooses its steps: fixed steps of `step`, or with `tol` adaptive steps
+    /// whose largest is the output interval (frames land on output times).
+    pub fn stepping(&self) -> Result<Stepping, CrowdError> {
+        let Some(tol) = self.tol else {
+            return Ok(Stepping::fixed(self.step)?);
+        };
+        let mut settings = AdaptiveSettings::new(tol);
+        settings.mu_max = settings.mu_max.min(self.output_interval).min(self.horizon);
+        settings.mu_first = self.step.min(settings.mu_max);
+        settings.mu_min = settings.mu_min.min(settings.mu_first);
+        settings.estimate = self.estimate.unwrap_or(ErrorEstimate::VelocityChange);
+        Stepping::adaptive(settings)
+            .map_err(|e| CrowdError::invalid("time.tol", tol, e.to_string()))
     }
-}
-
-impl SolverKind {
-    /// The name scene files use.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            SolverKind::Apgd => "apgd",
-            SolverKind::Clarabel => "clarabel",
-            SolverKind::Interior => "interior",
-            SolverKind::Auto => "auto",
-        }
-    }
-
-    /// The largest crowd whose interior point (or `Auto`) gets Clarabel as fallback (APGD above): the
-    /// largest size at which Clarabel was measured (its factorization took 253 MB at 100,000
-    /// people, benches/README.md).
-    pub const CLARABEL_FALLBACK_MAX_PEOPLE: usize = 100_000;
 }
 
 /// Which broad phase.
@@ -352,6 +334,15 @@ impl Scene {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
             }
+        }
+        if let Some(tol) = t.tol
+            && !(tol > 0.0 && tol.is_finite())
+        {
+            return Err(CrowdError::invalid(
+                "time.tol",
+                tol,
+                "must be finite and > 0",
+            ));
         }
         let s = &self.solver;
         for (f, v) in [
@@ -559,37 +550,5 @@ impl Scene {
             .iter()
             .map(|g| g.radius.max())
             .fold(0.0, f64::max)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn solver_kind_names_are_the_scene_file_names() {
-        for kind in [
-            SolverKind::Apgd,
-            SolverKind::Clarabel,
-            SolverKind::Interior,
-            SolverKind::Auto,
-        ] {
-            let settings = SolverSettings {
-                kind,
-                ..SolverSettings::default()
-            };
-            let text = toml::to_string(&settings).unwrap();
-            assert!(
-                text.contains(&format!("kind = \"{}\"", kind.as_str())),
-                "{text}"
-            );
-            assert_eq!(kind.as_str().parse::<SolverKind>(), Ok(kind));
-        }
-        assert!(
-            "newton"
-                .parse::<SolverKind>()
-                .unwrap_err()
-                .contains("newton")
-        );
     }
 }

@@ -1,83 +1,26 @@
-//! A crowd run: people placed from the scene, stepped by the catching-up scheme, exits applied.
+//! `Simulation`: a crowd run as a value (its scene, people, geometry and pipelines) and
+//! `advance_to`, the one loop over its steps, which reports steps, frames and exits to an
+//! observer the caller passes.
 
-use std::collections::HashMap;
+use std::cell::RefCell;
 
-use moreau_core::Parallelism;
-use moreau_core::StepReport;
-use moreau_integrate::{
-    AdaptiveStep, EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepController,
-};
-use moreau_solve::{
-    Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings,
-    InteriorPoint, InteriorPointSettings, ProjectionSolver,
-};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use moreau_core::{ConstraintRows, Parallelism, RunStats, StepReport};
+use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Stepping};
+use moreau_solve::ProjectionSolver;
 
 use crate::broad::{BroadPhaseKind, choose_broad_phase};
-use crate::constraints::CrowdConstraints;
+use crate::contacts::{ContactSources, CrowdContacts, PersonPairs, PersonWalls};
 use crate::error::CrowdError;
-use crate::field::{DesiredVelocity, DistanceField};
-use crate::geometry::{Polygon, Segment};
-use crate::scene::{BroadPhaseChoice, ExitAction, Quantity, Scene, SolverKind};
+use crate::exits::Exits;
+use crate::field::DesiredVelocity;
+use crate::geometry::Segment;
+use crate::people::{ExitRecord, People, Place};
+use crate::scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind};
+use crate::spawn::place_people;
+use crate::state::SimState;
+use crate::walls::Walls;
 
-/// Where a person is headed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Stage {
-    /// Walking to exit `e`.
-    ToExit(usize),
-    /// Passed exit `e`, walking to its target area.
-    ToTarget(usize),
-    /// Inside the target area of exit `e`: standing.
-    Arrived(usize),
-}
-
-/// An exit as the run uses it.
-#[derive(Debug, Clone)]
-struct ExitRuntime {
-    area: Option<Polygon>,
-    segment: Option<Segment>,
-    action: ExitAction,
-    field: usize,
-    target: Option<(Polygon, usize)>,
-    open: bool,
-}
-
-impl ExitRuntime {
-    /// The wall that closes the exit.
-    fn closure(&self) -> Segment {
-        if let Some(s) = self.segment {
-            return s;
-        }
-        let (lo, hi) = self.area.as_ref().expect("an area or a segment").bounds();
-        if hi[1] - lo[1] >= hi[0] - lo[0] {
-            let x = 0.5 * (lo[0] + hi[0]);
-            Segment {
-                a: [x, lo[1]],
-                b: [x, hi[1]],
-            }
-        } else {
-            let y = 0.5 * (lo[1] + hi[1]);
-            Segment {
-                a: [lo[0], y],
-                b: [hi[0], y],
-            }
-        }
-    }
-
-    fn reached(&self, p: [f64; 2], r: f64) -> bool {
-        if !self.open {
-            return false;
-        }
-        match (&self.area, &self.segment) {
-            (Some(a), _) => a.contains(p),
-            (None, Some(s)) => s.distance(p) <= r,
-            _ => false,
-        }
-    }
-}
-
-/// One recorded configuration.
+/// One recorded configuration, borrowed from the people.
 #[derive(Debug, Clone, Copy)]
 pub struct Frame<'a> {
     /// Time.
@@ -90,86 +33,95 @@ pub struct Frame<'a> {
     pub radii: &'a [f64],
 }
 
-type CrowdScheme =
-    Scheme<DesiredVelocity, LinearizedProjection<CrowdConstraints, Box<dyn ProjectionSolver>>>;
+impl Frame<'_> {
+    /// Writes the positions into `out` at `[2 id, 2 id + 1]`, NaN for ids not present (and
+    /// ids beyond `out` skipped).
+    pub fn positions_by_id(&self, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        for (k, &id) in self.ids.iter().enumerate() {
+            let i = 2 * id as usize;
+            if i + 1 < out.len() {
+                out[i] = self.positions[2 * k];
+                out[i + 1] = self.positions[2 * k + 1];
+            }
+        }
+    }
 
-/// A crowd run built from a [`Scene`].
+    /// Writes the radii into `out` at `id`, NaN for ids not present.
+    pub fn radii_by_id(&self, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        for (k, &id) in self.ids.iter().enumerate() {
+            if let Some(r) = out.get_mut(id as usize) {
+                *r = self.radii[k];
+            }
+        }
+    }
+}
+
+/// An error an observer returns to stop the run (a file that cannot be written, say).
+pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
+
+/// What a run reports as it goes; every method defaults to doing nothing.
+pub trait Observer {
+    /// After every accepted step.
+    fn step(&mut self, _report: &StepReport) -> Result<(), ObserverError> {
+        Ok(())
+    }
+    /// At the start and at every output time (every `time.output_interval`, and the horizon).
+    fn frame(&mut self, _frame: &Frame<'_>) -> Result<(), ObserverError> {
+        Ok(())
+    }
+    /// When a person passes an exit (after the step's report).
+    fn exit(&mut self, _record: &ExitRecord) -> Result<(), ObserverError> {
+        Ok(())
+    }
+}
+
+/// Observes nothing.
+impl Observer for () {}
+
+/// Adds up the step reports.
+impl Observer for RunStats {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        self.add(report);
+        Ok(())
+    }
+}
+
+type Projection = LinearizedProjection<Box<dyn ProjectionSolver>>;
+
+/// A crowd run built from a [`Scene`]: the people (the one owner of their data), the walls,
+/// exits and distance fields, and the pipelines that step them (scheme, solver, contact
+/// sources), which hold only scratch memory and the warm start.
 pub struct Simulation {
     scene: Scene,
-    exits: Vec<ExitRuntime>,
-    scheme: CrowdScheme,
-    q: Vec<f64>,
-    stage: Vec<Stage>,
+    exits: Exits,
+    /// The scene's walls, before closed exits add theirs.
+    scene_walls: Vec<Segment>,
+    walls: Walls,
+    people: People,
+    exit_log: Vec<ExitRecord>,
+    scheme: Scheme<Projection>,
+    sources: ContactSources,
+    stepping: Stepping,
     t: f64,
     steps: usize,
-    exit_times: Vec<(u32, f64)>,
+    frames: usize,
+    speed_factor: f64,
     total: usize,
     broad: BroadPhaseKind,
-    solver: SolverKind,
-    /// The walls of the scene, before closed exits add theirs.
-    scene_walls: usize,
+    // scratch
+    near: RefCell<Vec<u32>>,
+    keep: Vec<bool>,
+    gap_rows: ConstraintRows,
 }
 
 impl std::fmt::Debug for Simulation {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Simulation")
             .field("t", &self.t)
-            .field("people", &self.stage.len())
+            .field("people", &self.people.len())
             .finish_non_exhaustive()
-    }
-}
-
-fn draw(q: &Quantity, rng: &mut ChaCha8Rng) -> f64 {
-    match *q {
-        Quantity::Fixed(x) => x,
-        Quantity::Uniform { min, max } => {
-            if max > min {
-                rng.random_range(min..=max)
-            } else {
-                min
-            }
-        }
-    }
-}
-
-/// Overlap test against people already placed, through a hash of cells of side `2 r_max`.
-struct Placed {
-    cell: f64,
-    cells: HashMap<(i64, i64), Vec<usize>>,
-    pos: Vec<[f64; 2]>,
-    radius: Vec<f64>,
-}
-
-impl Placed {
-    fn key(&self, p: [f64; 2]) -> (i64, i64) {
-        (
-            (p[0] / self.cell).floor() as i64,
-            (p[1] / self.cell).floor() as i64,
-        )
-    }
-    fn overlaps(&self, p: [f64; 2], r: f64) -> Option<usize> {
-        let (cx, cy) = self.key(p);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for &j in self
-                    .cells
-                    .get(&(cx + dx, cy + dy))
-                    .map_or(&[][..], |v| v.as_slice())
-                {
-                    let q = self.pos[j];
-                    if ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt() < r + self.radius[j] {
-                        return Some(j);
-                    }
-                }
-            }
-        }
-        None
-    }
-    fn insert(&mut self, p: [f64; 2], r: f64) {
-        let k = self.key(p);
-        self.cells.entry(k).or_default().push(self.pos.len());
-        self.pos.push(p);
-        self.radius.push(r);
     }
 }
 
@@ -178,254 +130,54 @@ impl Simulation {
     /// scene field at fault.
     pub fn new(scene: Scene) -> Result<Self, CrowdError> {
         scene.validate()?;
-        let walls = scene.walls();
-        let outer = Polygon {
-            vertices: scene.area.outer.clone(),
-        };
-        let (lo, hi) = outer.bounds();
-        let cell = scene.solver.grid_cell;
-        let walkable = |p: [f64; 2]| scene.walkable(p);
-
-        // One distance field per exit, one per target area.
-        let mut fields = Vec::new();
-        let mut exits = Vec::new();
-        for (e, exit) in scene.exits.iter().enumerate() {
-            let area = exit.area.as_ref().map(|a| Polygon {
-                vertices: a.clone(),
-            });
-            let segment = exit.segment.map(|s| Segment { a: s[0], b: s[1] });
-            let goal = |p: [f64; 2]| match (&area, &segment) {
-                (Some(a), _) => a.contains(p),
-                (None, Some(s)) => s.distance(p) <= 0.75 * cell,
-                _ => false,
-            };
-            let f = DistanceField::build(lo, hi, cell, walkable, goal).ok_or_else(|| {
-                CrowdError::invalid(
-                    format!("exits[{e}]"),
-                    &exit.name,
-                    "no walkable cell of the distance grid lies in the exit",
-                )
-            })?;
-            fields.push(f);
-            let field = fields.len() - 1;
-            let target = match &exit.target {
-                Some(t) => {
-                    let poly = Polygon {
-                        vertices: t.clone(),
-                    };
-                    let f = DistanceField::build(lo, hi, cell, walkable, |p| poly.contains(p))
-                        .ok_or_else(|| {
-                            CrowdError::invalid(
-                                format!("exits[{e}].target"),
-                                format!("{t:?}"),
-                                "no walkable cell of the distance grid lies in the target",
-                            )
-                        })?;
-                    fields.push(f);
-                    Some((poly, fields.len() - 1))
-                }
-                None => None,
-            };
-            exits.push(ExitRuntime {
-                area,
-                segment,
-                action: exit.action,
-                field,
-                target,
-                open: true,
-            });
-        }
-
-        // People.
-        let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
-        let mut placed = Placed {
-            cell: (2.0 * scene.max_radius()).max(1e-9),
-            cells: HashMap::new(),
-            pos: Vec::new(),
-            radius: Vec::new(),
-        };
-        let (mut speed, mut stage) = (Vec::new(), Vec::new());
-        let clear_of_walls = |p: [f64; 2], r: f64| walls.iter().all(|w| w.distance(p) >= r);
-        for (g, group) in scene.groups.iter().enumerate() {
-            let exit = scene
-                .exits
-                .iter()
-                .position(|e| e.name == group.destination)
-                .expect("validated");
-            let first = placed.pos.len();
-            match (&group.positions, group.count, &group.spawn) {
-                (Some(list), _, _) => {
-                    for (k, &p) in list.iter().enumerate() {
-                        let r = draw(&group.radius, &mut rng);
-                        let field = format!("groups[{g}].positions[{k}]");
-                        if !scene.walkable(p) || !clear_of_walls(p, r) {
-                            return Err(CrowdError::invalid(
-                                field,
-                                format!("{p:?}"),
-                                format!(
-                                    "a disk of radius {r} there is not inside the walkable area"
-                                ),
-                            ));
-                        }
-                        if let Some(j) = placed.overlaps(p, r) {
-                            return Err(CrowdError::invalid(
-                                field,
-                                format!("{p:?}"),
-                                format!("overlaps the person at {:?}", placed.pos[j]),
-                            ));
-                        }
-                        placed.insert(p, r);
-                    }
-                }
-                (None, Some(n), Some(region)) => {
-                    let region = Polygon {
-                        vertices: region.clone(),
-                    };
-                    let (rlo, rhi) = region.bounds();
-                    let budget = 2000 * n + 10_000;
-                    let (mut made, mut tries) = (0, 0);
-                    let mut r = draw(&group.radius, &mut rng);
-                    while made < n && tries < budget {
-                        tries += 1;
-                        let p = [
-                            rng.random_range(rlo[0]..=rhi[0]),
-                            rng.random_range(rlo[1]..=rhi[1]),
-                        ];
-                        if region.contains(p)
-                            && scene.walkable(p)
-                            && clear_of_walls(p, r)
-                            && placed.overlaps(p, r).is_none()
-                        {
-                            placed.insert(p, r);
-                            made += 1;
-                            r = draw(&group.radius, &mut rng);
-                        }
-                    }
-                    if made < n {
-                        return Err(CrowdError::invalid(
-                            format!("groups[{g}].count"),
-                            n,
-                            format!(
-                                "only {made} people fit in the spawn region ({:.2} m²) after {tries} random tries",
-                                region.area()
-                            ),
-                        ));
-                    }
-                }
-                _ => unreachable!("validated"),
-            }
-            for k in first..placed.pos.len() {
-                let p = placed.pos[k];
-                if !fields[exits[exit].field].distance(p).is_finite() {
-                    return Err(CrowdError::invalid(
-                        format!("groups[{g}].destination"),
-                        &group.destination,
-                        format!("unreachable from {p:?} (no walkable path on the distance grid)"),
-                    ));
-                }
-                speed.push(draw(&group.speed, &mut rng));
-                stage.push(Stage::ToExit(exit));
-            }
-        }
-        let n = placed.pos.len();
-        if n >= (1 << 31) {
-            return Err(CrowdError::invalid("groups", n, "at most 2³¹ − 1 people"));
-        }
-        // People are numbered along a Z-order curve over cells of two radii of their starting
-        // positions, so that people who touch sit close in every per-person array and the
-        // solver's products read memory nearly in order (1.3× faster at 100,000 people).
-        let order = spatial_order(&placed.pos, placed.cell);
-        let q: Vec<f64> = order.iter().flat_map(|&k| placed.pos[k]).collect();
-        let ids: Vec<u32> = (0..n as u32).collect();
-        let radius: Vec<f64> = order.iter().map(|&k| placed.radius[k]).collect();
-        let speed: Vec<f64> = order.iter().map(|&k| speed[k]).collect();
-        let stage: Vec<Stage> = order.iter().map(|&k| stage[k]).collect();
-
+        let scene_walls = scene.walls();
+        let walls = Walls::new(scene_walls.clone());
+        let exits = Exits::build(&scene)?;
+        let people = place_people(&scene, &walls, &exits)?;
+        let n = people.len();
         let broad = match scene.solver.broad_phase {
             BroadPhaseChoice::Grid => BroadPhaseKind::Grid,
             BroadPhaseChoice::Bvh => BroadPhaseKind::Bvh,
             BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
         };
-        let goal = stage.iter().map(|s| match *s {
-            Stage::ToExit(e) => Some(exits[e].field),
-            _ => None,
-        });
-        let field = DesiredVelocity {
-            fields,
-            walls: walls.clone(),
-            speed,
-            radius: radius.clone(),
-            goal: goal.collect(),
-            speed_factor: 1.0,
-        };
-        let scene_walls = walls.len();
-        let constraints = CrowdConstraints::new(walls, radius, ids, broad.build());
+        let sources = ContactSources::new(vec![
+            Box::new(PersonPairs::new(broad.build())),
+            Box::new(PersonWalls::default()),
+        ]);
+        let solver = scene
+            .solver
+            .kind
+            .build(Parallelism::threads(scene.solver.threads), 2 * n)
+            .map_err(moreau_integrate::IntegrateError::from)?;
         let settings = LinearizedSettings {
             max_violation: scene.solver.max_violation,
             max_redo: 8,
         };
-        let kind = scene.solver.kind;
-        let apgd = || -> Result<Box<dyn ProjectionSolver>, CrowdError> {
-            Ok(Box::new(
-                Apgd::new(
-                    ApgdSettings::builder()
-                        .parallelism(Parallelism::threads(scene.solver.threads))
-                        .build()
-                        .map_err(moreau_integrate::IntegrateError::from)?,
-                )
-                .map_err(moreau_integrate::IntegrateError::from)?,
-            ))
-        };
-        let clarabel = || -> Box<dyn ProjectionSolver> {
-            Box::new(ClarabelReference::new(ClarabelSettings::default()))
-        };
-        let solver: Box<dyn ProjectionSolver> = match kind {
-            SolverKind::Apgd => apgd()?,
-            SolverKind::Auto => Box::new(
-                AutoSolver::new(AutoSettings {
-                    parallelism: Parallelism::threads(scene.solver.threads),
-                    ..AutoSettings::default()
-                })
-                .map_err(moreau_integrate::IntegrateError::from)?,
-            ),
-            SolverKind::Interior => Box::new(
-                InteriorPoint::new(
-                    InteriorPointSettings::builder()
-                        .parallelism(Parallelism::threads(scene.solver.threads))
-                        .build()
-                        .map_err(moreau_integrate::IntegrateError::from)?,
-                )
-                .map_err(moreau_integrate::IntegrateError::from)?,
-            ),
-            SolverKind::Clarabel => clarabel(),
-        };
-        // The fallback answers when the main solver misses its target: Clarabel while its
-        // memory is small, APGD (no factorization) for the largest crowds.
-        let fallback = match kind {
-            SolverKind::Clarabel => None,
-            SolverKind::Apgd => Some(clarabel()),
-            _ if n <= SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE => Some(clarabel()),
-            _ => Some(apgd()?),
-        };
-        let mut correction = LinearizedProjection::new(constraints, solver, settings)?;
-        if let Some(fallback) = fallback {
-            correction = correction.with_fallback(fallback);
+        let correction = LinearizedProjection::new(solver, settings)?;
+        let mut scheme = Scheme::new(correction, EpsPolicy::new(scene.solver.eps_kappa, 3.0)?);
+        let stepping = scene.time.stepping()?;
+        if let Stepping::Adaptive(c) = &stepping {
+            scheme.set_eps(c.settings().eps_policy());
         }
-        let eps = EpsPolicy::new(scene.solver.eps_kappa, 3.0)?;
-        let scheme = Scheme::new(field, correction, eps);
         Ok(Self {
             scene,
             exits,
+            scene_walls,
+            walls,
+            people,
+            exit_log: Vec::new(),
             scheme,
-            q,
-            stage,
+            sources,
+            stepping,
             t: 0.0,
             steps: 0,
-            exit_times: Vec::new(),
+            frames: 0,
+            speed_factor: 1.0,
             total: n,
             broad,
-            solver: kind,
-            scene_walls,
+            near: RefCell::new(Vec::new()),
+            keep: Vec::new(),
+            gap_rows: ConstraintRows::default(),
         })
     }
 
@@ -449,27 +201,30 @@ impl Simulation {
         self.total
     }
 
+    /// The people present.
+    pub fn people(&self) -> &People {
+        &self.people
+    }
+
     /// The current configuration.
     pub fn frame(&self) -> Frame<'_> {
-        let c = self.scheme.correction().constraints();
         Frame {
             t: self.t,
-            ids: &c.ids,
-            positions: &self.q,
-            radii: &c.radius,
+            ids: self.people.ids(),
+            positions: self.people.positions(),
+            radii: self.people.radii(),
         }
     }
 
-    /// `(id, time)` of everyone who passed an exit so far.
-    pub fn exit_times(&self) -> &[(u32, f64)] {
-        &self.exit_times
+    /// Everyone who passed an exit so far, in order.
+    pub fn exit_records(&self) -> &[ExitRecord] {
+        &self.exit_log
     }
 
-    /// The projection solver in use. `Apgd` has Clarabel as fallback; `Interior` and `Auto`
-    /// have Clarabel up to [`SolverKind::CLARABEL_FALLBACK_MAX_PEOPLE`] people, APGD above.
-    /// With `Auto` each step report names the solver that answered.
+    /// The projection solver's kind (its fallback and `auto`'s rule:
+    /// [`SolverKind::describe`]). Each step report names the solver that answered.
     pub fn solver_kind(&self) -> SolverKind {
-        self.solver
+        self.scene.solver.kind
     }
 
     /// The broad phase in use.
@@ -477,16 +232,14 @@ impl Simulation {
         self.broad
     }
 
-    /// The scheme (its correction holds the last step's rows and multipliers, its field the
-    /// desired velocities).
-    pub fn scheme(&self) -> &CrowdScheme {
-        &self.scheme
+    /// How steps are chosen (fixed, or adaptive with its controller).
+    pub fn stepping(&self) -> &Stepping {
+        &self.stepping
     }
 
-    /// The scheme, mutably: for benchmarks and tools that time or drive its stages (field,
-    /// constraint assembly, the post-step check) one by one between steps.
-    pub fn scheme_mut(&mut self) -> &mut CrowdScheme {
-        &mut self.scheme
+    /// The walls (the scene's and those of closed exits).
+    pub fn walls(&self) -> &Walls {
+        &self.walls
     }
 
     /// The projection problem of the last step (rows, offsets, prediction), to re-solve it.
@@ -496,23 +249,73 @@ impl Simulation {
             .last_problem(self.scheme.prediction())
     }
 
-    /// The factor on every desired speed.
-    pub fn set_speed_factor(&mut self, factor: f64) {
-        self.scheme.field_mut().speed_factor = factor;
+    /// The multipliers of the last step, one per row of [`last_projection`](Self::last_projection).
+    pub fn last_multipliers(&self) -> &[f64] {
+        self.scheme.correction().multipliers()
     }
 
-    /// One step of size `mu`; then applies exits.
-    pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
-        let report = self.scheme.step(self.steps, self.t, &mut self.q, mu)?;
-        self.t = report.t;
-        self.steps += 1;
-        self.apply_exits();
-        Ok(report)
+    /// The factor on every desired speed.
+    pub fn set_speed_factor(&mut self, factor: f64) {
+        self.speed_factor = factor;
+    }
+
+    /// The desired velocities at the current configuration, `[u0x, u0y, …]`, into `out`.
+    pub fn desired_velocities(&self, out: &mut [f64]) {
+        use moreau_core::Field;
+        let field = DesiredVelocity {
+            fields: &self.exits.fields,
+            goals: &self.exits.goals,
+            walls: &self.walls,
+            people: self.people.view(),
+            speed_factor: self.speed_factor,
+            near: &self.near,
+        };
+        field.eval(self.t, self.people.positions(), out);
+    }
+
+    /// Every contact with `g ≤ margin` at the current configuration, as rows (cleared first).
+    pub fn contacts(&mut self, margin: f64, rows: &mut ConstraintRows) {
+        rows.clear(self.people.positions().len());
+        let view = self.people.view();
+        self.sources.assemble(
+            self.t,
+            self.people.positions(),
+            view,
+            &self.walls,
+            margin,
+            rows,
+        );
+    }
+
+    /// The margin of the contacts assembled for a step of `mu` from the current configuration
+    /// with predicted velocities `w` (every contact that can close within the step).
+    pub fn contact_margin(&mut self, w: &[f64], mu: f64) -> f64 {
+        use moreau_core::ConstraintSet;
+        let view = self.people.view();
+        let contacts = CrowdContacts {
+            people: view,
+            walls: &self.walls,
+            sources: &mut self.sources,
+        };
+        contacts.margin(self.people.positions(), w, mu)
+    }
+
+    /// How many constraints that are not in `assembled` are violated by more than `tol` at
+    /// the current configuration (the check after every step).
+    pub fn crossed_outside(&mut self, assembled: &ConstraintRows, tol: f64) -> usize {
+        use moreau_core::ConstraintSet;
+        let view = self.people.view();
+        let mut contacts = CrowdContacts {
+            people: view,
+            walls: &self.walls,
+            sources: &mut self.sources,
+        };
+        contacts.crossed_outside(self.t, self.people.positions(), assembled, tol)
     }
 
     /// Whether exit `e` is open.
     pub fn exit_open(&self, e: usize) -> Option<bool> {
-        self.exits.get(e).map(|x| x.open)
+        self.exits.exits.get(e).map(|x| x.open)
     }
 
     /// Opens or closes exit `e` (a scene change, from the next step on). A closed exit is a
@@ -520,184 +323,287 @@ impl Simulation {
     /// longer side; nobody passes it, and people standing in it are pushed out to the side
     /// their centre is on. Reopening removes the wall.
     pub fn set_exit_open(&mut self, e: usize, open: bool) -> Result<(), CrowdError> {
-        let Some(exit) = self.exits.get_mut(e) else {
+        let count = self.exits.exits.len();
+        let Some(exit) = self.exits.exits.get_mut(e) else {
             return Err(CrowdError::invalid(
                 "exit",
                 e,
-                format!("the scene has {} exits", self.exits.len()),
+                format!("the scene has {count} exits"),
             ));
         };
         if exit.open == open {
             return Ok(());
         }
         exit.open = open;
-        let mut walls: Vec<Segment> =
-            self.scheme.correction().constraints().walls[..self.scene_walls].to_vec();
-        for x in self.exits.iter().filter(|x| !x.open) {
-            walls.push(x.closure());
-        }
-        self.scheme.field_mut().walls = walls.clone();
-        self.scheme.correction_mut().constraints_mut().walls = walls;
+        self.rebuild_walls();
         Ok(())
+    }
+
+    fn rebuild_walls(&mut self) {
+        let mut walls = self.scene_walls.clone();
+        walls.extend(
+            self.exits
+                .exits
+                .iter()
+                .filter(|x| !x.open)
+                .map(|x| x.closure()),
+        );
+        self.walls = Walls::new(walls);
     }
 
     /// The smallest gap between two people present, or between a person and a wall (closed
     /// exits included), at the current configuration (m); `+∞` when there is nothing to
     /// touch within `reach` (m).
-    pub fn min_gap(&self, reach: f64) -> f64 {
-        let c = self.scheme.correction().constraints();
-        let mut rows = moreau_core::ConstraintRows::new(self.q.len());
-        // Assembling with a margin lists every pair and wall closer than it.
-        let mut scratch = CrowdConstraints::new(
-            c.walls.clone(),
-            c.radius.clone(),
-            c.ids.clone(),
-            self.broad.build(),
-        );
-        moreau_core::ConstraintSet::assemble(&mut scratch, self.t, &self.q, reach, &mut rows);
-        rows.values().iter().copied().fold(f64::INFINITY, f64::min)
+    pub fn min_gap(&mut self, reach: f64) -> f64 {
+        let mut rows = std::mem::take(&mut self.gap_rows);
+        self.contacts(reach, &mut rows);
+        let gap = rows.values().iter().copied().fold(f64::INFINITY, f64::min);
+        self.gap_rows = rows;
+        gap
     }
 
-    /// One adaptive step chosen by `controller`, ending at or before `t_end`; then applies
-    /// exits (and makes the controller forget velocities when people left).
-    pub fn step_adaptive(
-        &mut self,
-        controller: &mut StepController,
-        t_end: f64,
-    ) -> Result<AdaptiveStep, CrowdError> {
-        let people = self.q.len();
-        let step = controller.step(&mut self.scheme, self.steps, self.t, &mut self.q, t_end)?;
-        self.t = step.report.t;
+    /// One step of size `mu` (whatever the scene's stepping says); then applies exits. For
+    /// tests and tools that choose each step; runs call [`advance_to`](Self::advance_to).
+    pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
+        let (q, view) = self.people.split_mut();
+        let field = DesiredVelocity {
+            fields: &self.exits.fields,
+            goals: &self.exits.goals,
+            walls: &self.walls,
+            people: view,
+            speed_factor: self.speed_factor,
+            near: &self.near,
+        };
+        let mut contacts = CrowdContacts {
+            people: view,
+            walls: &self.walls,
+            sources: &mut self.sources,
+        };
+        let report = self
+            .scheme
+            .step(&field, &mut contacts, self.steps, self.t, q, mu)?;
+        self.accept(&report);
+        Ok(report)
+    }
+
+    /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
+    fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
+        let (q, view) = self.people.split_mut();
+        let field = DesiredVelocity {
+            fields: &self.exits.fields,
+            goals: &self.exits.goals,
+            walls: &self.walls,
+            people: view,
+            speed_factor: self.speed_factor,
+            near: &self.near,
+        };
+        let mut contacts = CrowdContacts {
+            people: view,
+            walls: &self.walls,
+            sources: &mut self.sources,
+        };
+        let report = self.stepping.step(
+            &mut self.scheme,
+            &field,
+            &mut contacts,
+            self.steps,
+            self.t,
+            q,
+            t_stop,
+        )?;
+        if let Some(r) = &report {
+            self.accept(r);
+        }
+        Ok(report)
+    }
+
+    fn accept(&mut self, report: &StepReport) {
+        self.t = report.t;
         self.steps += 1;
+        let people = self.people.len();
         self.apply_exits();
-        if self.q.len() != people {
-            controller.reset_history();
+        if self.people.len() != people {
+            self.stepping.state_resized();
         }
-        Ok(step)
     }
 
-    /// The steps [`run`](Self::run) takes: `(μ_k, frame after it?)`, the scene's step with the
-    /// last one shortened to land on the horizon, and a frame every output interval and at
-    /// the end.
-    pub fn schedule(&self) -> Vec<(f64, bool)> {
-        let time = self.scene.time;
-        let n_steps = (time.horizon / time.step - 1e-9).ceil() as usize;
-        let every = ((time.output_interval / time.step).round() as usize).max(1);
-        (0..n_steps)
-            .map(|k| {
-                let mu = if k + 1 < n_steps {
-                    time.step
-                } else {
-                    time.horizon - time.step * (n_steps - 1) as f64
-                };
-                (mu, (k + 1) % every == 0 || k + 1 == n_steps)
-            })
-            .collect()
+    /// The next time a frame is due: every output interval, and the horizon.
+    fn next_output(&self) -> f64 {
+        let time = &self.scene.time;
+        let next = self.frames as f64 * time.output_interval;
+        if next > time.horizon && !self.stepping.reached(self.t, time.horizon) {
+            time.horizon
+        } else {
+            next
+        }
     }
 
-    /// Runs to the scene's horizon along [`schedule`](Self::schedule), calling `on_frame` at
-    /// the start and at every output frame, and `on_step` after every step. The first error,
-    /// of a step or of a callback, ends the run and is returned.
-    pub fn run<E: From<CrowdError>>(
+    /// Steps to `t_end` (fixed or adaptive, as the scene says), telling `observer` of every
+    /// step, every exit and every frame due on the way (the first frame, at the start, on the
+    /// first call). The first error, of a step or of the observer, stops the run there and is
+    /// returned: the simulation stays at its last accepted step.
+    pub fn advance_to<O: Observer + ?Sized>(
         &mut self,
-        mut on_step: impl FnMut(&Self, &StepReport) -> Result<(), E>,
-        mut on_frame: impl FnMut(Frame<'_>) -> Result<(), E>,
-    ) -> Result<(), E> {
-        on_frame(self.frame())?;
-        for (mu, frame) in self.schedule() {
-            let report = self.step(mu)?;
-            on_step(self, &report)?;
-            if frame {
-                on_frame(self.frame())?;
-            }
+        t_end: f64,
+        observer: &mut O,
+    ) -> Result<(), CrowdError> {
+        if !(t_end.is_finite() && t_end >= self.t) {
+            return Err(CrowdError::invalid(
+                "t_end",
+                t_end,
+                format!("must be finite and ≥ the current time {}", self.t),
+            ));
         }
-        Ok(())
-    }
-
-    fn apply_exits(&mut self) {
-        let mut keep = Vec::with_capacity(self.stage.len());
-        let mut changed = false;
-        for i in 0..self.stage.len() {
-            let p = [self.q[2 * i], self.q[2 * i + 1]];
-            let r = self.scheme.correction().constraints().radius[i];
-            let id = self.scheme.correction().constraints().ids[i];
-            let mut stays = true;
-            match self.stage[i] {
-                Stage::ToExit(e) if self.exits[e].reached(p, r) => {
-                    self.exit_times.push((id, self.t));
-                    changed = true;
-                    match (&self.exits[e].action, &self.exits[e].target) {
-                        (ExitAction::Continue, Some(_)) => self.stage[i] = Stage::ToTarget(e),
-                        _ => stays = false,
+        if self.frames == 0 {
+            observer
+                .frame(&self.frame())
+                .map_err(CrowdError::Observer)?;
+            self.frames = 1;
+        }
+        loop {
+            let output = self.next_output();
+            let stop = output.min(t_end);
+            let seen = self.exit_log.len();
+            match self.step_towards(stop)? {
+                Some(report) => {
+                    observer.step(&report).map_err(CrowdError::Observer)?;
+                    for record in &self.exit_log[seen..] {
+                        observer.exit(record).map_err(CrowdError::Observer)?;
                     }
                 }
-                Stage::ToTarget(e)
-                    if self.exits[e]
+                None => {
+                    if stop == output {
+                        observer
+                            .frame(&self.frame())
+                            .map_err(CrowdError::Observer)?;
+                        self.frames += 1;
+                    }
+                    if stop == t_end {
+                        return Ok(());
+                    }
+                }
+            }
+        }
+    }
+
+    /// Runs to the scene's horizon: [`advance_to`](Self::advance_to)`(horizon, observer)`.
+    pub fn run<O: Observer + ?Sized>(&mut self, observer: &mut O) -> Result<(), CrowdError> {
+        self.advance_to(self.scene.time.horizon, observer)
+    }
+
+    /// Records who passed an exit or reached a target in the last step, and removes those
+    /// who leave.
+    fn apply_exits(&mut self) {
+        let mut leaving = false;
+        for i in 0..self.people.len() {
+            let p = self.people.position(i);
+            let r = self.people.radii()[i];
+            match self.people.places()[i] {
+                Place::ToExit(e) if self.exits.exits[e as usize].reached(p, r) => {
+                    let exit = &self.exits.exits[e as usize];
+                    self.exit_log.push(ExitRecord {
+                        id: self.people.ids()[i],
+                        exit: e,
+                        t: self.t,
+                    });
+                    match (exit.action, &exit.target) {
+                        (ExitAction::Continue, Some(_)) => {
+                            self.people.set_place(i, Place::ToTarget(e))
+                        }
+                        _ => {
+                            if !leaving {
+                                leaving = true;
+                                self.keep.clear();
+                                self.keep.resize(self.people.len(), true);
+                            }
+                            self.keep[i] = false;
+                        }
+                    }
+                }
+                Place::ToTarget(e)
+                    if self.exits.exits[e as usize]
                         .target
                         .as_ref()
-                        .is_some_and(|(t, _)| t.contains(p)) =>
+                        .is_some_and(|t| t.contains(p)) =>
                 {
-                    self.stage[i] = Stage::Arrived(e);
-                    changed = true;
+                    self.people.set_place(i, Place::Arrived(e));
                 }
                 _ => {}
             }
-            keep.push(stays);
         }
-        if !changed {
-            return;
+        if leaving {
+            self.people.retain(&self.keep);
         }
-        let exits = &self.exits;
-        let goal: Vec<Option<usize>> = self
-            .stage
-            .iter()
-            .map(|s| match *s {
-                Stage::ToExit(e) => Some(exits[e].field),
-                Stage::ToTarget(e) => exits[e].target.as_ref().map(|t| t.1),
-                Stage::Arrived(_) => None,
-            })
-            .collect();
-        let field = self.scheme.field_mut();
-        field.goal = goal;
-        if keep.iter().all(|&k| k) {
-            return;
-        }
-        fn retain<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {
-            let mut k = keep.iter();
-            v.retain(|_| *k.next().unwrap());
-        }
-        retain(&mut field.speed, &keep);
-        retain(&mut field.radius, &keep);
-        retain(&mut field.goal, &keep);
-        retain(&mut self.stage, &keep);
-        let c = self.scheme.correction_mut().constraints_mut();
-        retain(&mut c.radius, &keep);
-        retain(&mut c.ids, &keep);
-        let mut k = keep.iter().flat_map(|&b| [b, b]);
-        self.q.retain(|_| k.next().unwrap());
     }
-}
 
-/// The indices of `pos` sorted along a Z-order (Morton) curve over square cells of side
-/// `cell`; ties keep their order.
-fn spatial_order(pos: &[[f64; 2]], cell: f64) -> Vec<usize> {
-    fn spread(mut x: u64) -> u64 {
-        x &= 0xffff_ffff;
-        x = (x | (x << 16)) & 0x0000_ffff_0000_ffff;
-        x = (x | (x << 8)) & 0x00ff_00ff_00ff_00ff;
-        x = (x | (x << 4)) & 0x0f0f_0f0f_0f0f_0f0f;
-        x = (x | (x << 2)) & 0x3333_3333_3333_3333;
-        (x | (x << 1)) & 0x5555_5555_5555_5555
+    /// Everything the next step depends on, as a value ([`SimState`]).
+    pub fn state(&self) -> SimState {
+        SimState {
+            format: SimState::FORMAT,
+            scene_hash: SimState::hash_scene(&self.scene),
+            time: self.t,
+            steps: self.steps,
+            frames: self.frames,
+            people: self.people.clone(),
+            exits: self.exit_log.clone(),
+            exits_open: self.exits.exits.iter().map(|x| x.open).collect(),
+            speed_factor: self.speed_factor,
+            stepping: self.stepping.state(),
+            multipliers: self.scheme.correction().warm_start().to_vec(),
+        }
     }
-    let lo = pos
-        .iter()
-        .fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
-    let key = |p: &[f64; 2]| {
-        let ix = ((p[0] - lo[0]) / cell) as u64;
-        let iy = ((p[1] - lo[1]) / cell) as u64;
-        spread(ix) | (spread(iy) << 1)
-    };
-    let mut order: Vec<usize> = (0..pos.len()).collect();
-    order.sort_by_key(|&k| key(&pos[k]));
-    order
+
+    /// Continues from `state`, saved from a simulation of the same scene: what follows is
+    /// what would have followed the save, bit for bit. A state of another scene or format is
+    /// refused, and nothing changes.
+    pub fn restore(&mut self, state: &SimState) -> Result<(), CrowdError> {
+        let refuse = |field: &str, value: String, reason: String| {
+            Err(CrowdError::invalid(format!("state.{field}"), value, reason))
+        };
+        if state.format != SimState::FORMAT {
+            return refuse(
+                "format",
+                state.format.to_string(),
+                format!("this build reads format {}", SimState::FORMAT),
+            );
+        }
+        let hash = SimState::hash_scene(&self.scene);
+        if state.scene_hash != hash {
+            return refuse(
+                "scene_hash",
+                format!("{:016x}", state.scene_hash),
+                format!("saved from another scene (this one hashes to {hash:016x})"),
+            );
+        }
+        if let Err(why) = state.people.check() {
+            return refuse("people", format!("{} people", state.people.len()), why);
+        }
+        if state.exits_open.len() != self.exits.exits.len() {
+            return refuse(
+                "exits_open",
+                format!("{:?}", state.exits_open),
+                format!("the scene has {} exits", self.exits.exits.len()),
+            );
+        }
+        if !(state.time.is_finite() && state.speed_factor.is_finite()) {
+            return refuse("time", state.time.to_string(), "must be finite".into());
+        }
+        let mut stepping = self.stepping.clone();
+        stepping.restore(&state.stepping)?;
+        self.stepping = stepping;
+        self.t = state.time;
+        self.steps = state.steps;
+        self.frames = state.frames;
+        self.people = state.people.clone();
+        self.exit_log = state.exits.clone();
+        for (x, &open) in self.exits.exits.iter_mut().zip(&state.exits_open) {
+            x.open = open;
+        }
+        self.rebuild_walls();
+        self.speed_factor = state.speed_factor;
+        self.scheme
+            .correction_mut()
+            .set_warm_start(&state.multipliers);
+        Ok(())
+    }
 }

@@ -16,7 +16,7 @@ use moreau_crowd::{Hall, Scene, Simulation, SolverSettings};
 /// `compare_every` steps (when nobody left during the step). Returns the simulation.
 fn run_checked(scene: Scene, compare_every: Option<usize>) -> Simulation {
     let mut sim = Simulation::new(scene.clone()).unwrap();
-    for (k, (mu, _)) in sim.schedule().into_iter().enumerate() {
+    for (k, mu) in common::steps(sim.scene()).into_iter().enumerate() {
         let before = sim.frame().positions.to_vec();
         let people = sim.frame().ids.len();
         let report = sim.step(mu).unwrap();
@@ -36,9 +36,9 @@ fn a_single_person_walks_out_at_its_speed() {
     let scene = room(1.2, 0.05, 10.0, &listed("one", &[[1.0, 3.0]], 0.2, 1.0));
     let sim = run_checked(scene, None);
     // Straight along y = 3 from x = 1 into the exit area at x ≥ 7.5: 6.5 m at 1 m/s.
-    let exits = sim.exit_times();
+    let exits = sim.exit_records();
     assert_eq!(exits.len(), 1);
-    assert!((exits[0].1 - 6.5).abs() <= 0.1, "exit at {}", exits[0].1);
+    assert!((exits[0].t - 6.5).abs() <= 0.1, "exit at {}", exits[0].t);
 }
 
 #[test]
@@ -68,7 +68,7 @@ fn tiny_steps_stay_feasible_and_move_by_speed_times_step() {
 fn one_second_steps_stay_feasible() {
     let scene = room(1.2, 1.0, 12.0, &spawn(60, "0.2", "1.0"));
     let sim = run_checked(scene, Some(3));
-    assert!(!sim.exit_times().is_empty());
+    assert!(!sim.exit_records().is_empty());
 }
 
 #[test]
@@ -88,7 +88,7 @@ fn a_crowd_jammed_against_a_door_too_narrow_to_pass() {
     let scene = room(0.3, 0.05, 8.0, &spawn(75, "0.25", "1.0"));
     let mut sim = Simulation::new(scene.clone()).unwrap();
     let mut max_active = 0;
-    for (k, (mu, _)) in sim.schedule().into_iter().enumerate() {
+    for (k, mu) in common::steps(sim.scene()).into_iter().enumerate() {
         let before = sim.frame().positions.to_vec();
         let report = sim.step(mu).unwrap();
         assert_feasible(&scene, &sim, &report);
@@ -98,7 +98,7 @@ fn a_crowd_jammed_against_a_door_too_narrow_to_pass() {
         max_active = max_active.max(report.active);
     }
     assert!(
-        sim.exit_times().is_empty(),
+        sim.exit_records().is_empty(),
         "someone passed a door narrower than themselves"
     );
     // Jammed: more active contacts than people.
@@ -125,7 +125,7 @@ fn degenerate_contacts_chain_wedges_and_corners() {
     let scene = room(0.3, 0.05, 4.0, &groups);
     let head_index = start_index(&scene, [5.75, 3.0]);
     let sim = run_checked(scene, Some(4));
-    assert!(sim.exit_times().is_empty());
+    assert!(sim.exit_records().is_empty());
     // The chain's head (it started at (5.75, 3)) sits in the door's corners:
     // (x − 6)² + 0.15² = 0.25².
     let k = head_index;
@@ -152,7 +152,7 @@ fn zero_desired_speed_moves_nobody() {
 fn very_high_desired_speed_does_not_tunnel() {
     let scene = room(1.2, 0.05, 1.5, &spawn(100, "0.2", "40.0"));
     let sim = run_checked(scene, Some(3));
-    assert!(sim.exit_times().len() > 10);
+    assert!(sim.exit_records().len() > 10);
 }
 
 #[test]
@@ -211,10 +211,9 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     let mut scene = room(0.3, 0.05, 2.0, &spawn(60, "0.25", "1.0"));
     scene.solver.eps_kappa = 1e-20;
     let mut sim = Simulation::new(scene).unwrap();
-    let err = sim
-        .schedule()
+    let err = common::steps(sim.scene())
         .into_iter()
-        .find_map(|(mu, _)| sim.step(mu).err())
+        .find_map(|mu| sim.step(mu).err())
         .expect("some step cannot be certified");
     let text = err.to_string();
     assert!(
@@ -233,20 +232,18 @@ fn auto_picks_apgd_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
     free.solver.kind = SolverKind::Auto;
     let mut sim = Simulation::new(free).unwrap();
     assert_eq!(sim.solver_kind(), SolverKind::Auto);
-    let solvers: Vec<&str> = sim
-        .schedule()
+    let solvers: Vec<&str> = common::steps(sim.scene())
         .into_iter()
-        .map(|(mu, _)| sim.step(mu).unwrap().solver)
+        .map(|mu| sim.step(mu).unwrap().solver)
         .collect();
     assert!(solvers.iter().all(|&s| s == "apgd"), "{solvers:?}");
     // A jam at a door too narrow to pass: dense contacts after the first steps.
     let mut jam = room(0.3, 0.05, 4.0, &spawn(75, "0.25", "1.0"));
     jam.solver.kind = SolverKind::Auto;
     let mut sim = Simulation::new(jam).unwrap();
-    let solvers: Vec<&str> = sim
-        .schedule()
+    let solvers: Vec<&str> = common::steps(sim.scene())
         .into_iter()
-        .map(|(mu, _)| sim.step(mu).unwrap().solver)
+        .map(|mu| sim.step(mu).unwrap().solver)
         .collect();
     // Once the crowd presses on the wall (the second half of the run) every step is dense.
     let half = solvers.len() / 2;

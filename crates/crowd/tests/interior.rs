@@ -20,7 +20,7 @@ fn interior(mut scene: Scene) -> Scene {
 fn run_against_clarabel(scene: Scene) -> usize {
     let mut sim = Simulation::new(scene.clone()).unwrap();
     let mut compared = 0;
-    for (mu, _) in sim.schedule() {
+    for mu in common::steps(sim.scene()) {
         let before = sim.frame().positions.to_vec();
         let people = sim.frame().ids.len();
         let report = sim.step(mu).unwrap();
@@ -65,7 +65,7 @@ fn interior_point_matches_clarabel_on_degenerate_contacts() {
     let mut sim = Simulation::new(interior(room(0.3, 0.05, 4.0, &groups))).unwrap();
     let head_index = start_index(sim.scene(), [5.75, 3.0]);
     let scene = sim.scene().clone();
-    for (mu, _) in sim.schedule() {
+    for mu in common::steps(sim.scene()) {
         let before = sim.frame().positions.to_vec();
         let report = sim.step(mu).unwrap();
         assert_eq!(report.solver, "interior");
@@ -113,7 +113,7 @@ fn thread_count_does_not_change_the_answer() {
         let mut sim = Simulation::new(s).unwrap();
         let mut eps_sum = 0.0f64;
         let mut active = 0;
-        for (mu, _) in sim.schedule() {
+        for mu in common::steps(sim.scene()) {
             let r = sim.step(mu).unwrap();
             assert_eq!(r.solver, "interior");
             eps_sum += r.eps.sqrt();
@@ -156,7 +156,7 @@ fn the_jam_step_that_clarabel_and_apgd_could_not_certify_is_certified_by_the_int
     let scene = Scene::from_toml(&std::fs::read_to_string(path).unwrap(), path).unwrap();
     let mut sim = Simulation::new(scene.clone()).unwrap();
     let mut failed = None;
-    for (mu, _) in sim.schedule() {
+    for mu in common::steps(sim.scene()) {
         if let Err(e) = sim.step(mu) {
             failed = Some((mu, e.to_string()));
             break;

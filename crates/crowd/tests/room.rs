@@ -4,7 +4,8 @@
 mod common;
 
 use common::worst_overlap;
-use moreau_crowd::{Scene, Simulation};
+use moreau_core::StepReport;
+use moreau_crowd::{Frame, Observer, ObserverError, Scene, Simulation};
 
 fn room() -> Scene {
     Scene::from_file(concat!(
@@ -20,10 +21,16 @@ fn the_room_runs_to_the_horizon_without_overlap() {
     let mut sim = Simulation::new(scene.clone()).unwrap();
     assert_eq!(sim.total_people(), 150);
     let bound = scene.solver.max_violation;
-    let (mut frames, mut worst, mut max_reported) = (0, 0.0f64, 0.0f64);
-    let mut last_t = 0.0;
-    sim.run::<moreau_crowd::CrowdError>(
-        |_, r| {
+    struct Check<'a> {
+        scene: &'a Scene,
+        bound: f64,
+        frames: usize,
+        worst: f64,
+        max_reported: f64,
+        last_t: f64,
+    }
+    impl Observer for Check<'_> {
+        fn step(&mut self, r: &StepReport) -> Result<(), ObserverError> {
             assert!(r.status.is_converged());
             assert!(
                 r.eps <= r.eps_target * (1.0 + 1e-12),
@@ -32,31 +39,46 @@ fn the_room_runs_to_the_horizon_without_overlap() {
                 r.eps,
                 r.eps_target
             );
-            max_reported = max_reported.max(r.violation);
+            self.max_reported = self.max_reported.max(r.violation);
             Ok(())
-        },
-        |f| {
+        }
+        fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
             assert!(f.positions.iter().all(|x| x.is_finite()));
-            let (d, w) = worst_overlap(&scene, f.positions, f.radii);
+            let (d, w) = worst_overlap(self.scene, f.positions, f.radii);
             // The linearized constraints are inner approximations: overlap only up to the
             // certified violation of the last step (plus rounding).
             assert!(
-                d <= bound + 1e-12 && w <= bound + 1e-12,
+                d <= self.bound + 1e-12 && w <= self.bound + 1e-12,
                 "t = {}: overlaps {d} (disks), {w} (walls)",
                 f.t
             );
-            worst = worst.max(d).max(w);
-            frames += 1;
-            last_t = f.t;
+            self.worst = self.worst.max(d).max(w);
+            self.frames += 1;
+            self.last_t = f.t;
             Ok(())
-        },
-    )
-    .unwrap();
+        }
+    }
+    let mut check = Check {
+        scene: &scene,
+        bound,
+        frames: 0,
+        worst: 0.0,
+        max_reported: 0.0,
+        last_t: 0.0,
+    };
+    sim.run(&mut check).unwrap();
+    let Check {
+        frames,
+        worst,
+        max_reported,
+        last_t,
+        ..
+    } = check;
     assert_eq!(frames, 201);
     assert!((last_t - 20.0).abs() < 1e-9);
     assert!(max_reported <= bound);
     // People moved: a good part of the room passed the door (the paper's room empties in ~30 s).
-    let out = sim.exit_times().len();
+    let out = sim.exit_records().len();
     assert!((50..150).contains(&out), "{out} people passed the door");
     // The state keeps its size (people continue to the target area).
     assert_eq!(sim.frame().ids.len(), 150);

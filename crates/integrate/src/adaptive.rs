@@ -17,13 +17,15 @@
 //! `tol` as the parameter that goes to zero.
 
 use moreau_core::{Field, StepReport};
+use serde::{Deserialize, Serialize};
 
 use crate::Correction;
 use crate::error::IntegrateError;
 use crate::scheme::{EpsPolicy, Scheme};
 
 /// How the local error of a step is estimated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ErrorEstimate {
     /// One step of `μ` against two of `μ/2` from the same state; the two half steps are kept.
     /// Three projections per accepted step.
@@ -131,6 +133,19 @@ pub struct AdaptiveStep {
     pub next_mu: f64,
 }
 
+/// What a [`StepController`] carries from one step to the next.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControllerState {
+    /// The step it will try next.
+    pub mu: f64,
+    /// The velocity of the last accepted step (empty: none).
+    pub v_prev: Vec<f64>,
+    /// Steps accepted so far.
+    pub accepted: usize,
+    /// Trials rejected so far.
+    pub rejected: usize,
+}
+
 /// The step-size controller; holds its scratch memory and the last step.
 #[derive(Debug, Clone)]
 pub struct StepController {
@@ -170,6 +185,24 @@ impl StepController {
         self.mu
     }
 
+    /// What the next step depends on.
+    pub fn state(&self) -> ControllerState {
+        ControllerState {
+            mu: self.mu,
+            v_prev: self.v_prev.clone(),
+            accepted: self.accepted,
+            rejected: self.rejected,
+        }
+    }
+
+    /// Restores [`state`](Self::state).
+    pub fn restore(&mut self, state: &ControllerState) {
+        self.mu = state.mu;
+        self.v_prev.clone_from(&state.v_prev);
+        self.accepted = state.accepted;
+        self.rejected = state.rejected;
+    }
+
     /// Forgets the last velocity (after the state changed size or jumped).
     pub fn reset_history(&mut self) {
         self.v_prev.clear();
@@ -185,9 +218,11 @@ impl StepController {
 
     /// One accepted step from `(t, q)`, never past `t_end`; `q` becomes the new state. Sets the
     /// scheme's `ε` policy to [`AdaptiveSettings::eps_policy`].
-    pub fn step<F: Field, C: Correction>(
+    pub fn step<F: Field + ?Sized, C: Correction>(
         &mut self,
-        scheme: &mut Scheme<F, C>,
+        scheme: &mut Scheme<C>,
+        field: &F,
+        set: &mut C::Set<'_>,
         k: usize,
         t: f64,
         q: &mut [f64],
@@ -217,7 +252,7 @@ impl StepController {
                 mu = remaining;
             }
             q.copy_from_slice(&self.saved);
-            let trial = self.trial(scheme, k, t, q, mu);
+            let trial = self.trial(scheme, field, set, k, t, q, mu);
             let smallest = mu <= s.mu_min * (1.0 + 1e-12) || mu == remaining && mu < s.mu_min;
             match trial {
                 Ok((mut report, error, its)) => {
@@ -274,9 +309,11 @@ impl StepController {
 
     /// One trial of size `mu` from `q` (which holds `saved`): the state it reaches, the report
     /// to keep, the error estimate and the iterations spent.
-    fn trial<F: Field, C: Correction>(
+    fn trial<F: Field + ?Sized, C: Correction>(
         &mut self,
-        scheme: &mut Scheme<F, C>,
+        scheme: &mut Scheme<C>,
+        field: &F,
+        set: &mut C::Set<'_>,
         k: usize,
         t: f64,
         q: &mut [f64],
@@ -284,12 +321,12 @@ impl StepController {
     ) -> Result<(StepReport, f64, usize), IntegrateError> {
         match self.settings.estimate {
             ErrorEstimate::StepDoubling => {
-                let whole = scheme.step(k, t, q, mu)?;
+                let whole = scheme.step(field, set, k, t, q, mu)?;
                 self.full.clear();
                 self.full.extend_from_slice(q);
                 q.copy_from_slice(&self.saved);
-                let first = scheme.step(k, t, q, 0.5 * mu)?;
-                let mut second = scheme.step(k, t + 0.5 * mu, q, 0.5 * mu)?;
+                let first = scheme.step(field, set, k, t, q, 0.5 * mu)?;
+                let mut second = scheme.step(field, set, k, t + 0.5 * mu, q, 0.5 * mu)?;
                 let error = q
                     .iter()
                     .zip(&self.full)
@@ -299,19 +336,12 @@ impl StepController {
                 second.redone += whole.redone + first.redone;
                 second.eps = second.eps.max(first.eps);
                 second.violation = second.violation.max(first.violation);
-                second.timings.total += whole.timings.total + first.timings.total;
-                second.timings.solve += whole.timings.solve + first.timings.solve;
-                second.timings.solve_analyse +=
-                    whole.timings.solve_analyse + first.timings.solve_analyse;
-                second.timings.solve_factorize +=
-                    whole.timings.solve_factorize + first.timings.solve_factorize;
-                second.timings.assemble += whole.timings.assemble + first.timings.assemble;
-                second.timings.predict += whole.timings.predict + first.timings.predict;
-                second.timings.verify += whole.timings.verify + first.timings.verify;
+                second.timings.add(&whole.timings);
+                second.timings.add(&first.timings);
                 Ok((second, error, its))
             }
             ErrorEstimate::VelocityChange => {
-                let report = scheme.step(k, t, q, mu)?;
+                let report = scheme.step(field, set, k, t, q, mu)?;
                 let error = if self.v_prev.len() == q.len() {
                     0.5 * mu
                         * q.iter()

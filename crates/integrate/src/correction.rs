@@ -11,10 +11,19 @@ use crate::error::IntegrateError;
 
 /// Computes `q_next ∈ proj^ε(q + μ w)` onto the feasible set at `t_next` and records in the
 /// report what it proved (ε, violation) and what it cost.
+///
+/// A correction is a pipeline: it holds its solver, scratch memory and warm start, never the
+/// set it projects onto. The set ([`Correction::Set`]) is passed in at every step by whoever
+/// owns the state (a crowd's people, an example's half-space), so that it can borrow that
+/// state instead of copying it.
 pub trait Correction {
+    /// What the correction projects onto.
+    type Set<'a>: ?Sized;
+
     /// Computes `q_next`. `report.step`, `report.t` and `report.mu` are already set.
     fn correct(
         &mut self,
+        set: &mut Self::Set<'_>,
         q: &[f64],
         w: &[f64],
         eps_target: f64,
@@ -28,8 +37,11 @@ pub trait Correction {
 pub struct Unconstrained;
 
 impl Correction for Unconstrained {
+    type Set<'a> = ();
+
     fn correct(
         &mut self,
+        _set: &mut (),
         q: &[f64],
         w: &[f64],
         _eps: f64,
@@ -44,23 +56,35 @@ impl Correction for Unconstrained {
     }
 }
 
-/// A fixed convex set with an exact projection (ε = 0).
+/// The exact projection (ε = 0) onto a convex set `S` passed in at every step.
 #[derive(Debug, Clone)]
 pub struct ExactProjection<S> {
-    set: S,
     y: Vec<f64>,
+    set: std::marker::PhantomData<fn(&S)>,
+}
+
+impl<S: ConvexSet> Default for ExactProjection<S> {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl<S: ConvexSet> ExactProjection<S> {
-    /// Projects onto `set`.
-    pub fn new(set: S) -> Self {
-        Self { set, y: Vec::new() }
+    /// Projects onto sets of type `S`.
+    pub fn new() -> Self {
+        Self {
+            y: Vec::new(),
+            set: std::marker::PhantomData,
+        }
     }
 }
 
 impl<S: ConvexSet> Correction for ExactProjection<S> {
+    type Set<'a> = S;
+
     fn correct(
         &mut self,
+        set: &mut S,
         q: &[f64],
         w: &[f64],
         _eps: f64,
@@ -71,7 +95,7 @@ impl<S: ConvexSet> Correction for ExactProjection<S> {
         self.y.clear();
         self.y
             .extend(q.iter().zip(w).map(|(q, w)| q + report.mu * w));
-        self.set.project(&self.y, q_next);
+        set.project(&self.y, q_next);
         report.solver = "exact";
         report.timings.solve = start.elapsed().as_secs_f64();
         Ok(())
@@ -100,13 +124,12 @@ impl Default for LinearizedSettings {
 /// The projection onto the linearized inner set
 /// `Q~ = {z : g_i(t_{k+1}, q_k) + ∇g_i·(z − q_k) ≥ 0, g_i ≤ ρ}` solved in velocity form.
 ///
-/// Multipliers are warm-started from the previous step by constraint key. A solve that
-/// misses its target goes to the fallback solver, if any, then fails the step.
+/// The constraint set is passed in at every step. Multipliers are warm-started from the
+/// previous step by constraint key. A solve that misses its target fails the step (a solver
+/// with a fallback, `moreau_solve::WithFallback`, has tried its fallback first).
 #[derive(Debug)]
-pub struct LinearizedProjection<C, S> {
-    constraints: C,
+pub struct LinearizedProjection<S> {
     solver: S,
-    fallback: Option<Box<dyn ProjectionSolver>>,
     settings: LinearizedSettings,
     rows: ConstraintRows,
     b: Vec<f64>,
@@ -114,13 +137,9 @@ pub struct LinearizedProjection<C, S> {
     previous: Vec<(ConstraintKey, f64)>,
 }
 
-impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
-    /// Projects onto the linearization of `constraints` with `solver`.
-    pub fn new(
-        constraints: C,
-        solver: S,
-        settings: LinearizedSettings,
-    ) -> Result<Self, IntegrateError> {
+impl<S: ProjectionSolver> LinearizedProjection<S> {
+    /// Projects onto linearized constraint sets with `solver`.
+    pub fn new(solver: S, settings: LinearizedSettings) -> Result<Self, IntegrateError> {
         if !(settings.max_violation > 0.0) {
             return Err(IntegrateError::InvalidSetting {
                 field: "max_violation",
@@ -128,33 +147,19 @@ impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
                 reason: "must be > 0",
             });
         }
-        let dim = constraints.dim();
         Ok(Self {
-            constraints,
             solver,
-            fallback: None,
             settings,
-            rows: ConstraintRows::new(dim),
+            rows: ConstraintRows::new(0),
             b: Vec::new(),
             solution: ProjectionSolution::default(),
             previous: Vec::new(),
         })
     }
 
-    /// Uses `fallback` when the main solver misses its target.
-    pub fn with_fallback(mut self, fallback: Box<dyn ProjectionSolver>) -> Self {
-        self.fallback = Some(fallback);
-        self
-    }
-
-    /// The constraint set.
-    pub fn constraints(&self) -> &C {
-        &self.constraints
-    }
-
-    /// The constraint set, mutably (a scene change between steps).
-    pub fn constraints_mut(&mut self) -> &mut C {
-        &mut self.constraints
+    /// The solver.
+    pub fn solver(&self) -> &S {
+        &self.solver
     }
 
     /// The rows assembled in the last step.
@@ -178,7 +183,20 @@ impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
         &self.solution.lambda
     }
 
-    fn warm_start(&mut self) {
+    /// The multipliers the next step starts from, by constraint key (sorted by key): the
+    /// last accepted step's. Part of the state of a run.
+    pub fn warm_start(&self) -> &[(ConstraintKey, f64)] {
+        &self.previous
+    }
+
+    /// Replaces the warm start (restoring a saved run); sorted by key here.
+    pub fn set_warm_start(&mut self, multipliers: &[(ConstraintKey, f64)]) {
+        self.previous.clear();
+        self.previous.extend_from_slice(multipliers);
+        self.previous.sort_unstable_by_key(|e| e.0);
+    }
+
+    fn start_from_previous(&mut self) {
         let lam = &mut self.solution.lambda;
         lam.clear();
         lam.extend(self.rows.keys().iter().map(|k| {
@@ -202,9 +220,12 @@ impl<C: ConstraintSet, S: ProjectionSolver> LinearizedProjection<C, S> {
     }
 }
 
-impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<C, S> {
+impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
+    type Set<'a> = dyn ConstraintSet + 'a;
+
     fn correct(
         &mut self,
+        constraints: &mut (dyn ConstraintSet + '_),
         q: &[f64],
         w: &[f64],
         eps_target: f64,
@@ -217,14 +238,14 @@ impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<
             gap: eps_target / (2.0 * mu * mu),
             violation: self.settings.max_violation / mu,
         };
-        let mut margin = self.constraints.margin(q, w, mu);
+        let mut margin = constraints.margin(q, w, mu);
         loop {
             let start = Instant::now();
             self.rows.clear(q.len());
-            self.constraints.assemble(t_next, q, margin, &mut self.rows);
+            constraints.assemble(t_next, q, margin, &mut self.rows);
             self.b.clear();
             self.b.extend(self.rows.values().iter().map(|g| g / mu));
-            self.warm_start();
+            self.start_from_previous();
             let solve_start = Instant::now();
             report.timings.assemble += (solve_start - start).as_secs_f64();
 
@@ -233,17 +254,8 @@ impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<
                 jacobian: &self.rows,
                 b: &self.b,
             };
-            let mut rep = self.solver.solve(&problem, target, &mut self.solution)?;
-            report.solver = self.solver.name();
-            if !rep.status.is_converged()
-                && let Some(fb) = self.fallback.as_mut()
-            {
-                report.iterations += rep.iterations;
-                report.timings.solve_analyse += rep.time_analyse;
-                report.timings.solve_factorize += rep.time_factorize;
-                rep = fb.solve(&problem, target, &mut self.solution)?;
-                report.solver = fb.name();
-            }
+            let rep = self.solver.solve(&problem, target, &mut self.solution)?;
+            report.solver = rep.solver;
             report.timings.solve += solve_start.elapsed().as_secs_f64();
             report.iterations += rep.iterations;
             report.timings.solve_analyse += rep.time_analyse;
@@ -269,12 +281,7 @@ impl<C: ConstraintSet, S: ProjectionSolver> Correction for LinearizedProjection<
             }
             let verify_start = Instant::now();
             let crossed = if margin.is_finite() {
-                self.constraints.crossed_outside(
-                    t_next,
-                    q_next,
-                    &self.rows,
-                    self.settings.max_violation,
-                )
+                constraints.crossed_outside(t_next, q_next, &self.rows, self.settings.max_violation)
             } else {
                 0
             };

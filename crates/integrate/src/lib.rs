@@ -11,10 +11,14 @@ pub mod adaptive;
 mod correction;
 mod error;
 mod scheme;
+mod stepping;
 
-pub use adaptive::{AdaptiveSettings, AdaptiveStep, ErrorEstimate, StepController};
+pub use adaptive::{
+    AdaptiveSettings, AdaptiveStep, ControllerState, ErrorEstimate, StepController,
+};
 pub use correction::{
     Correction, ExactProjection, LinearizedProjection, LinearizedSettings, Unconstrained,
 };
 pub use error::IntegrateError;
 pub use scheme::{EpsPolicy, Scheme, Selection, StepSequence};
+pub use stepping::{Stepping, SteppingState, fixed_step};

@@ -6,6 +6,7 @@ use moreau_core::{ConvexPart, Field, StepReport};
 
 use crate::correction::Correction;
 use crate::error::IntegrateError;
+use crate::stepping::fixed_step;
 
 /// How the set-valued part `∂ψ` enters the prediction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -75,7 +76,8 @@ impl EpsPolicy {
 /// The steps `μ_k` of a run.
 #[derive(Debug, Clone, PartialEq)]
 pub enum StepSequence {
-    /// Equal steps `h` from `t0` to `t_end` (the last one shortened if `h` does not divide).
+    /// Equal steps `h` from `t0` to `t_end`, the last one shortened to land on `t_end`
+    /// ([`fixed_step`](crate::fixed_step)).
     Fixed {
         /// The step.
         h: f64,
@@ -86,53 +88,22 @@ pub enum StepSequence {
     Given(Vec<f64>),
 }
 
-impl StepSequence {
-    /// The steps starting from `t0`, checked: positive and finite.
-    pub fn steps(&self, t0: f64) -> Result<Vec<f64>, IntegrateError> {
-        let steps = match self {
-            StepSequence::Fixed { h, t_end } => {
-                if !(*h > 0.0 && h.is_finite()) {
-                    return Err(IntegrateError::InvalidSetting {
-                        field: "step",
-                        value: h.to_string(),
-                        reason: "must be finite and > 0",
-                    });
-                }
-                let span = t_end - t0;
-                if !(span >= 0.0 && span.is_finite()) {
-                    return Err(IntegrateError::InvalidSetting {
-                        field: "t_end",
-                        value: t_end.to_string(),
-                        reason: "must be finite and ≥ t0",
-                    });
-                }
-                let n = (span / h - 1e-9).ceil().max(0.0) as usize;
-                (0..n)
-                    .map(|k| {
-                        if k + 1 < n {
-                            *h
-                        } else {
-                            span - h * (n - 1) as f64
-                        }
-                    })
-                    .collect()
-            }
-            StepSequence::Given(v) => v.clone(),
-        };
-        if let Some(m) = steps.iter().find(|m| !(**m > 0.0 && m.is_finite())) {
-            return Err(IntegrateError::InvalidSetting {
-                field: "step",
-                value: m.to_string(),
-                reason: "must be finite and > 0",
-            });
-        }
-        Ok(steps)
+fn check_step(mu: f64) -> Result<(), IntegrateError> {
+    if mu > 0.0 && mu.is_finite() {
+        Ok(())
+    } else {
+        Err(IntegrateError::InvalidSetting {
+            field: "step",
+            value: mu.to_string(),
+            reason: "must be finite and > 0",
+        })
     }
 }
 
-/// The catching-up scheme for `q' ∈ F(t, q) − ∂ψ(q) − N(Q(t), q)`.
-pub struct Scheme<F, C> {
-    field: F,
+/// The catching-up scheme for `q' ∈ F(t, q) − ∂ψ(q) − N(Q(t), q)`: a pipeline that holds
+/// the correction (solver, warm start) and scratch memory. The field `F` and the set the
+/// correction projects onto belong to the caller and are passed in at every step.
+pub struct Scheme<C> {
     convex: Option<Box<dyn ConvexPart>>,
     selection: Selection,
     correction: C,
@@ -142,7 +113,7 @@ pub struct Scheme<F, C> {
     q_next: Vec<f64>,
 }
 
-impl<F, C> std::fmt::Debug for Scheme<F, C> {
+impl<C> std::fmt::Debug for Scheme<C> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Scheme")
             .field("selection", &self.selection)
@@ -151,11 +122,10 @@ impl<F, C> std::fmt::Debug for Scheme<F, C> {
     }
 }
 
-impl<F: Field, C: Correction> Scheme<F, C> {
-    /// The scheme for field `field` with correction `correction`.
-    pub fn new(field: F, correction: C, eps: EpsPolicy) -> Self {
+impl<C: Correction> Scheme<C> {
+    /// The scheme with correction `correction`.
+    pub fn new(correction: C, eps: EpsPolicy) -> Self {
         Self {
-            field,
             convex: None,
             selection: Selection::Explicit,
             correction,
@@ -183,16 +153,6 @@ impl<F: Field, C: Correction> Scheme<F, C> {
         &mut self.correction
     }
 
-    /// The field.
-    pub fn field(&self) -> &F {
-        &self.field
-    }
-
-    /// The field, mutably (an input changed between steps).
-    pub fn field_mut(&mut self) -> &mut F {
-        &mut self.field
-    }
-
     /// The `ε_k` policy in force.
     pub fn eps_policy(&self) -> EpsPolicy {
         self.eps
@@ -208,9 +168,12 @@ impl<F: Field, C: Correction> Scheme<F, C> {
         &self.w
     }
 
-    /// One step of size `mu` from `(t, q)`; `q` becomes `q_{k+1}`. `step` indexes the report.
-    pub fn step(
+    /// One step of size `mu` from `(t, q)` with field `field`, projecting onto `set`; `q`
+    /// becomes `q_{k+1}`. `step` indexes the report.
+    pub fn step<F: Field + ?Sized>(
         &mut self,
+        field: &F,
+        set: &mut C::Set<'_>,
         step: usize,
         t: f64,
         q: &mut [f64],
@@ -236,7 +199,7 @@ impl<F: Field, C: Correction> Scheme<F, C> {
         self.f.resize(n, 0.0);
         self.w.resize(n, 0.0);
         self.q_next.resize(n, 0.0);
-        self.field.eval(t, q, &mut self.f);
+        field.eval(t, q, &mut self.f);
         match (&self.convex, self.selection) {
             (None, _) => self.w.copy_from_slice(&self.f),
             (Some(psi), Selection::Explicit) => psi.min_norm_selection(q, &self.f, &mut self.w),
@@ -269,7 +232,7 @@ impl<F: Field, C: Correction> Scheme<F, C> {
         };
         report.timings.predict = start.elapsed().as_secs_f64();
         self.correction
-            .correct(q, &self.w, eps_target, &mut self.q_next, &mut report)?;
+            .correct(set, q, &self.w, eps_target, &mut self.q_next, &mut report)?;
         q.copy_from_slice(&self.q_next);
         report.timings.total = start.elapsed().as_secs_f64();
         Ok(report)
@@ -277,17 +240,43 @@ impl<F: Field, C: Correction> Scheme<F, C> {
 
     /// Runs from `(t0, q)` through `steps`; `observe(report, q)` sees every accepted step.
     /// Returns the final time.
-    pub fn run(
+    pub fn run<F: Field + ?Sized>(
         &mut self,
+        field: &F,
+        set: &mut C::Set<'_>,
         t0: f64,
         q: &mut [f64],
         steps: &StepSequence,
         mut observe: impl FnMut(&StepReport, &[f64]),
     ) -> Result<f64, IntegrateError> {
         let mut t = t0;
-        for (k, mu) in steps.steps(t0)?.into_iter().enumerate() {
-            let report = self.step(k, t, q, mu)?;
+        let mut k = 0;
+        let next = |k: usize, t: f64| -> Result<Option<f64>, IntegrateError> {
+            Ok(match steps {
+                StepSequence::Fixed { h, t_end } => {
+                    check_step(*h)?;
+                    if !(t_end.is_finite() && *t_end >= t0) {
+                        return Err(IntegrateError::InvalidSetting {
+                            field: "t_end",
+                            value: t_end.to_string(),
+                            reason: "must be finite and ≥ t0",
+                        });
+                    }
+                    fixed_step(*h, t_end - t)
+                }
+                StepSequence::Given(v) => match v.get(k) {
+                    Some(&mu) => {
+                        check_step(mu)?;
+                        Some(mu)
+                    }
+                    None => None,
+                },
+            })
+        };
+        while let Some(mu) = next(k, t)? {
+            let report = self.step(field, set, k, t, q, mu)?;
             t = report.t;
+            k += 1;
             observe(&report, q);
         }
         Ok(t)

@@ -8,7 +8,7 @@ use moreau_solve::{
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-#[path = "../../../tests/support/mod.rs"]
+#[path = "support/mod.rs"]
 mod support;
 
 struct Instance {

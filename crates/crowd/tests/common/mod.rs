@@ -204,3 +204,15 @@ pub fn start_index(scene: &Scene, p: [f64; 2]) -> usize {
         .find(|&k| q[2 * k] == p[0] && q[2 * k + 1] == p[1])
         .expect("somebody starts there")
 }
+
+/// The steps of the scene's fixed stepping from 0 to its horizon (`moreau_integrate::fixed_step`),
+/// for tests that check every step.
+pub fn steps(scene: &Scene) -> Vec<f64> {
+    let (h, horizon) = (scene.time.step, scene.time.horizon);
+    let (mut t, mut out) = (0.0, Vec::new());
+    while let Some(mu) = moreau_integrate::fixed_step(h, horizon - t) {
+        out.push(mu);
+        t += mu;
+    }
+    out
+}

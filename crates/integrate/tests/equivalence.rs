@@ -4,13 +4,12 @@
 //! Catching-up runs through the library (APGD on the linearized set); PDS and CDS steps are
 //! built here from the independent exact enumerator of `support`.
 
+#[path = "../../solve/tests/support/mod.rs"]
 mod support;
 
-use moreau::core::{FnField, HalfSpace, HalfSpaces};
-use moreau::integrate::{
-    EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepSequence,
-};
-use moreau::solve::{Apgd, ApgdSettings};
+use moreau_core::{FnField, HalfSpace, HalfSpaces};
+use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, fixed_step};
+use moreau_solve::{Apgd, ApgdSettings};
 
 /// `f(x) = M x + c`, monotone: the symmetric part of `M` is diag(1, 0.5).
 const M: [[f64; 2]; 2] = [[1.0, 2.0], [-2.0, 0.5]];
@@ -44,8 +43,8 @@ fn catching_up(h: f64) -> Trajectory {
         .zip(D)
         .map(|(a, d)| HalfSpace::new(a.to_vec(), d).unwrap())
         .collect();
+    let mut set = HalfSpaces::new(faces).unwrap();
     let correction = LinearizedProjection::new(
-        HalfSpaces::new(faces).unwrap(),
         Apgd::new(ApgdSettings::default()).unwrap(),
         LinearizedSettings {
             max_violation: 1e-12,
@@ -53,15 +52,16 @@ fn catching_up(h: f64) -> Trajectory {
         },
     )
     .unwrap();
-    let mut scheme = Scheme::new(field, correction, EpsPolicy::new(1e-6, 3.0).unwrap());
+    let mut scheme = Scheme::new(correction, EpsPolicy::new(1e-6, 3.0).unwrap());
     let mut x = X0;
     let mut traj = Trajectory {
         x: vec![X0],
         lambda: Vec::new(),
     };
-    let steps = StepSequence::Fixed { h, t_end: T_END }.steps(0.0).unwrap();
-    for (k, mu) in steps.into_iter().enumerate() {
-        scheme.step(k, k as f64 * h, &mut x, mu).unwrap();
+    let (mut k, mut t) = (0, 0.0);
+    while let Some(mu) = fixed_step(h, T_END - t) {
+        scheme.step(&field, &mut set, k, t, &mut x, mu).unwrap();
+        (k, t) = (k + 1, t + mu);
         // The rows are all three faces (margin ∞), keyed by face index, in order.
         let corr = scheme.correction();
         assert_eq!(corr.rows().keys(), &[0, 1, 2]);

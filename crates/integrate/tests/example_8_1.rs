@@ -1,13 +1,14 @@
 //! `seeds/002` Example 8.1: `x' ∈ −a x + b − A(x)`, `C = [0, ∞)`, against its closed form.
 
+#[path = "../../solve/tests/support/mod.rs"]
 mod support;
 
-use moreau::core::{BoxSet, FnField, HalfSpace, HalfSpaces};
-use moreau::integrate::{
+use moreau_core::{BoxSet, FnField, HalfSpace, HalfSpaces};
+use moreau_integrate::{
     Correction, EpsPolicy, ExactProjection, LinearizedProjection, LinearizedSettings, Scheme,
     StepSequence,
 };
-use moreau::solve::{Apgd, ApgdSettings};
+use moreau_solve::{Apgd, ApgdSettings};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -29,15 +30,22 @@ fn exact(a: f64, b: f64, x0: f64, t: f64) -> f64 {
 }
 
 /// The largest error against the exact solution at the step times.
-fn max_error<C: Correction>(a: f64, b: f64, x0: f64, steps: &StepSequence, correction: C) -> f64 {
+fn max_error<C: Correction>(
+    a: f64,
+    b: f64,
+    x0: f64,
+    steps: &StepSequence,
+    correction: C,
+    set: &mut C::Set<'_>,
+) -> f64 {
     let field = FnField::new(1, move |_t, x: &[f64], out: &mut [f64]| {
         out[0] = -(a + 1.0) * x[0] + b
     });
-    let mut scheme = Scheme::new(field, correction, EpsPolicy::new(1e-2, 3.0).unwrap());
+    let mut scheme = Scheme::new(correction, EpsPolicy::new(1e-2, 3.0).unwrap());
     let mut x = [x0];
     let mut err: f64 = 0.0;
     scheme
-        .run(0.0, &mut x, steps, |r, x| {
+        .run(&field, set, 0.0, &mut x, steps, |r, x| {
             assert!(
                 x[0] >= -r.violation - 1e-15,
                 "left C: x = {} at t = {}",
@@ -60,9 +68,8 @@ fn half_line() -> HalfSpaces {
     HalfSpaces::new(vec![HalfSpace::new(vec![-1.0], 0.0).unwrap()]).unwrap()
 }
 
-fn linearized() -> LinearizedProjection<HalfSpaces, Apgd> {
+fn linearized() -> LinearizedProjection<Apgd> {
     LinearizedProjection::new(
-        half_line(),
         Apgd::new(ApgdSettings::default()).unwrap(),
         LinearizedSettings::default(),
     )
@@ -87,16 +94,15 @@ fn fixed_steps_converge_with_order_one_for_exact_and_solved_projections() {
                 .map(|&h| {
                     let steps = StepSequence::Fixed { h, t_end: 3.0 };
                     if solved {
-                        max_error(a, b, x0, &steps, linearized())
+                        max_error(a, b, x0, &steps, linearized(), &mut half_line())
                     } else {
                         max_error(
                             a,
                             b,
                             x0,
                             &steps,
-                            ExactProjection::new(
-                                BoxSet::new(vec![0.0], vec![f64::INFINITY]).unwrap(),
-                            ),
+                            ExactProjection::new(),
+                            &mut BoxSet::new(vec![0.0], vec![f64::INFINITY]).unwrap(),
                         )
                     }
                 })
@@ -135,6 +141,7 @@ fn variable_steps_converge_with_order_one() {
                 x0,
                 &StepSequence::Given(steps),
                 linearized(),
+                &mut half_line(),
             ));
         }
         let (order, _) = support::fit_order(&hmax, &errs);
@@ -151,11 +158,13 @@ fn b_negative_makes_the_boundary_invariant() {
     let field = FnField::new(1, |_t, x: &[f64], out: &mut [f64]| {
         out[0] = -2.0 * x[0] - 1.0
     });
-    let mut scheme = Scheme::new(field, linearized(), EpsPolicy::default());
+    let mut scheme = Scheme::new(linearized(), EpsPolicy::default());
     let mut x = [1.0];
     let mut reached = None;
     scheme
         .run(
+            &field,
+            &mut half_line(),
             0.0,
             &mut x,
             &StepSequence::Fixed {

@@ -7,7 +7,7 @@
 //! `cargo bench -p moreau-crowd --bench step_stages`
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use moreau_core::{ConstraintRows, ConstraintSet, Field};
+use moreau_core::ConstraintRows;
 use moreau_crowd::{Hall, Scene, Simulation, SolverKind, SolverSettings};
 use moreau_solve::{
     Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
@@ -41,7 +41,6 @@ fn stages(c: &mut Criterion) {
             sim.step(MU).expect("warm-up step");
         }
         let last = sim.step(MU).expect("the measured step");
-        let t = sim.time();
         let q = sim.frame().positions.to_vec();
         let scene = sim.scene().clone();
         let target = Target {
@@ -53,7 +52,7 @@ fn stages(c: &mut Criterion) {
         // predict: F(t, q)
         let mut w = vec![0.0; q.len()];
         group.bench_with_input(BenchmarkId::new("predict", &label), &n, |b, _| {
-            b.iter(|| sim.scheme().field().eval(t, &q, &mut w))
+            b.iter(|| sim.desired_velocities(&mut w))
         });
 
         // solve: the last step's projection, by each solver
@@ -109,18 +108,14 @@ fn stages(c: &mut Criterion) {
             b.iter(|| clarabel.solve(&problem, target, &mut sol).unwrap())
         });
 
-        // assemble and verify, on the simulation's own constraint set
-        let constraints = sim.scheme_mut().correction_mut().constraints_mut();
+        // assemble and verify, on the simulation's own contact sources
         let mut out = ConstraintRows::new(q.len());
-        let margin = constraints.margin(&q, &problem_w, MU);
+        let margin = sim.contact_margin(&problem_w, MU);
         group.bench_with_input(BenchmarkId::new("assemble", &label), &n, |b, _| {
-            b.iter(|| {
-                out.clear(q.len());
-                constraints.assemble(t, &q, margin, &mut out);
-            })
+            b.iter(|| sim.contacts(margin, &mut out))
         });
         group.bench_with_input(BenchmarkId::new("verify", &label), &n, |b, _| {
-            b.iter(|| constraints.crossed_outside(t, &q, &out, scene.solver.max_violation))
+            b.iter(|| sim.crossed_outside(&out, scene.solver.max_violation))
         });
     }
     group.finish();

@@ -3,8 +3,8 @@
 //! grow after it, the `ε_k` policy follows the step, and it costs fewer steps than fixed steps
 //! at the same error.
 
-use moreau::core::{FnField, HalfSpace};
-use moreau::integrate::{
+use moreau_core::{FnField, HalfSpace};
+use moreau_integrate::{
     AdaptiveSettings, ErrorEstimate, ExactProjection, IntegrateError, Scheme, StepController,
     StepSequence,
 };
@@ -30,28 +30,30 @@ fn t_hit() -> f64 {
     ((X0 + 1.0 / k) / (1.0 / k)).ln() / k
 }
 
-type Example = Scheme<FnField<fn(f64, &[f64], &mut [f64])>, ExactProjection<HalfSpace>>;
+type Example = Scheme<ExactProjection<HalfSpace>>;
 
-fn scheme() -> Example {
-    fn f(_t: f64, x: &[f64], out: &mut [f64]) {
-        out[0] = -(A + 1.0) * x[0] + B;
-    }
+fn f(_t: f64, x: &[f64], out: &mut [f64]) {
+    out[0] = -(A + 1.0) * x[0] + B;
+}
+
+/// The field, the set and the scheme.
+fn scheme() -> (FnField<fn(f64, &[f64], &mut [f64])>, HalfSpace, Example) {
     let half_line = HalfSpace::new(vec![-1.0], 0.0).unwrap();
-    Scheme::new(
+    (
         FnField::new(1, f as fn(f64, &[f64], &mut [f64])),
-        ExactProjection::new(half_line),
-        Default::default(),
+        half_line,
+        Scheme::new(ExactProjection::new(), Default::default()),
     )
 }
 
 /// Runs adaptively to T: (max error at the step times, accepted steps, rejected, steps (t, μ)).
 fn adaptive(settings: AdaptiveSettings) -> (f64, usize, usize, Vec<(f64, f64)>) {
-    let mut s = scheme();
+    let (field, mut set, mut s) = scheme();
     let mut c = StepController::new(settings).unwrap();
     let (mut t, mut x, mut err, mut steps) = (0.0, [X0], 0.0f64, Vec::new());
     let mut k = 0;
     while t < T {
-        let step = c.step(&mut s, k, t, &mut x, T).unwrap();
+        let step = c.step(&mut s, &field, &mut set, k, t, &mut x, T).unwrap();
         let r = &step.report;
         assert!(
             (r.eps_target
@@ -76,13 +78,20 @@ fn adaptive(settings: AdaptiveSettings) -> (f64, usize, usize, Vec<(f64, f64)>) 
 }
 
 fn fixed(h: f64) -> (f64, usize) {
-    let mut s = scheme();
+    let (field, mut set, mut s) = scheme();
     let mut x = [X0];
     let (mut err, mut n) = (0.0f64, 0);
-    s.run(0.0, &mut x, &StepSequence::Fixed { h, t_end: T }, |r, x| {
-        err = err.max((x[0] - exact(r.t)).abs());
-        n += 1;
-    })
+    s.run(
+        &field,
+        &mut set,
+        0.0,
+        &mut x,
+        &StepSequence::Fixed { h, t_end: T },
+        |r, x| {
+            err = err.max((x[0] - exact(r.t)).abs());
+            n += 1;
+        },
+    )
     .unwrap();
     (err, n)
 }

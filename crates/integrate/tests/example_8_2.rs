@@ -1,10 +1,10 @@
 //! `seeds/002` Example 8.2: `x' ∈ τ − K x − ∂ψ(x) − N_C(x)`, dry friction in a box.
 
-use moreau::core::{BoxSet, FnField, SeparableAbs};
-use moreau::integrate::{
+use moreau_core::{BoxSet, FnField, SeparableAbs};
+use moreau_integrate::{
     EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Selection, StepSequence,
 };
-use moreau::solve::{Apgd, ApgdSettings};
+use moreau_solve::{Apgd, ApgdSettings};
 
 const K: [[f64; 3]; 3] = [[2.0, 0.3, 0.0], [0.3, 1.0, 0.2], [0.0, 0.2, 1.5]];
 const TAU: [f64; 3] = [5.0, 0.3, -1.2];
@@ -28,9 +28,8 @@ fn run(selection: Selection, h: f64, t_end: f64) -> Vec<[f64; 3]> {
     let field = FnField::new(3, |_t, x: &[f64], out: &mut [f64]| {
         out.copy_from_slice(&f(x))
     });
-    let boxset = BoxSet::new(vec![LO; 3], vec![HI; 3]).unwrap();
+    let mut boxset = BoxSet::new(vec![LO; 3], vec![HI; 3]).unwrap();
     let correction = LinearizedProjection::new(
-        boxset,
         Apgd::new(ApgdSettings::default()).unwrap(),
         LinearizedSettings {
             max_violation: 1e-10,
@@ -38,23 +37,30 @@ fn run(selection: Selection, h: f64, t_end: f64) -> Vec<[f64; 3]> {
         },
     )
     .unwrap();
-    let mut scheme = Scheme::new(field, correction, EpsPolicy::new(1.0, 3.0).unwrap())
+    let mut scheme = Scheme::new(correction, EpsPolicy::new(1.0, 3.0).unwrap())
         .with_convex_part(Box::new(SeparableAbs::new(MU.to_vec()).unwrap()), selection);
     let mut x = X0;
     let mut out = vec![X0];
     scheme
-        .run(0.0, &mut x, &StepSequence::Fixed { h, t_end }, |r, x| {
-            // Iterates stay in the box up to the certified violation.
-            for &xi in x {
-                assert!(
-                    xi >= LO - r.violation - 1e-15 && xi <= HI + r.violation + 1e-15,
-                    "left the box: {x:?} (violation {})",
-                    r.violation
-                );
-            }
-            assert!(r.eps <= r.eps_target);
-            out.push([x[0], x[1], x[2]]);
-        })
+        .run(
+            &field,
+            &mut boxset,
+            0.0,
+            &mut x,
+            &StepSequence::Fixed { h, t_end },
+            |r, x| {
+                // Iterates stay in the box up to the certified violation.
+                for &xi in x {
+                    assert!(
+                        xi >= LO - r.violation - 1e-15 && xi <= HI + r.violation + 1e-15,
+                        "left the box: {x:?} (violation {})",
+                        r.violation
+                    );
+                }
+                assert!(r.eps <= r.eps_target);
+                out.push([x[0], x[1], x[2]]);
+            },
+        )
         .unwrap();
     out
 }

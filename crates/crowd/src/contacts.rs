@@ -1,0 +1,307 @@
+//! Contact generation: the sources of constraint rows (pairs of people, people and walls),
+//! each behind [`ContactSource`] with its own stable key, and the crowd's constraint set for
+//! one step, borrowed from the people and the walls.
+
+use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet};
+
+use crate::broad::BroadPhase;
+use crate::people::PeopleView;
+use crate::walls::Walls;
+
+/// The kinds of contact, the top two bits of their keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum ContactKind {
+    /// Two people: `g = |q_i − q_j| − r_i − r_j`.
+    PersonPerson = 0,
+    /// A person and a wall segment: `g = dist(q_i, wall) − r_i`.
+    PersonWall = 1,
+}
+
+impl ContactKind {
+    /// The key of a contact of this kind between `a` and `b` (both below 2³¹): stable across
+    /// steps, so multipliers warm-start by it.
+    pub fn key(self, a: u32, b: u32) -> ConstraintKey {
+        debug_assert!(a < 1 << 31 && b < 1 << 31);
+        ((self as u64) << 62) | ((a as u64) << 31) | b as u64
+    }
+
+    /// The kind and the two halves of `key`.
+    pub fn of(key: ConstraintKey) -> (Option<ContactKind>, u32, u32) {
+        let kind = match key >> 62 {
+            0 => Some(ContactKind::PersonPerson),
+            1 => Some(ContactKind::PersonWall),
+            _ => None,
+        };
+        (
+            kind,
+            ((key >> 31) & 0x7fff_ffff) as u32,
+            (key & 0x7fff_ffff) as u32,
+        )
+    }
+}
+
+/// What a source reads to list its contacts: the time, the positions, the people and the
+/// walls, and the margin (every contact with `g ≤ margin` must be listed).
+#[derive(Debug, Clone, Copy)]
+pub struct ContactQuery<'a> {
+    /// The time at which `g` and `∇g` are evaluated.
+    pub t: f64,
+    /// Positions `[x0, y0, …]`.
+    pub q: &'a [f64],
+    /// The people.
+    pub people: PeopleView<'a>,
+    /// The walls.
+    pub walls: &'a Walls,
+    /// The margin (m).
+    pub margin: f64,
+}
+
+/// One kind of contact: appends a row `g_i(t, q) ≥ 0` with its gradient and key for every
+/// contact of its kind with `g ≤ margin`.
+pub trait ContactSource: std::fmt::Debug + Send {
+    /// A short name for reports.
+    fn name(&self) -> &'static str;
+    /// Appends the rows to `rows`.
+    fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows);
+}
+
+/// Pairs of people found by a [`BroadPhase`].
+#[derive(Debug)]
+pub struct PersonPairs {
+    broad: Box<dyn BroadPhase>,
+    pairs: Vec<(u32, u32)>,
+}
+
+impl PersonPairs {
+    /// Pairs found by `broad`.
+    pub fn new(broad: Box<dyn BroadPhase>) -> Self {
+        Self {
+            broad,
+            pairs: Vec::new(),
+        }
+    }
+
+    /// The broad phase's name.
+    pub fn broad_phase(&self) -> &'static str {
+        self.broad.name()
+    }
+}
+
+impl ContactSource for PersonPairs {
+    fn name(&self) -> &'static str {
+        "person-person"
+    }
+
+    fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
+        let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+        self.broad.pairs(q, radius, at.margin, &mut self.pairs);
+        for &(i, j) in &self.pairs {
+            let (i, j) = (i as usize, j as usize);
+            let (dx, dy) = (q[2 * i] - q[2 * j], q[2 * i + 1] - q[2 * j + 1]);
+            let d = (dx * dx + dy * dy).sqrt();
+            // Coincident centres: any unit direction is a subgradient.
+            let e = if d > 0.0 {
+                [dx / d, dy / d]
+            } else {
+                [1.0, 0.0]
+            };
+            let g = d - radius[i] - radius[j];
+            let (a, b) = (id[i].min(id[j]), id[i].max(id[j]));
+            rows.push(
+                ContactKind::PersonPerson.key(a, b),
+                g,
+                [
+                    (2 * i, e[0]),
+                    (2 * i + 1, e[1]),
+                    (2 * j, -e[0]),
+                    (2 * j + 1, -e[1]),
+                ],
+            );
+        }
+    }
+}
+
+/// People against wall segments, through the walls' grid index: the cost follows the walls
+/// near each person, not all of them.
+#[derive(Debug, Default)]
+pub struct PersonWalls {
+    near: Vec<u32>,
+}
+
+impl ContactSource for PersonWalls {
+    fn name(&self) -> &'static str {
+        "person-wall"
+    }
+
+    fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
+        let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+        let segments = at.walls.segments();
+        for i in 0..radius.len() {
+            let p = [q[2 * i], q[2 * i + 1]];
+            at.walls
+                .near(p, radius[i] + at.margin.max(0.0), &mut self.near);
+            for &w in &self.near {
+                let wall = &segments[w as usize];
+                let c = wall.closest(p);
+                let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
+                let d = (ex * ex + ey * ey).sqrt();
+                let g = d - radius[i];
+                if g > at.margin {
+                    continue;
+                }
+                // On the wall itself: the walkable side is the wall's left.
+                let n = if d > 0.0 {
+                    [ex / d, ey / d]
+                } else {
+                    wall.left_normal()
+                };
+                rows.push(
+                    ContactKind::PersonWall.key(id[i], w),
+                    g,
+                    [(2 * i, n[0]), (2 * i + 1, n[1])],
+                );
+            }
+        }
+    }
+}
+
+/// The contact sources of a run and the scratch of the check after each step; owned by the
+/// simulation, lent to [`CrowdContacts`] at every step.
+#[derive(Debug)]
+pub struct ContactSources {
+    sources: Vec<Box<dyn ContactSource>>,
+    check: ConstraintRows,
+    crossed: Vec<ConstraintKey>,
+}
+
+impl ContactSources {
+    /// The sources, in the order their rows are assembled.
+    pub fn new(sources: Vec<Box<dyn ContactSource>>) -> Self {
+        Self {
+            sources,
+            check: ConstraintRows::default(),
+            crossed: Vec::new(),
+        }
+    }
+
+    /// Their names.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.sources.iter().map(|s| s.name()).collect()
+    }
+
+    /// Appends every source's rows with `g ≤ margin` at `(t, q)`.
+    pub fn assemble(
+        &mut self,
+        t: f64,
+        q: &[f64],
+        people: PeopleView<'_>,
+        walls: &Walls,
+        margin: f64,
+        rows: &mut ConstraintRows,
+    ) {
+        let at = ContactQuery {
+            t,
+            q,
+            people,
+            walls,
+            margin,
+        };
+        for s in &mut self.sources {
+            s.assemble(&at, rows);
+        }
+    }
+}
+
+/// The crowd's feasible set for one step: `g ≥ 0` for every contact of every source, convex
+/// in `q`, so the linearized set lies inside it. Borrowed from the people and the walls.
+#[derive(Debug)]
+pub struct CrowdContacts<'a> {
+    /// The people.
+    pub people: PeopleView<'a>,
+    /// The walls.
+    pub walls: &'a Walls,
+    /// The sources and their scratch.
+    pub sources: &'a mut ContactSources,
+}
+
+impl ConstraintSet for CrowdContacts<'_> {
+    fn dim(&self) -> usize {
+        2 * self.people.id.len()
+    }
+
+    fn assemble(&mut self, t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {
+        self.sources
+            .assemble(t, q, self.people, self.walls, margin, rows);
+    }
+
+    /// Two disks close by at most `|v_i| + |v_j|` per unit time and a disk closes on a wall at
+    /// `|v_i|`; `v` can exceed the desired `w` when pushed, hence the factor, and the check
+    /// after the step catches the rest.
+    fn margin(&self, _q: &[f64], w: &[f64], mu: f64) -> f64 {
+        let vmax = w
+            .chunks_exact(2)
+            .map(|v| (v[0] * v[0] + v[1] * v[1]).sqrt())
+            .fold(0.0, f64::max);
+        let rmin = self
+            .people
+            .radius
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min);
+        3.0 * mu * vmax + 0.05 * rmin
+    }
+
+    /// As the default, with the rows kept from step to step, and the assembled keys searched
+    /// only for the (usually no) rows violated beyond `tol`.
+    fn crossed_outside(
+        &mut self,
+        t: f64,
+        q: &[f64],
+        assembled: &ConstraintRows,
+        tol: f64,
+    ) -> usize {
+        let mut check = std::mem::take(&mut self.sources.check);
+        check.clear(self.dim());
+        self.assemble(t, q, -tol, &mut check);
+        let crossed = &mut self.sources.crossed;
+        crossed.clear();
+        crossed.extend(
+            check
+                .keys()
+                .iter()
+                .zip(check.values())
+                .filter(|&(_, &g)| g < -tol)
+                .map(|(&k, _)| k),
+        );
+        self.sources.check = check;
+        let crossed = &mut self.sources.crossed;
+        if crossed.is_empty() {
+            return 0;
+        }
+        crossed.sort_unstable();
+        let known = assembled
+            .keys()
+            .iter()
+            .filter(|k| crossed.binary_search(k).is_ok())
+            .count();
+        crossed.len() - known
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_of_different_kinds_never_collide_and_read_back() {
+        let max = (1u32 << 31) - 1;
+        for (a, b) in [(0, 0), (1, 2), (max, max), (max, 0)] {
+            let pp = ContactKind::PersonPerson.key(a, b);
+            let pw = ContactKind::PersonWall.key(a, b);
+            assert_ne!(pp, pw);
+            assert_eq!(ContactKind::of(pp), (Some(ContactKind::PersonPerson), a, b));
+            assert_eq!(ContactKind::of(pw), (Some(ContactKind::PersonWall), a, b));
+        }
+    }
+}

@@ -1,0 +1,128 @@
+//! Exits as a run uses them: where they are, what passing one does, whether they are open,
+//! and the distance fields that lead to them; built once from the scene.
+
+use crate::error::CrowdError;
+use crate::field::{DistanceField, ExitGoal};
+use crate::geometry::{Polygon, Segment};
+use crate::scene::{ExitAction, Scene};
+
+/// One exit.
+#[derive(Debug, Clone)]
+pub(crate) struct ExitRuntime {
+    pub area: Option<Polygon>,
+    pub segment: Option<Segment>,
+    pub action: ExitAction,
+    pub target: Option<Polygon>,
+    pub open: bool,
+}
+
+impl ExitRuntime {
+    /// The wall that closes the exit: its segment, or for an area the mid-line of the area's
+    /// bounding box along its longer side.
+    pub fn closure(&self) -> Segment {
+        if let Some(s) = self.segment {
+            return s;
+        }
+        let (lo, hi) = self.area.as_ref().expect("an area or a segment").bounds();
+        if hi[1] - lo[1] >= hi[0] - lo[0] {
+            let x = 0.5 * (lo[0] + hi[0]);
+            Segment {
+                a: [x, lo[1]],
+                b: [x, hi[1]],
+            }
+        } else {
+            let y = 0.5 * (lo[1] + hi[1]);
+            Segment {
+                a: [lo[0], y],
+                b: [hi[0], y],
+            }
+        }
+    }
+
+    /// Whether a person of radius `r` at `p` has passed the (open) exit.
+    pub fn reached(&self, p: [f64; 2], r: f64) -> bool {
+        if !self.open {
+            return false;
+        }
+        match (&self.area, &self.segment) {
+            (Some(a), _) => a.contains(p),
+            (None, Some(s)) => s.distance(p) <= r,
+            _ => false,
+        }
+    }
+}
+
+/// The exits of a scene with their distance fields: one per exit, one per target area.
+#[derive(Debug, Clone)]
+pub(crate) struct Exits {
+    pub exits: Vec<ExitRuntime>,
+    pub goals: Vec<ExitGoal>,
+    pub fields: Vec<DistanceField>,
+}
+
+impl Exits {
+    /// Builds the exits and solves their distance fields on the scene's grid.
+    pub fn build(scene: &Scene) -> Result<Self, CrowdError> {
+        let outer = Polygon {
+            vertices: scene.area.outer.clone(),
+        };
+        let (lo, hi) = outer.bounds();
+        let cell = scene.solver.grid_cell;
+        let walkable = |p: [f64; 2]| scene.walkable(p);
+        let mut out = Self {
+            exits: Vec::new(),
+            goals: Vec::new(),
+            fields: Vec::new(),
+        };
+        for (e, exit) in scene.exits.iter().enumerate() {
+            let area = exit.area.as_ref().map(|a| Polygon {
+                vertices: a.clone(),
+            });
+            let segment = exit.segment.map(|s| Segment { a: s[0], b: s[1] });
+            let goal = |p: [f64; 2]| match (&area, &segment) {
+                (Some(a), _) => a.contains(p),
+                (None, Some(s)) => s.distance(p) <= 0.75 * cell,
+                _ => false,
+            };
+            let f = DistanceField::build(lo, hi, cell, walkable, goal).ok_or_else(|| {
+                CrowdError::invalid(
+                    format!("exits[{e}]"),
+                    &exit.name,
+                    "no walkable cell of the distance grid lies in the exit",
+                )
+            })?;
+            out.fields.push(f);
+            let field = out.fields.len() - 1;
+            let target = match &exit.target {
+                Some(t) => {
+                    let poly = Polygon {
+                        vertices: t.clone(),
+                    };
+                    let f = DistanceField::build(lo, hi, cell, walkable, |p| poly.contains(p))
+                        .ok_or_else(|| {
+                            CrowdError::invalid(
+                                format!("exits[{e}].target"),
+                                format!("{t:?}"),
+                                "no walkable cell of the distance grid lies in the target",
+                            )
+                        })?;
+                    out.fields.push(f);
+                    Some((poly, out.fields.len() - 1))
+                }
+                None => None,
+            };
+            out.goals.push(ExitGoal {
+                exit: field,
+                target: target.as_ref().map(|t| t.1),
+            });
+            out.exits.push(ExitRuntime {
+                area,
+                segment,
+                action: exit.action,
+                target: target.map(|t| t.0),
+                open: true,
+            });
+        }
+        Ok(out)
+    }
+}

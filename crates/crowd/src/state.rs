@@ -1,0 +1,71 @@
+//! `SimState`: everything the next step of a run depends on, as one serializable value
+//! (saving, resuming, rolling back and pickling are the same operation).
+
+use moreau_core::ConstraintKey;
+use moreau_integrate::SteppingState;
+use serde::{Deserialize, Serialize};
+
+use crate::error::CrowdError;
+use crate::people::{ExitRecord, People};
+use crate::scene::Scene;
+
+/// The state of a [`Simulation`](crate::Simulation) between two steps. Restored into a
+/// simulation built from the same scene, the run goes on bit for bit as if never stopped.
+///
+/// What is *not* in it, because it is rebuilt from the scene: the geometry, the distance
+/// fields, the solver's scratch and symbolic analyses (the same pattern gives the same
+/// ordering). The random generator only places people at the start, so no random state is
+/// left to save.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimState {
+    /// [`SimState::FORMAT`] when written.
+    pub format: u32,
+    /// [`SimState::hash_scene`] of the scene it was saved from.
+    pub scene_hash: u64,
+    /// Time (s).
+    pub time: f64,
+    /// Steps taken.
+    pub steps: usize,
+    /// Frames reported so far (the next is due at `frames × output_interval`).
+    pub frames: usize,
+    /// The people present.
+    pub people: People,
+    /// Everyone who passed an exit, in order.
+    pub exits: Vec<ExitRecord>,
+    /// Which exits are open.
+    pub exits_open: Vec<bool>,
+    /// The factor on every desired speed.
+    pub speed_factor: f64,
+    /// The step controller's memory (adaptive steps).
+    pub stepping: SteppingState,
+    /// The last step's multipliers by contact key: the next step's warm start.
+    pub multipliers: Vec<(ConstraintKey, f64)>,
+}
+
+impl SimState {
+    /// The layout version; bumped whenever a field changes meaning.
+    pub const FORMAT: u32 = 1;
+
+    /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of
+    /// the scene it was saved from.
+    pub fn hash_scene(scene: &Scene) -> u64 {
+        scene
+            .to_toml()
+            .bytes()
+            .fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+                (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+            })
+    }
+
+    /// The compact binary form (postcard).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        postcard::to_stdvec(self).expect("a state serializes")
+    }
+
+    /// Reads [`to_bytes`](Self::to_bytes)' form.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, CrowdError> {
+        postcard::from_bytes(bytes).map_err(|e| {
+            CrowdError::invalid("state", format!("{} bytes", bytes.len()), e.to_string())
+        })
+    }
+}

@@ -1,0 +1,181 @@
+//! `Walls`: the wall segments of a scene and a grid index over them, built once, that finds
+//! the walls within reach of a point without looking at the others.
+
+use crate::geometry::Segment;
+
+/// Wall segments (the walkable side on each one's left) and a uniform grid of square cells,
+/// each listing the walls that pass through it.
+#[derive(Debug, Clone, Default)]
+pub struct Walls {
+    segments: Vec<Segment>,
+    origin: [f64; 2],
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    cell_start: Vec<u32>,
+    entries: Vec<u32>,
+}
+
+impl Walls {
+    /// The index over `segments`: about four cells per wall (at most `4 walls + 16`), each
+    /// listing every wall that passes within its circumscribed circle (a superset of the walls
+    /// that cross it).
+    pub fn new(segments: Vec<Segment>) -> Self {
+        let mut walls = Self {
+            segments,
+            ..Self::default()
+        };
+        if walls.segments.is_empty() {
+            return walls;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for s in &walls.segments {
+            for p in [s.a, s.b] {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+        }
+        let span = [(hi[0] - lo[0]).max(1e-9), (hi[1] - lo[1]).max(1e-9)];
+        let budget = (4 * walls.segments.len() + 16) as f64;
+        let mut cell = (span[0] * span[1] / budget).sqrt().max(1e-9);
+        // Thin boxes: cells no wider than the box's long side / 1 keeps the count in budget.
+        while (span[0] / cell).ceil() * (span[1] / cell).ceil() > budget {
+            cell *= 1.25;
+        }
+        let nx = ((span[0] / cell).ceil() as usize).max(1);
+        let ny = ((span[1] / cell).ceil() as usize).max(1);
+        walls.origin = lo;
+        walls.cell = cell;
+        walls.nx = nx;
+        walls.ny = ny;
+        let reach = 0.5 * std::f64::consts::SQRT_2 * cell * (1.0 + 1e-9);
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); nx * ny];
+        for (w, s) in walls.segments.iter().enumerate() {
+            let (x0, x1) = walls.cell_range(s.a[0].min(s.b[0]), s.a[0].max(s.b[0]), 0);
+            let (y0, y1) = walls.cell_range(s.a[1].min(s.b[1]), s.a[1].max(s.b[1]), 1);
+            for iy in y0..=y1 {
+                for ix in x0..=x1 {
+                    let c = [
+                        lo[0] + (ix as f64 + 0.5) * cell,
+                        lo[1] + (iy as f64 + 0.5) * cell,
+                    ];
+                    if s.distance(c) <= reach {
+                        lists[iy * nx + ix].push(w as u32);
+                    }
+                }
+            }
+        }
+        walls.cell_start.push(0);
+        for l in &lists {
+            walls.entries.extend_from_slice(l);
+            walls.cell_start.push(walls.entries.len() as u32);
+        }
+        walls
+    }
+
+    /// The cells `[first, last]` along axis `k` that `[a, b]` overlaps, clamped to the grid.
+    fn cell_range(&self, a: f64, b: f64, k: usize) -> (usize, usize) {
+        let n = if k == 0 { self.nx } else { self.ny };
+        let to_cell = |x: f64| -> usize {
+            let f = ((x - self.origin[k]) / self.cell).floor();
+            if f.is_nan() || f < 0.0 {
+                0
+            } else {
+                (f as usize).min(n - 1)
+            }
+        };
+        (to_cell(a), to_cell(b))
+    }
+
+    /// The segments.
+    pub fn segments(&self) -> &[Segment] {
+        &self.segments
+    }
+
+    /// How many walls.
+    pub fn len(&self) -> usize {
+        self.segments.len()
+    }
+
+    /// True without walls.
+    pub fn is_empty(&self) -> bool {
+        self.segments.is_empty()
+    }
+
+    /// Writes into `out` (cleared first), in increasing order, the index of every wall that
+    /// may lie within `reach` of `p`: a superset of those that do, found from the cells the
+    /// square `p ± reach` overlaps.
+    pub fn near(&self, p: [f64; 2], reach: f64, out: &mut Vec<u32>) {
+        out.clear();
+        if self.segments.is_empty() || !(reach >= 0.0) {
+            return;
+        }
+        if !reach.is_finite() {
+            out.extend(0..self.segments.len() as u32);
+            return;
+        }
+        let (lo, hi) = ([p[0] - reach, p[1] - reach], [p[0] + reach, p[1] + reach]);
+        let top = [
+            self.origin[0] + self.nx as f64 * self.cell,
+            self.origin[1] + self.ny as f64 * self.cell,
+        ];
+        // Entirely outside the grid: no wall is within reach (every wall lies in the grid).
+        if hi[0] < self.origin[0] || hi[1] < self.origin[1] || lo[0] > top[0] || lo[1] > top[1] {
+            return;
+        }
+        let (x0, x1) = self.cell_range(lo[0], hi[0], 0);
+        let (y0, y1) = self.cell_range(lo[1], hi[1], 1);
+        for iy in y0..=y1 {
+            for ix in x0..=x1 {
+                let c = iy * self.nx + ix;
+                out.extend_from_slice(
+                    &self.entries[self.cell_start[c] as usize..self.cell_start[c + 1] as usize],
+                );
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn near_finds_every_wall_within_reach() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let segments: Vec<Segment> = (0..300)
+            .map(|_| {
+                let a = [rng.random_range(0.0..50.0), rng.random_range(0.0..20.0)];
+                let len = if rng.random_bool(0.1) { 30.0 } else { 1.0 };
+                let b = [
+                    a[0] + rng.random_range(-len..len),
+                    a[1] + rng.random_range(-len..len),
+                ];
+                Segment { a, b }
+            })
+            .collect();
+        let walls = Walls::new(segments.clone());
+        let mut near = Vec::new();
+        for _ in 0..2000 {
+            let p = [rng.random_range(-10.0..60.0), rng.random_range(-10.0..30.0)];
+            let reach = rng.random_range(0.0..3.0);
+            walls.near(p, reach, &mut near);
+            assert!(near.windows(2).all(|w| w[0] < w[1]));
+            for (w, s) in segments.iter().enumerate() {
+                if s.distance(p) <= reach {
+                    assert!(
+                        near.contains(&(w as u32)),
+                        "wall {w} at {} missed from {p:?}",
+                        s.distance(p)
+                    );
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,170 @@
+//! How a run chooses its steps: fixed or adaptive, and the one place where "equal steps, the
+//! last one shortened to land on the stop" is written.
+
+use moreau_core::{Field, StepReport};
+use serde::{Deserialize, Serialize};
+
+use crate::adaptive::{AdaptiveSettings, ControllerState, StepController};
+use crate::correction::Correction;
+use crate::error::IntegrateError;
+use crate::scheme::Scheme;
+
+/// The next of equal steps `h` that cover `remaining` with the last one shortened: `h` while
+/// more than one step is left, then what is left (taken as `h` when within `10⁻⁹ h` of it:
+/// rounding in the sum of the steps, so that spans that are multiples of `h` are covered by steps of exactly
+/// `h`); `None` once what is left is below `10⁻⁹ h`.
+pub fn fixed_step(h: f64, remaining: f64) -> Option<f64> {
+    let n = (remaining / h - 1e-9).ceil();
+    if !(n >= 1.0) {
+        return None;
+    }
+    if n > 1.0 {
+        return Some(h);
+    }
+    Some(if (remaining - h).abs() <= 1e-9 * h {
+        h
+    } else {
+        remaining
+    })
+}
+
+/// How steps are chosen, with what the next step depends on.
+#[derive(Debug, Clone)]
+pub enum Stepping {
+    /// Equal steps, the last one before each stop shortened ([`fixed_step`]).
+    Fixed {
+        /// The step (s).
+        step: f64,
+    },
+    /// Chosen by an error-controlling [`StepController`].
+    Adaptive(StepController),
+}
+
+/// What [`Stepping`] carries from one step to the next (serializable: part of the state of a
+/// run).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum SteppingState {
+    /// Fixed steps carry nothing.
+    Fixed,
+    /// The controller's next step and last velocity.
+    Adaptive(ControllerState),
+}
+
+impl Stepping {
+    /// Fixed steps of `step`, checked.
+    pub fn fixed(step: f64) -> Result<Self, IntegrateError> {
+        if !(step > 0.0 && step.is_finite()) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "step",
+                value: step.to_string(),
+                reason: "must be finite and > 0",
+            });
+        }
+        Ok(Self::Fixed { step })
+    }
+
+    /// Adaptive steps with validated `settings`.
+    pub fn adaptive(settings: AdaptiveSettings) -> Result<Self, IntegrateError> {
+        Ok(Self::Adaptive(StepController::new(settings)?))
+    }
+
+    /// True once `t` is at `t_stop` (within a billionth of a step).
+    pub fn reached(&self, t: f64, t_stop: f64) -> bool {
+        let scale = match self {
+            Stepping::Fixed { step } => *step,
+            Stepping::Adaptive(c) => c.settings().mu_min,
+        };
+        t_stop - t <= 1e-9 * scale
+    }
+
+    /// One accepted step from `(t, q)` towards `t_stop`, never past it; `None` when `t_stop`
+    /// is reached. The report's `rejected` counts the trials rejected before it.
+    pub fn step<F: Field + ?Sized, C: Correction>(
+        &mut self,
+        scheme: &mut Scheme<C>,
+        field: &F,
+        set: &mut C::Set<'_>,
+        k: usize,
+        t: f64,
+        q: &mut [f64],
+        t_stop: f64,
+    ) -> Result<Option<StepReport>, IntegrateError> {
+        if self.reached(t, t_stop) {
+            return Ok(None);
+        }
+        match self {
+            Stepping::Fixed { step } => match fixed_step(*step, t_stop - t) {
+                Some(mu) => scheme.step(field, set, k, t, q, mu).map(Some),
+                None => Ok(None),
+            },
+            Stepping::Adaptive(c) => {
+                let s = c.step(scheme, field, set, k, t, q, t_stop)?;
+                let mut report = s.report;
+                report.rejected = s.rejected;
+                Ok(Some(report))
+            }
+        }
+    }
+
+    /// Forgets what depends on the size of the state (people left).
+    pub fn state_resized(&mut self) {
+        if let Stepping::Adaptive(c) = self {
+            c.reset_history();
+        }
+    }
+
+    /// What the next step depends on.
+    pub fn state(&self) -> SteppingState {
+        match self {
+            Stepping::Fixed { .. } => SteppingState::Fixed,
+            Stepping::Adaptive(c) => SteppingState::Adaptive(c.state()),
+        }
+    }
+
+    /// Restores [`state`](Self::state); the kind of stepping must match.
+    pub fn restore(&mut self, state: &SteppingState) -> Result<(), IntegrateError> {
+        match (self, state) {
+            (Stepping::Fixed { .. }, SteppingState::Fixed) => Ok(()),
+            (Stepping::Adaptive(c), SteppingState::Adaptive(s)) => {
+                c.restore(s);
+                Ok(())
+            }
+            (me, _) => Err(IntegrateError::InvalidSetting {
+                field: "stepping",
+                value: format!("{state:?}"),
+                reason: if matches!(me, Stepping::Fixed { .. }) {
+                    "the state was saved with adaptive steps, this run has fixed steps"
+                } else {
+                    "the state was saved with fixed steps, this run has adaptive steps"
+                },
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fixed_steps_cover_a_span_with_the_last_one_shortened() {
+        let cover = |h: f64, span: f64| {
+            let (mut t, mut steps) = (0.0, Vec::new());
+            while let Some(mu) = fixed_step(h, span - t) {
+                steps.push(mu);
+                t += mu;
+            }
+            (t, steps)
+        };
+        let (t, steps) = cover(0.3, 1.0);
+        assert_eq!(steps.len(), 4);
+        assert_eq!(&steps[..3], &[0.3, 0.3, 0.3]);
+        assert!((steps[3] - 0.1).abs() < 1e-12 && (t - 1.0).abs() < 1e-12);
+        // A multiple of the step: every step exactly h, although 20 − 399·0.05 ≠ 0.05.
+        let (_, steps) = cover(0.05, 20.0);
+        assert_eq!(steps.len(), 400);
+        assert!(steps.iter().all(|&mu| mu == 0.05));
+        assert_eq!(fixed_step(0.1, 0.0), None);
+        assert_eq!(fixed_step(0.1, 1e-12), None);
+    }
+}
