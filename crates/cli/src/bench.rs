@@ -1,21 +1,32 @@
 //! `moreau bench`: the scale table of the performance issue. Dense evacuation halls
-//! (≥ 2.5 people/m², one door) of 10³…10⁶ people, each size in its own process (for its peak
-//! memory): per step the median time and its stages, iterations, certified ε and violation,
-//! at the accuracy `√ε ≤ 1e-3 r_min`, violation ≤ 1e-4 r_min; the fitted exponent of cost in
-//! N; and, at one size, the fast solver against Clarabel on the same projection.
+//! (≥ 2.5 people/m², one door) or crushed crowds (a hexagonal packing at 5 people/m² pushing
+//! towards one point) of 10³…10⁶ people, each size in its own process (for its peak memory):
+//! per step the median time and its stages, iterations, certified ε and violation, at the
+//! accuracy `√ε ≤ 1e-3 r_min`, violation ≤ 1e-4 r_min; the fitted exponent of cost in N; and,
+//! at one size, the step's own (warm) projection against cold solves of the same projection
+//! by each solver asked for (Clarabel among them).
 
 use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use moreau_core::StepReport;
-use moreau_crowd::{Hall, Observer, ObserverError, Scene, Simulation, SolverKind, SolverSettings};
-use moreau_solve::{
-    ClarabelReference, ClarabelSettings, ProjectionSolution, ProjectionSolver, Target,
+use moreau_core::{Parallelism, StepReport};
+use moreau_crowd::{
+    Crush, Hall, Observer, ObserverError, Scene, Simulation, SolverKind, SolverSettings,
 };
+use moreau_solve::{ProjectionSolution, Target};
 use serde::{Deserialize, Serialize};
 
 use crate::svg::fit_power;
+
+/// Which crowd `moreau bench` measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+pub enum BenchScene {
+    /// An evacuation hall: people spread at `--density` head for one door and leave.
+    Hall,
+    /// A crush: a hexagonal packing at `--density` (default 5) pushing towards one point.
+    Crush,
+}
 
 /// Arguments of `moreau bench`.
 #[derive(Debug, clap::Args)]
@@ -23,20 +34,27 @@ pub struct BenchArgs {
     /// Crowd sizes.
     #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000")]
     sizes: Vec<usize>,
-    /// People per m².
-    #[arg(long, default_value_t = 2.6)]
-    density: f64,
+    /// The crowd.
+    #[arg(long, value_enum, default_value_t = BenchScene::Hall)]
+    scene: BenchScene,
+    /// People per m² (default: 2.6 in a hall, 5 in a crush).
+    #[arg(long)]
+    density: Option<f64>,
     /// Steps before measuring: 100 steps (5 s) let the queues form, so the measured steps
-    /// are jammed ones (10 gives the easy early phase).
+    /// are jammed ones (10 gives the easy early phase, 0 measures from the start).
     #[arg(long, default_value_t = 100)]
     warmup: usize,
-    /// Steps measured.
+    /// Steps measured (200 with --warmup 0: a whole evacuation, free flow then jam).
     #[arg(long, default_value_t = 5)]
     steps: usize,
-    /// Also solve one projection with Clarabel at this size (0: never) and compare.
+    /// At this size (0: never), after the measured steps, one more step, then its projection
+    /// again from cold (a new solver, zero multipliers) by each of --compare.
     #[arg(long, default_value_t = 40_000)]
-    clarabel_at: usize,
-    /// The fast solver measured (`interior`, `apgd`, `auto`, `clarabel`).
+    compare_at: usize,
+    /// The solvers of the cold comparison.
+    #[arg(long, value_delimiter = ',', default_value = "clarabel")]
+    compare: Vec<SolverKind>,
+    /// The solver of the steps (`interior`, `newton`, `apgd`, `auto`, `clarabel`, …).
     #[arg(long, default_value = "interior")]
     kind: SolverKind,
     /// Threads for the projection (0: every core).
@@ -54,48 +72,72 @@ struct Row {
     rows_per_step: f64,
     active_per_step: f64,
     ms_median: f64,
+    ms_mean: f64,
     ms_assemble: f64,
     ms_solve: f64,
     /// Within the solve: orderings and symbolic analyses.
-    #[serde(default)]
     ms_analyse: f64,
     /// Within the solve: numeric factorizations and triangular solves.
-    #[serde(default)]
     ms_factorize: f64,
     ms_other: f64,
+    /// Solver iterations per step, mean (for the Newton-type solvers: factorizations).
     iterations: f64,
     max_eps: f64,
     max_violation: f64,
     peak_rss_mb: f64,
     setup_s: f64,
-    clarabel: Option<Comparison>,
+    solvers: Vec<(String, usize)>,
+    comparison: Option<Comparison>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
 struct Comparison {
-    fast_ms: f64,
-    fast_gap: f64,
-    clarabel_ms: f64,
-    clarabel_gap: f64,
-    clarabel_status: String,
     target_gap: f64,
+    warm_ms: f64,
+    warm_gap: f64,
+    warm_solver: String,
+    warm_iterations: usize,
+    cold: Vec<Cold>,
 }
 
-/// The hall of `n` people at the table's accuracy: `√ε ≤ 1e-3 r_min` at μ = 0.05, i.e.
-/// `κ μ³ = (1e-3 r_min)²`, and violation ≤ 1e-4 r_min.
-fn hall(args: &BenchArgs, n: usize) -> Result<Scene> {
+#[derive(Debug, Serialize, Deserialize)]
+struct Cold {
+    kind: String,
+    answered_by: String,
+    ms: f64,
+    gap: f64,
+    status: String,
+    iterations: usize,
+}
+
+/// The scene of `n` people at the table's accuracy: `√ε ≤ 1e-3 r_min` at μ = 0.05, i.e.
+/// `κ μ³ = (1e-3 r_min)²`, and violation ≤ 1e-4 r_min, with r_min = 0.18 m.
+fn scene(args: &BenchArgs, n: usize) -> Result<Scene> {
     let r_min: f64 = 0.18;
-    let mut hall = Hall::new(n, args.density);
-    hall.horizon = 0.05 * (args.warmup + args.steps + 1) as f64;
-    hall.solver = SolverSettings {
+    let horizon = 0.05 * (args.warmup + args.steps + 1) as f64;
+    let solver = |side: f64| SolverSettings {
         kind: args.kind,
         threads: args.threads,
         eps_kappa: (1e-3 * r_min).powi(2) / 0.05f64.powi(3),
         max_violation: 1e-4 * r_min,
-        grid_cell: (hall.side() / 400.0).max(0.25),
+        grid_cell: (side / 400.0).max(0.25),
         ..SolverSettings::default()
     };
-    Ok(hall.scene()?)
+    Ok(match args.scene {
+        BenchScene::Hall => {
+            let mut hall = Hall::new(n, args.density.unwrap_or(2.6));
+            hall.horizon = horizon;
+            hall.solver = solver(hall.side());
+            hall.scene()?
+        }
+        BenchScene::Crush => {
+            let mut crush = Crush::new(n);
+            crush.density = args.density.unwrap_or(crush.density);
+            crush.horizon = horizon;
+            crush.solver = solver((n as f64 / crush.density).sqrt());
+            crush.scene()?
+        }
+    })
 }
 
 fn peak_rss_mb() -> f64 {
@@ -119,57 +161,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
-    let start = Instant::now();
-    let scene = hall(args, n)?;
-    let side = (n as f64 / args.density).sqrt();
-    let mut sim = Simulation::new(scene)?;
-    let setup = start.elapsed().as_secs_f64();
-    sim.advance_to(0.05 * args.warmup as f64, &mut ())?;
-    let mut measured = Reports::default();
-    sim.advance_to(0.05 * (args.warmup + args.steps) as f64, &mut measured)?;
-    let (mut total, mut assemble, mut solve) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut analyse, mut factorize) = (Vec::new(), Vec::new());
-    let (mut rows, mut active, mut iterations, mut eps, mut viol) = (0.0, 0.0, 0.0, 0.0f64, 0.0f64);
-    for r in &measured.0 {
-        total.push(1e3 * r.timings.total);
-        assemble.push(1e3 * r.timings.assemble);
-        solve.push(1e3 * r.timings.solve);
-        analyse.push(1e3 * r.timings.solve_analyse);
-        factorize.push(1e3 * r.timings.solve_factorize);
-        rows += r.assembled as f64;
-        active += r.active as f64;
-        iterations += r.iterations as f64;
-        eps = eps.max(r.eps);
-        viol = viol.max(r.violation);
-    }
-    let k = args.steps.max(1) as f64;
-    let clarabel = if n == args.clarabel_at {
-        Some(compare(&mut sim)?)
-    } else {
-        None
-    };
-    let (t, a, s) = (median(total), median(assemble), median(solve));
-    Ok(Row {
-        people: n,
-        area_m2: side * side,
-        rows_per_step: rows / k,
-        active_per_step: active / k,
-        ms_median: t,
-        ms_assemble: a,
-        ms_solve: s,
-        ms_analyse: median(analyse),
-        ms_factorize: median(factorize),
-        ms_other: t - a - s,
-        iterations: iterations / k,
-        max_eps: eps,
-        max_violation: viol,
-        peak_rss_mb: peak_rss_mb(),
-        setup_s: setup,
-        clarabel,
-    })
-}
-
 /// Keeps every step report.
 #[derive(Default)]
 struct Reports(Vec<StepReport>);
@@ -181,8 +172,71 @@ impl Observer for Reports {
     }
 }
 
-/// One more step with the fast solver, then its projection again with Clarabel.
-fn compare(sim: &mut Simulation) -> Result<Comparison> {
+fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
+    let start = Instant::now();
+    let scene = scene(args, n)?;
+    let area = {
+        let (lo, hi) = moreau_crowd::Polygon {
+            vertices: scene.area.outer.clone(),
+        }
+        .bounds();
+        (hi[0] - lo[0]) * (hi[1] - lo[1])
+    };
+    let mut sim = Simulation::new(scene)?;
+    let setup = start.elapsed().as_secs_f64();
+    sim.advance_to(0.05 * args.warmup as f64, &mut ())?;
+    let mut measured = Reports::default();
+    sim.advance_to(0.05 * (args.warmup + args.steps) as f64, &mut measured)?;
+    let mut stats = moreau_core::RunStats::default();
+    let (mut rows, mut active) = (0.0, 0.0);
+    let (mut total, mut assemble, mut solve) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut analyse, mut factorize) = (Vec::new(), Vec::new());
+    for r in &measured.0 {
+        stats.add(r);
+        total.push(1e3 * r.timings.total);
+        assemble.push(1e3 * r.timings.assemble);
+        solve.push(1e3 * r.timings.solve);
+        analyse.push(1e3 * r.timings.solve_analyse);
+        factorize.push(1e3 * r.timings.solve_factorize);
+        rows += r.assembled as f64;
+        active += r.active as f64;
+    }
+    let k = args.steps.max(1) as f64;
+    let comparison = if n == args.compare_at {
+        Some(compare(&mut sim, &args.compare, args.threads)?)
+    } else {
+        None
+    };
+    let (t, a, s) = (median(total), median(assemble), median(solve));
+    Ok(Row {
+        people: n,
+        area_m2: area,
+        rows_per_step: rows / k,
+        active_per_step: active / k,
+        ms_median: t,
+        ms_mean: 1e3 * stats.timings.total / k,
+        ms_assemble: a,
+        ms_solve: s,
+        ms_analyse: median(analyse),
+        ms_factorize: median(factorize),
+        ms_other: t - a - s,
+        iterations: stats.iterations_per_step(),
+        max_eps: stats.max_eps,
+        max_violation: stats.max_violation,
+        peak_rss_mb: peak_rss_mb(),
+        setup_s: setup,
+        solvers: stats
+            .solvers
+            .iter()
+            .map(|&(s, n)| (s.to_string(), n))
+            .collect(),
+        comparison,
+    })
+}
+
+/// One more step (its projection warm-started from the previous step), then the same
+/// projection from cold by each of `kinds`.
+fn compare(sim: &mut Simulation, kinds: &[SolverKind], threads: usize) -> Result<Comparison> {
     let mu = 0.05;
     let mut last = Reports::default();
     sim.advance_to(sim.time() + mu, &mut last)?;
@@ -192,17 +246,28 @@ fn compare(sim: &mut Simulation) -> Result<Comparison> {
         gap: r.eps_target / (2.0 * mu * mu),
         violation: sim.scene().solver.max_violation / mu,
     };
-    let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
-    let mut sol = ProjectionSolution::default();
-    let start = Instant::now();
-    let rep = clarabel.solve(&problem, target, &mut sol)?;
+    let mut cold = Vec::new();
+    for &kind in kinds {
+        let mut solver = kind.build(Parallelism::threads(threads), problem.dim())?;
+        let mut sol = ProjectionSolution::default();
+        let start = Instant::now();
+        let rep = solver.solve(&problem, target, &mut sol)?;
+        cold.push(Cold {
+            kind: kind.as_str().into(),
+            answered_by: rep.solver.into(),
+            ms: 1e3 * start.elapsed().as_secs_f64(),
+            gap: rep.gap,
+            status: rep.status.as_str().into(),
+            iterations: rep.iterations,
+        });
+    }
     Ok(Comparison {
-        fast_ms: 1e3 * r.timings.solve,
-        fast_gap: r.eps / (2.0 * mu * mu),
-        clarabel_ms: 1e3 * start.elapsed().as_secs_f64(),
-        clarabel_gap: rep.gap,
-        clarabel_status: rep.status.as_str().into(),
         target_gap: target.gap,
+        warm_ms: 1e3 * r.timings.solve,
+        warm_gap: r.eps / (2.0 * mu * mu),
+        warm_solver: r.solver.into(),
+        warm_iterations: r.iterations,
+        cold,
     })
 }
 
@@ -216,12 +281,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(
-        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9} {:>9} {:>8} {:>7}",
+        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>9} {:>9} {:>8} {:>7}",
         "people",
         "m²",
         "rows",
         "active",
         "ms/step",
+        "mean",
         "assemble",
         "solve",
         "analyse",
@@ -234,29 +300,39 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         "setup s"
     );
     let mut sizes = args.sizes.clone();
-    if args.clarabel_at > 0 && !sizes.contains(&args.clarabel_at) {
-        sizes.push(args.clarabel_at);
+    if args.compare_at > 0 && !sizes.contains(&args.compare_at) {
+        sizes.push(args.compare_at);
         sizes.sort_unstable();
     }
+    let compare: Vec<&str> = args.compare.iter().map(|k| k.as_str()).collect();
     for &n in &sizes {
-        let out = Command::new(&exe)
-            .args([
-                "bench",
-                "--one",
-                &n.to_string(),
-                "--density",
-                &args.density.to_string(),
-                "--warmup",
-                &args.warmup.to_string(),
-                "--steps",
-                &args.steps.to_string(),
-                "--clarabel-at",
-                &args.clarabel_at.to_string(),
-                "--kind",
-                args.kind.as_str(),
-                "--threads",
-                &args.threads.to_string(),
-            ])
+        let mut cmd = Command::new(&exe);
+        cmd.args([
+            "bench",
+            "--one",
+            &n.to_string(),
+            "--scene",
+            match args.scene {
+                BenchScene::Hall => "hall",
+                BenchScene::Crush => "crush",
+            },
+            "--warmup",
+            &args.warmup.to_string(),
+            "--steps",
+            &args.steps.to_string(),
+            "--compare-at",
+            &args.compare_at.to_string(),
+            "--compare",
+            &compare.join(","),
+            "--kind",
+            args.kind.as_str(),
+            "--threads",
+            &args.threads.to_string(),
+        ]);
+        if let Some(d) = args.density {
+            cmd.args(["--density", &d.to_string()]);
+        }
+        let out = cmd
             .output()
             .with_context(|| format!("running the {n}-people measurement"))?;
         if !out.status.success() {
@@ -267,12 +343,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         let row: Row = serde_json::from_slice(&out.stdout)?;
         println!(
-            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>8.0} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
+            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>7.1} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
             row.people,
             row.area_m2,
             row.rows_per_step,
             row.active_per_step,
             row.ms_median,
+            row.ms_mean,
             row.ms_assemble,
             row.ms_solve,
             row.ms_analyse,
@@ -298,18 +375,33 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         );
     }
     for row in &rows {
-        if let Some(c) = &row.clarabel {
+        let solvers: Vec<String> = row
+            .solvers
+            .iter()
+            .map(|(s, n)| format!("{s} {n}"))
+            .collect();
+        println!(
+            "{} people: steps answered by {}",
+            row.people,
+            solvers.join(", ")
+        );
+        if let Some(c) = &row.comparison {
             println!(
-                "{} people, one projection to gap ≤ {:.2e}: fast solver {:.1} ms (gap {:.2e}), Clarabel {:.1} ms (gap {:.2e}, {}): {:.1}× ",
-                row.people,
-                c.target_gap,
-                c.fast_ms,
-                c.fast_gap,
-                c.clarabel_ms,
-                c.clarabel_gap,
-                c.clarabel_status,
-                c.clarabel_ms / c.fast_ms
+                "{} people, one projection to gap ≤ {:.2e}: the step's own (warm) {:.1} ms by {} ({} iterations, gap {:.2e})",
+                row.people, c.target_gap, c.warm_ms, c.warm_solver, c.warm_iterations, c.warm_gap
             );
+            for k in &c.cold {
+                println!(
+                    "    cold {:<9} {:>10.1} ms  {:>5} it  gap {:.2e}  {} (by {})  {:.1}× the warm step",
+                    k.kind,
+                    k.ms,
+                    k.iterations,
+                    k.gap,
+                    k.status,
+                    k.answered_by,
+                    k.ms / c.warm_ms
+                );
+            }
         }
     }
     Ok(())

@@ -37,8 +37,10 @@ fn stages(c: &mut Criterion) {
     group.sample_size(10);
     for n in [2_000usize, 40_000] {
         let mut sim = Simulation::new(hall(n)).expect("hall builds");
-        sim.advance_to(60.0 * MU, &mut ()).expect("the warm-up steps");
-        sim.advance_to(61.0 * MU, &mut ()).expect("the measured step");
+        sim.advance_to(60.0 * MU, &mut ())
+            .expect("the warm-up steps");
+        sim.advance_to(61.0 * MU, &mut ())
+            .expect("the measured step");
         let eps_target = sim.scene().solver.eps_kappa * MU.powi(3);
         let q = sim.frame().positions.to_vec();
         let scene = sim.scene().clone();

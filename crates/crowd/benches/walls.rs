@@ -39,7 +39,8 @@ fn walls(c: &mut Criterion) {
         let mut sim = Simulation::new(hall(pillars)).expect("the hall builds");
         let walls = sim.walls().len();
         assert_eq!(walls, 8 + 4 * pillars);
-        sim.advance_to(10.0 * MU, &mut ()).expect("the warm-up steps");
+        sim.advance_to(10.0 * MU, &mut ())
+            .expect("the warm-up steps");
         let mut w = vec![0.0; sim.people().positions().len()];
         sim.desired_velocities(&mut w);
         let margin = sim.contact_margin(&w, MU);

@@ -87,3 +87,95 @@ output_interval = {output_interval}
         Scene::from_toml(&text, &format!("hall of {} people", self.people))
     }
 }
+
+/// A crowd pressed together: people on a hexagonal lattice at `density` per m² (5 by default:
+/// 0.48 m between centres) with radii of 0.995 × half the spacing (gaps of 2.4 mm), filling a
+/// square room, all pushing at 1 m/s towards a small area at its centre. From the first steps
+/// almost every pair of neighbours is in contact: the state of a crush, where nearly every
+/// row of the projection is active.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Crush {
+    /// People on the lattice.
+    pub people: usize,
+    /// People per m².
+    pub density: f64,
+    /// Radius (m); `None`: 0.995 × half the lattice spacing.
+    pub radius: Option<f64>,
+    /// Step (s).
+    pub step: f64,
+    /// Horizon (s).
+    pub horizon: f64,
+    /// The `[solver]` table.
+    pub solver: SolverSettings,
+}
+
+impl Crush {
+    /// `people` at 5 per m², nearly touching, 0.05 s steps over 1 s, the default solver.
+    pub fn new(people: usize) -> Self {
+        Self {
+            people,
+            density: 5.0,
+            radius: None,
+            step: 0.05,
+            horizon: 1.0,
+            solver: SolverSettings::default(),
+        }
+    }
+
+    /// The scene, validated like a scene file.
+    pub fn scene(&self) -> Result<Scene, CrowdError> {
+        // Hexagonal lattice: rows `d √3/2` apart, every other row shifted by `d/2`; one
+        // person per `d² √3/2` m².
+        let d = (2.0 / (3f64.sqrt() * self.density)).sqrt();
+        let dy = d * 3f64.sqrt() / 2.0;
+        let radius = self.radius.unwrap_or(0.995 * d / 2.0);
+        let per_row = ((self.people as f64 * dy / d).sqrt().ceil() as usize).max(1);
+        let rows = self.people.div_ceil(per_row);
+        let margin = d / 2.0 + radius;
+        let (w, h) = (
+            (per_row as f64 - 0.5) * d + 2.0 * margin,
+            (rows as f64 - 1.0) * dy + 2.0 * margin,
+        );
+        let side = w.max(h);
+        let positions: Vec<String> = (0..self.people)
+            .map(|k| {
+                let (r, c) = (k / per_row, k % per_row);
+                let x = margin + c as f64 * d + if r % 2 == 1 { d / 2.0 } else { 0.0 };
+                let y = margin + r as f64 * dy + (side - h) / 2.0;
+                format!("[{x}, {y}]")
+            })
+            .collect();
+        let (c0, c1) = (side / 2.0 - 0.25, side / 2.0 + 0.25);
+        let solver = toml::to_string(&self.solver).expect("solver settings serialize");
+        let text = format!(
+            r#"
+name = "crush-{n}"
+seed = 1
+[area]
+outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+[[exits]]
+name = "centre"
+area = [[{c0}, {c0}], [{c1}, {c0}], [{c1}, {c1}], [{c0}, {c1}]]
+action = "continue"
+target = [[{c0}, {c0}], [{c1}, {c0}], [{c1}, {c1}], [{c0}, {c1}]]
+[[groups]]
+name = "crowd"
+positions = [{positions}]
+radius = {radius}
+speed = 1.0
+destination = "centre"
+[time]
+horizon = {horizon}
+step = {step}
+output_interval = {step}
+[solver]
+{solver}"#,
+            n = self.people,
+            positions = positions.join(", "),
+            radius = radius,
+            horizon = self.horizon,
+            step = self.step,
+        );
+        Scene::from_toml(&text, &format!("crush of {} people", self.people))
+    }
+}

@@ -32,7 +32,7 @@ pub use contacts::{
 pub use error::CrowdError;
 pub use field::{DesiredVelocity, DistanceField, ExitGoal};
 pub use geometry::{Polygon, Segment};
-pub use hall::Hall;
+pub use hall::{Crush, Hall};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind, SolverSettings};
 pub use sim::{Frame, Observer, ObserverError, Simulation};
