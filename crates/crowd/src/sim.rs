@@ -90,6 +90,15 @@ impl Observer for RunStats {
 
 type Projection = LinearizedProjection<Box<dyn ProjectionSolver>>;
 
+/// What a step is made of, borrowed from a [`Simulation`].
+struct Parts<'a> {
+    scheme: &'a mut Scheme<Projection>,
+    stepping: &'a mut Stepping,
+    field: DesiredVelocity<'a>,
+    contacts: CrowdContacts<'a>,
+    q: &'a mut [f64],
+}
+
 /// A crowd run built from a [`Scene`]: the people (the one owner of their data), the walls,
 /// exits and distance fields, and the pipelines that step them (scheme, solver, contact
 /// sources), which hold only scratch memory and the warm start.
@@ -260,17 +269,11 @@ impl Simulation {
     }
 
     /// The desired velocities at the current configuration, `[u0x, u0y, …]`, into `out`.
-    pub fn desired_velocities(&self, out: &mut [f64]) {
+    pub fn desired_velocities(&mut self, out: &mut [f64]) {
         use moreau_core::Field;
-        let field = DesiredVelocity {
-            fields: &self.exits.fields,
-            goals: &self.exits.goals,
-            walls: &self.walls,
-            people: self.people.view(),
-            speed_factor: self.speed_factor,
-            near: &self.near,
-        };
-        field.eval(self.t, self.people.positions(), out);
+        let t = self.t;
+        let p = self.parts();
+        p.field.eval(t, p.q, out);
     }
 
     /// Every contact with `g ≤ margin` at the current configuration, as rows (cleared first).
@@ -291,26 +294,17 @@ impl Simulation {
     /// with predicted velocities `w` (every contact that can close within the step).
     pub fn contact_margin(&mut self, w: &[f64], mu: f64) -> f64 {
         use moreau_core::ConstraintSet;
-        let view = self.people.view();
-        let contacts = CrowdContacts {
-            people: view,
-            walls: &self.walls,
-            sources: &mut self.sources,
-        };
-        contacts.margin(self.people.positions(), w, mu)
+        let p = self.parts();
+        p.contacts.margin(p.q, w, mu)
     }
 
     /// How many constraints that are not in `assembled` are violated by more than `tol` at
     /// the current configuration (the check after every step).
     pub fn crossed_outside(&mut self, assembled: &ConstraintRows, tol: f64) -> usize {
         use moreau_core::ConstraintSet;
-        let view = self.people.view();
-        let mut contacts = CrowdContacts {
-            people: view,
-            walls: &self.walls,
-            sources: &mut self.sources,
-        };
-        contacts.crossed_outside(self.t, self.people.positions(), assembled, tol)
+        let t = self.t;
+        let mut p = self.parts();
+        p.contacts.crossed_outside(t, p.q, assembled, tol)
     }
 
     /// Whether exit `e` is open.
@@ -362,55 +356,49 @@ impl Simulation {
         gap
     }
 
+    /// The pipelines and the views of the people they step (the positions mutably, the rest
+    /// borrowed): what every step is made of.
+    fn parts(&mut self) -> Parts<'_> {
+        let (q, people) = self.people.split_mut();
+        Parts {
+            scheme: &mut self.scheme,
+            stepping: &mut self.stepping,
+            field: DesiredVelocity {
+                fields: &self.exits.fields,
+                goals: &self.exits.goals,
+                walls: &self.walls,
+                people,
+                speed_factor: self.speed_factor,
+                near: &self.near,
+            },
+            contacts: CrowdContacts {
+                people,
+                walls: &self.walls,
+                sources: &mut self.sources,
+            },
+            q,
+        }
+    }
+
     /// One step of size `mu` (whatever the scene's stepping says); then applies exits. For
     /// tests and tools that choose each step; runs call [`advance_to`](Self::advance_to).
     pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
-        let (q, view) = self.people.split_mut();
-        let field = DesiredVelocity {
-            fields: &self.exits.fields,
-            goals: &self.exits.goals,
-            walls: &self.walls,
-            people: view,
-            speed_factor: self.speed_factor,
-            near: &self.near,
-        };
-        let mut contacts = CrowdContacts {
-            people: view,
-            walls: &self.walls,
-            sources: &mut self.sources,
-        };
-        let report = self
+        let (k, t) = (self.steps, self.t);
+        let p = self.parts();
+        let report = p
             .scheme
-            .step(&field, &mut contacts, self.steps, self.t, q, mu)?;
+            .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)?;
         self.accept(&report);
         Ok(report)
     }
 
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
     fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
-        let (q, view) = self.people.split_mut();
-        let field = DesiredVelocity {
-            fields: &self.exits.fields,
-            goals: &self.exits.goals,
-            walls: &self.walls,
-            people: view,
-            speed_factor: self.speed_factor,
-            near: &self.near,
-        };
-        let mut contacts = CrowdContacts {
-            people: view,
-            walls: &self.walls,
-            sources: &mut self.sources,
-        };
-        let report = self.stepping.step(
-            &mut self.scheme,
-            &field,
-            &mut contacts,
-            self.steps,
-            self.t,
-            q,
-            t_stop,
-        )?;
+        let (k, t) = (self.steps, self.t);
+        let p = self.parts();
+        let report = p
+            .stepping
+            .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)?;
         if let Some(r) = &report {
             self.accept(r);
         }
