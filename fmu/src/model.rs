@@ -380,3 +380,43 @@ impl CrowdModel {
         self.sim.frame().radii_by_id(out);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The room, with its scene file rewritten into a scratch directory.
+    fn model(edit: impl Fn(&mut Scene), name: &str) -> CrowdModel {
+        let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/scenes/room-150.toml");
+        let mut scene = Scene::from_file(root).unwrap();
+        edit(&mut scene);
+        let dir = std::env::temp_dir().join(format!("moreau-fmu-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("scene.toml");
+        std::fs::write(&path, scene.to_toml()).unwrap();
+        let settings = Settings {
+            scene: path.display().to_string(),
+            ..Settings::default()
+        };
+        CrowdModel::new(&settings, None).unwrap()
+    }
+
+    #[test]
+    fn the_fmu_steps_adaptively_when_its_scene_asks_for_it() {
+        let mut fixed = model(|_| {}, "fixed");
+        fixed.do_step(0.0, 1.0).unwrap();
+        assert_eq!(
+            fixed.integer(vr::INTERNAL_STEPS),
+            Some(20),
+            "1 s of 0.05 s steps"
+        );
+        let mut adaptive = model(|s| s.time.tol = Some(0.05), "adaptive");
+        adaptive.do_step(0.0, 1.0).unwrap();
+        let steps = adaptive.integer(vr::INTERNAL_STEPS).unwrap();
+        // Free flow at the start: the controller grows the step up to the output interval.
+        assert!((10..20).contains(&steps), "{steps} adaptive steps in 1 s");
+        assert!((adaptive.time() - 1.0).abs() < 1e-12);
+        let eps = adaptive.real(vr::EPS).unwrap();
+        assert!(eps >= 0.0 && eps.is_finite());
+    }
+}
