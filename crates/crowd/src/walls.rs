@@ -127,12 +127,17 @@ impl Walls {
         }
         let (x0, x1) = self.cell_range(lo[0], hi[0], 0);
         let (y0, y1) = self.cell_range(lo[1], hi[1], 1);
+        let cell = |c: usize| {
+            &self.entries[self.cell_start[c] as usize..self.cell_start[c + 1] as usize]
+        };
+        if x0 == x1 && y0 == y1 {
+            // One cell: its list is already sorted and without repeats.
+            out.extend_from_slice(cell(y0 * self.nx + x0));
+            return;
+        }
         for iy in y0..=y1 {
             for ix in x0..=x1 {
-                let c = iy * self.nx + ix;
-                out.extend_from_slice(
-                    &self.entries[self.cell_start[c] as usize..self.cell_start[c + 1] as usize],
-                );
+                out.extend_from_slice(cell(iy * self.nx + ix));
             }
         }
         out.sort_unstable();
