@@ -16,6 +16,7 @@ mod chain;
 mod clarabel_ref;
 mod error;
 mod interior;
+mod normal;
 mod problem;
 mod products;
 mod workers;
@@ -26,9 +27,8 @@ pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
 pub use error::SolveError;
-pub use interior::{
-    FactorizationCounts, InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder,
-};
+pub use interior::{InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder};
+pub use normal::FactorizationCounts;
 pub use problem::{ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target};
 
 use moreau_core::Parallelism;
