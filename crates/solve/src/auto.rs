@@ -98,16 +98,15 @@ impl ProjectionSolver for AutoSolver {
         target: Target,
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
-        let mut spent = 0;
+        let mut spent = SolveReport::default();
         if Self::warm_active_share(p, sol) < self.settings.sparse_contacts {
-            let rep = self.apgd.solve(p, target, sol)?;
-            if rep.status.is_converged() {
-                return Ok(rep);
+            spent = self.apgd.solve(p, target, sol)?;
+            if spent.status.is_converged() {
+                return Ok(spent);
             }
-            spent = rep.iterations;
         }
         let mut rep = self.interior.solve(p, target, sol)?;
-        rep.iterations += spent;
+        rep.add_work(&spent);
         Ok(rep)
     }
 }

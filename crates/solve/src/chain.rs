@@ -46,9 +46,7 @@ impl ProjectionSolver for WithFallback {
         solution.lambda.clear();
         solution.lambda.extend_from_slice(&self.warm);
         let mut rep = self.fallback.solve(problem, target, solution)?;
-        rep.iterations += first.iterations;
-        rep.time_analyse += first.time_analyse;
-        rep.time_factorize += first.time_factorize;
+        rep.add_work(&first);
         Ok(rep)
     }
 }

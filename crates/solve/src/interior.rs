@@ -9,32 +9,19 @@
 //! freedom — cost nothing, where the dual Hessian `J Jᵀ` of an active-set method is singular.
 //! Mehrotra's predictor–corrector takes two solves per factorization.
 //!
-//! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
-//! rows, a person's x and y), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
-//! row's products land, and faer's *symbolic* Cholesky — all three redone only when the
-//! columns of `J`'s rows change — and the *numeric* factorization, every iteration. Scratch
-//! memory is sized at each symbolic analysis.
+//! The normal equations (ordering, pattern, symbolic analysis reused while the columns of
+//! `J`'s rows hold, a numeric factorization every iteration) are [`NormalEquations`]'s; this
+//! module is the interior-point loop.
 
-use std::time::Instant;
-
-use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::SupernodalThreshold;
-use faer::sparse::linalg::amd;
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
-    factorize_symbolic_cholesky,
-};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Par, Side};
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 
 use crate::certificate::certify;
 use crate::error::SolveError;
+use crate::normal::{FactorizationCounts, NormalEquations};
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
-use crate::products::{Index, Transpose, row_dot};
+use crate::products::row_dot;
 use crate::workers::Workers;
 
 /// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
@@ -111,213 +98,12 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
-/// What the factorization machinery did over the solver's life (for benchmarks).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct FactorizationCounts {
-    /// Orderings, patterns and symbolic analyses (the columns of the rows changed).
-    pub analyses: usize,
-    /// Numeric factorizations.
-    pub factorizations: usize,
-    /// Stored entries of the last factorized triangle of `I + Jᵀ D J`.
-    pub matrix_nnz: usize,
-    /// Stored entries of its last Cholesky factor (the fill the ordering left).
-    pub factor_nnz: usize,
-}
-
-/// One triangle of `I + Jᵀ D J` in compressed columns, in a given symmetric ordering, and
-/// where each product `D_i a_ia a_ib` of row `i` of `J` lands in it.
-#[derive(Debug, Clone, Default)]
-struct NormalPattern {
-    n: usize,
-    col_ptr: Vec<Index>,
-    row_idx: Vec<Index>,
-    diag: Vec<usize>,
-    // For each row of J, each ordered pair (a, b) of its entries with col_a ≥ col_b, in
-    // traversal order: where the product lands in `row_idx`.
-    slots: Vec<Index>,
-    // scratch for building
-    count: Vec<usize>,
-    fill: Vec<Index>,
-}
-
-/// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
-/// in the order [`NormalPattern::assemble`] visits them.
-fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
-    for i in 0..j.len() {
-        let cols = j.row(i).0;
-        for &ca in cols {
-            for &cb in cols {
-                if ca >= cb {
-                    f(ca, cb);
-                }
-            }
-        }
-    }
-}
-
-/// Numbers the runs of adjacent unknowns that appear in exactly the same rows
-/// (`group_of[c]`, increasing in `c`) and returns how many runs there are.
-fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
-    let n = jt.col_start.len() - 1;
-    group_of.clear();
-    let mut groups = 0;
-    for c in 0..n {
-        if c == 0 || jt.rows_of(c - 1) != jt.rows_of(c) {
-            groups += 1;
-        }
-        group_of.push(groups - 1);
-    }
-    groups
-}
-
-impl NormalPattern {
-    /// Builds the pattern of `j` with unknown `c` at position `at[c]` (identity without
-    /// `at`), storing the upper triangle (row ≤ column) when `upper`, else the lower one;
-    /// with `slots`, also where each product lands.
-    fn build(
-        &mut self,
-        j: &ConstraintRows,
-        at: Option<(&[usize], usize)>,
-        upper: bool,
-        slots: bool,
-    ) {
-        let n = at.map_or(j.dim(), |a| a.1);
-        self.n = n;
-        let at = at.map(|a| a.0);
-        let place = |ca: usize, cb: usize| -> (usize, usize) {
-            let (pa, pb) = match at {
-                Some(at) => (at[ca], at[cb]),
-                None => (ca, cb),
-            };
-            let (lo, hi) = if pa <= pb { (pa, pb) } else { (pb, pa) };
-            if upper { (lo, hi) } else { (hi, lo) } // (row, column)
-        };
-        // Bucket the entries by column, then sort and deduplicate each column.
-        self.count.clear();
-        self.count.resize(n, 1); // the diagonal
-        for_each_product(j, |ca, cb| self.count[place(ca, cb).1] += 1);
-        let mut total = 0;
-        for c in self.count.iter_mut() {
-            let k = *c;
-            *c = total;
-            total += k;
-        }
-        self.fill.clear();
-        self.fill.resize(total, 0);
-        {
-            let (count, fill) = (&mut self.count, &mut self.fill);
-            for c in 0..n {
-                fill[count[c]] = c as Index;
-                count[c] += 1;
-            }
-            for_each_product(j, |ca, cb| {
-                let (r, c) = place(ca, cb);
-                fill[count[c]] = r as Index;
-                count[c] += 1;
-            });
-        }
-        // count[c] is now the end of column c's bucket and the start of column c + 1's.
-        self.col_ptr.clear();
-        self.row_idx.clear();
-        let mut start = 0;
-        for c in 0..n {
-            let end = self.count[c];
-            let bucket = &mut self.fill[start..end];
-            bucket.sort_unstable();
-            self.col_ptr.push(self.row_idx.len() as Index);
-            let mut last = Index::MAX;
-            for &r in bucket.iter() {
-                if r != last {
-                    self.row_idx.push(r);
-                    last = r;
-                }
-            }
-            start = end;
-        }
-        self.col_ptr.push(self.row_idx.len() as Index);
-        self.diag.clear();
-        self.slots.clear();
-        if !slots {
-            return;
-        }
-        let find = |col_ptr: &[Index], row_idx: &[Index], r: usize, c: usize| {
-            let (a, b) = (col_ptr[c] as usize, col_ptr[c + 1] as usize);
-            a + row_idx[a..b]
-                .binary_search(&(r as Index))
-                .expect("every product has a slot in the pattern")
-        };
-        for c in 0..n {
-            self.diag.push(find(&self.col_ptr, &self.row_idx, c, c));
-        }
-        let (col_ptr, row_idx, out) = (&self.col_ptr, &self.row_idx, &mut self.slots);
-        for_each_product(j, |ca, cb| {
-            let (r, c) = place(ca, cb);
-            out.push(find(col_ptr, row_idx, r, c) as Index);
-        });
-    }
-
-    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
-        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
-    }
-
-    /// `values = triangle(I + Jᵀ diag(d) J)`.
-    fn assemble(&self, j: &ConstraintRows, d: &[f64], values: &mut Vec<f64>) {
-        values.clear();
-        values.resize(self.row_idx.len(), 0.0);
-        for &p in &self.diag {
-            values[p] = 1.0;
-        }
-        let mut k = 0;
-        for (i, &di) in d.iter().enumerate() {
-            let (cols, coefs) = j.row(i);
-            for (&ca, &aa) in cols.iter().zip(coefs) {
-                for (&cb, &ab) in cols.iter().zip(coefs) {
-                    if ca >= cb {
-                        values[self.slots[k] as usize] += di * aa * ab;
-                        k += 1;
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// faer's workspace, sized at each symbolic analysis.
-struct Scratch(MemBuffer);
-
-impl std::fmt::Debug for Scratch {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Scratch")
-    }
-}
-
 /// Mehrotra's predictor–corrector interior point on the velocity-form projection, with
 /// sparse Cholesky normal equations. Its answers are certified by [`certify`].
 #[derive(Debug)]
 pub struct InteriorPoint {
     settings: InteriorPointSettings,
-    // The structure of J the analysis below was made for.
-    j_row_start: Vec<usize>,
-    j_cols: Vec<usize>,
-    // The unpermuted lower triangle (input of the ordering), the fill-reducing ordering,
-    // and the permuted triangle that is factorized (no permutation per factorization).
-    natural: NormalPattern,
-    perm: Vec<usize>,
-    perm_inv: Vec<usize>,
-    group_of: Vec<usize>,
-    group_start: Vec<usize>,
-    group_perm: Vec<Index>,
-    group_perm_inv: Vec<Index>,
-    jt: Transpose,
-    workers: Workers,
-    pattern: NormalPattern,
-    symbolic: Option<SymbolicCholesky<Index>>,
-    side: Side,
-    counts: FactorizationCounts,
-    time_factorize: f64,
-    h: Vec<f64>,
-    l: Vec<f64>,
-    mem: Scratch,
+    normal: NormalEquations,
     // per-row
     s: Vec<f64>,
     d: Vec<f64>,
@@ -340,25 +126,7 @@ impl InteriorPoint {
         settings.validate()?;
         Ok(Self {
             settings: settings.clone(),
-            j_row_start: Vec::new(),
-            j_cols: Vec::new(),
-            natural: NormalPattern::default(),
-            perm: Vec::new(),
-            perm_inv: Vec::new(),
-            group_of: Vec::new(),
-            group_start: Vec::new(),
-            group_perm: Vec::new(),
-            group_perm_inv: Vec::new(),
-            jt: Transpose::default(),
-            workers: Workers::new(settings.parallelism)?,
-            pattern: NormalPattern::default(),
-            symbolic: None,
-            side: Side::Upper,
-            counts: FactorizationCounts::default(),
-            time_factorize: 0.0,
-            h: Vec::new(),
-            l: Vec::new(),
-            mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
+            normal: NormalEquations::new(settings.parallelism)?,
             s: Vec::new(),
             d: Vec::new(),
             rp: Vec::new(),
@@ -376,15 +144,7 @@ impl InteriorPoint {
 
     /// Patterns, analyses and factorizations done so far.
     pub fn counts(&self) -> FactorizationCounts {
-        self.counts
-    }
-
-    fn par(&self) -> Par {
-        if self.settings.parallelism.is_sequential() {
-            Par::Seq
-        } else {
-            Par::rayon(self.settings.parallelism.get())
-        }
+        self.normal.counts()
     }
 
     fn size(&mut self, m: usize, n: usize) {
@@ -408,171 +168,22 @@ impl InteriorPoint {
         }
     }
 
-    /// Makes the ordering, the pattern and the symbolic analysis fit `j`; nothing is redone
-    /// while the columns of `j`'s rows stay the same.
-    fn analyse(&mut self, j: &ConstraintRows) -> Result<(), SolveError> {
-        if self.symbolic.is_some()
-            && self.pattern.n == j.dim()
-            && self.j_row_start == j.row_starts()
-            && self.j_cols == j.columns()
-        {
-            return Ok(());
-        }
-        self.j_row_start.clear();
-        self.j_row_start.extend_from_slice(j.row_starts());
-        self.j_cols.clear();
-        self.j_cols.extend_from_slice(j.columns());
-        let n = j.dim();
-        let starts = j.row_starts();
-        let products: usize = n
-            + (0..j.len())
-                .map(|i| {
-                    let k = starts[i + 1] - starts[i];
-                    k * (k + 1) / 2
-                })
-                .sum::<usize>();
-        if products.max(j.nnz()) > Index::MAX as usize {
-            return Err(SolveError::Factorization(format!(
-                "{products} products in I + JᵀDJ: more than 32-bit indices hold"
-            )));
-        }
-
-        // Fill-reducing ordering (AMD) of the pattern compressed to groups of adjacent
-        // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
-        self.jt.build(j);
-        let groups = column_groups(&self.jt, &mut self.group_of);
-        self.natural
-            .build(j, Some((&self.group_of, groups)), false, false);
-        let nnz = self.natural.row_idx.len();
-        self.group_perm.clear();
-        self.group_perm.resize(groups, 0);
-        self.group_perm_inv.clear();
-        self.group_perm_inv.resize(groups, 0);
-        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(groups, nnz));
-        amd::order_maybe_unsorted(
-            &mut self.group_perm,
-            &mut self.group_perm_inv,
-            self.natural.symbolic(),
-            amd::Control::default(),
-            MemStack::new(&mut mem),
-        )
-        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
-        // Expand: the groups in their order, each group's unknowns in theirs.
-        self.group_start.clear();
-        self.group_start.resize(groups + 1, 0);
-        for &g in &self.group_of {
-            self.group_start[g + 1] += 1;
-        }
-        for g in 0..groups {
-            self.group_start[g + 1] += self.group_start[g];
-        }
-        self.perm.clear();
-        for &g in &self.group_perm {
-            let g = g as usize;
-            self.perm
-                .extend(self.group_start[g]..self.group_start[g + 1]);
-        }
-        self.perm_inv.clear();
-        self.perm_inv.resize(n, 0);
-        for (k, &c) in self.perm.iter().enumerate() {
-            self.perm_inv[c] = k;
-        }
-
-        // The permuted upper triangle: faer's simplicial factorization reads it without a
-        // copy (and its symbolic analysis without an ordering reads the upper triangle).
-        // The supernodal variant measured slower on crowds (benches/README.md): their
-        // factors are thin, 2×2-blocked and have few wide supernodes.
-        self.pattern.build(j, Some((&self.perm_inv, n)), true, true);
-        let symbolic = factorize_symbolic_cholesky(
-            self.pattern.symbolic(),
-            Side::Upper,
-            SymmetricOrdering::Identity,
-            CholeskySymbolicParams {
-                // faer's rule (supernodal when flops per factor entry are many): it picks
-                // simplicial on these crowds, 1.6× faster than supernodal at 40,000 people,
-                // 1.5× slower on a fully jammed 1,000 (benches/README.md).
-                supernodal_flop_ratio_threshold: SupernodalThreshold::AUTO,
-                ..Default::default()
-            },
-        )
-        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
-        self.side = match symbolic.raw() {
-            SymbolicCholeskyRaw::Simplicial(_) => Side::Upper,
-            SymbolicCholeskyRaw::Supernodal(_) => {
-                self.pattern
-                    .build(j, Some((&self.perm_inv, n)), false, true);
-                Side::Lower
-            }
-        };
-        let par = self.par();
-        let req = StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, par),
-        ]);
-        self.mem = Scratch(MemBuffer::new(req));
-        self.l.clear();
-        self.l.resize(symbolic.len_val(), 0.0);
-        self.counts.factor_nnz = symbolic.len_val();
-        self.counts.matrix_nnz = self.pattern.row_idx.len();
-        self.symbolic = Some(symbolic);
-        self.counts.analyses += 1;
-        Ok(())
-    }
-
-    /// Factorizes `I + Jᵀ D J`; false when it is not numerically positive definite.
-    fn factorize(&mut self, j: &ConstraintRows) -> bool {
-        self.pattern.assemble(j, &self.d, &mut self.h);
-        let clock = Instant::now();
-        let par = self.par();
-        let symbolic = self.symbolic.as_ref().expect("analysed");
-        let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
-        self.counts.factorizations += 1;
-        let (l, side, mem) = (&mut self.l, self.side, &mut self.mem.0);
-        let ok = self.workers.install(|| {
-            symbolic
-                .factorize_numeric_llt(
-                    l,
-                    a,
-                    side,
-                    LltRegularization::default(),
-                    par,
-                    MemStack::new(mem),
-                    Default::default(),
-                )
-                .is_ok()
-        });
-        self.time_factorize += clock.elapsed().as_secs_f64();
-        ok
-    }
-
     /// One Newton direction for the complementarity right-hand side in `self.rc`:
     /// `(I + JᵀDJ) Δv = −r_d + Jᵀ(r_c/s + D r_p)`, `Δs = JΔv − r_p`, `Δλ = (r_c − λΔs)/s`.
     fn direction(&mut self, j: &ConstraintRows, lam: &[f64]) {
-        let w = &self.workers;
+        let w = self.normal.workers();
         let (s, d, rp, rc) = (&self.s, &self.d, &self.rp, &self.rc);
         w.map(&mut self.scratch_m, |i, _| rc[i] / s[i] + d[i] * rp[i]);
-        // Δv's right-hand side −r_d + Jᵀ(r_c/s + D r_p) in natural order (memory in
-        // order), then permuted into the factor's order.
-        let (y, rd, jt, coefs) = (&self.scratch_m, &self.rd, &self.jt, j.coefficients());
+        // Δv's right-hand side −r_d + Jᵀ(r_c/s + D r_p) in natural order.
+        let (y, rd, jt, coefs) = (
+            &self.scratch_m,
+            &self.rd,
+            self.normal.transpose(),
+            j.coefficients(),
+        );
         w.map(&mut self.dv, |c, _| jt.dot(coefs, y, c) - rd[c]);
-        let (dv, perm) = (&self.dv, &self.perm);
-        w.map(&mut self.scratch_n, |k, _| dv[perm[k]]);
-        let clock = Instant::now();
-        let par = self.par();
-        let symbolic = self.symbolic.as_ref().expect("analysed");
-        let n = self.dv.len();
-        let (l, x, mem) = (&self.l, &mut self.scratch_n, &mut self.mem.0);
-        w.install(|| {
-            LltRef::new(symbolic, l).solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(x, n, 1),
-                par,
-                MemStack::new(mem),
-            )
-        });
-        self.time_factorize += clock.elapsed().as_secs_f64();
-        let (x, perm_inv) = (&self.scratch_n, &self.perm_inv);
-        w.map(&mut self.dv, |c, _| x[perm_inv[c]]);
+        self.normal.solve_in_place(&mut self.dv);
+        let w = self.normal.workers();
         let dv = &self.dv;
         w.map(&mut self.ds, |i, _| row_dot(j, dv, i) - rp[i]);
         let ds = &self.ds;
@@ -644,10 +255,8 @@ impl ProjectionSolver for InteriorPoint {
         }
         v.copy_from_slice(p.w);
 
-        let clock = Instant::now();
-        self.analyse(j)?;
-        let time_analyse = clock.elapsed().as_secs_f64();
-        self.time_factorize = 0.0;
+        let times = self.normal.times();
+        self.normal.analyse(j)?;
 
         // Starting point (Mehrotra's heuristic on v = w): shift the slacks of the
         // unconstrained velocity into the interior, then balance s and λ. The caller's
@@ -678,7 +287,11 @@ impl ProjectionSolver for InteriorPoint {
         let mut iterations = 0;
         let status = loop {
             // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
-            let (wk, jt, coefs) = (&self.workers, &self.jt, j.coefficients());
+            let (wk, jt, coefs) = (
+                self.normal.workers(),
+                self.normal.transpose(),
+                j.coefficients(),
+            );
             {
                 let (v, lam): (&[f64], &[f64]) = (v, lam);
                 wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(coefs, lam, c));
@@ -705,15 +318,17 @@ impl ProjectionSolver for InteriorPoint {
             let mu = sl / m as f64;
             {
                 let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
-                self.workers.map(&mut self.d, |i, _| lam[i] / s[i]);
+                self.normal.workers().map(&mut self.d, |i, _| lam[i] / s[i]);
                 // Predictor (affine scaling).
-                self.workers.map(&mut self.rc, |i, _| -s[i] * lam[i]);
+                self.normal
+                    .workers()
+                    .map(&mut self.rc, |i, _| -s[i] * lam[i]);
             }
-            if !self.factorize(j) {
+            if !self.normal.factorize(j, 1.0, &self.d) {
                 break SolveStatus::NumericalError;
             }
             self.direction(j, lam);
-            let wk = &self.workers;
+            let wk = self.normal.workers();
             let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
             let alpha_aff = Self::max_step(wk, s, ds, lam, dl);
             let lam_ref: &[f64] = lam;
@@ -732,12 +347,12 @@ impl ProjectionSolver for InteriorPoint {
             {
                 let (s, dsa, dla) = (&self.s, &self.ds_aff, &self.dl_aff);
                 let lam: &[f64] = lam;
-                self.workers.map(&mut self.rc, |i, _| {
+                self.normal.workers().map(&mut self.rc, |i, _| {
                     -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu
                 });
             }
             self.direction(j, lam);
-            let wk = &self.workers;
+            let wk = self.normal.workers();
             let alpha = tau * Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
             if !(alpha > 0.0) || self.dv.iter().any(|x| !x.is_finite()) {
                 break SolveStatus::NumericalError;
@@ -750,16 +365,17 @@ impl ProjectionSolver for InteriorPoint {
         let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         // Active: rows whose multiplier dominates their slack (complementarity decides).
         let active = (0..m).filter(|&i| lam[i] > self.s[i]).count();
-        Ok(SolveReport {
+        let mut report = SolveReport {
             solver: self.name(),
             status,
             gap: cert.gap,
             violation: cert.violation,
             iterations,
             active,
-            time_analyse,
-            time_factorize: self.time_factorize,
-        })
+            ..SolveReport::default()
+        };
+        self.normal.times().since(times).report_into(&mut report);
+        Ok(report)
     }
 }
 

@@ -16,6 +16,8 @@ mod chain;
 mod clarabel_ref;
 mod error;
 mod interior;
+mod newton;
+mod normal;
 mod problem;
 mod products;
 mod workers;
@@ -26,9 +28,9 @@ pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
 pub use error::SolveError;
-pub use interior::{
-    FactorizationCounts, InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder,
-};
+pub use interior::{InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder};
+pub use newton::{Newton, NewtonSettings, NewtonSettingsBuilder};
+pub use normal::FactorizationCounts;
 pub use problem::{ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target};
 
 use moreau_core::Parallelism;
@@ -45,6 +47,10 @@ pub enum SolverKind {
     /// Our interior point ([`InteriorPoint`]: sparse Cholesky normal equations, symbolic
     /// analysis reused while the contact pattern holds), with the large-problem fallback.
     Interior,
+    /// Our proximal augmented-Lagrangian semismooth Newton ([`Newton`]: warm-started from
+    /// the previous step's multipliers, the same normal equations as the interior point),
+    /// with the large-problem fallback.
+    Newton,
     /// Chosen for each projection ([`AutoSolver`]): APGD while few rows were active in the
     /// previous step, our interior point once contacts are dense, with the interior point's
     /// fallback. Each report names the solver that answered. The default.
@@ -55,7 +61,7 @@ pub enum SolverKind {
 impl std::str::FromStr for SolverKind {
     type Err = String;
 
-    /// The names scene files use (`apgd`, `clarabel`, `interior`, `auto`).
+    /// The names scene files use (`apgd`, `clarabel`, `interior`, `newton`, `auto`).
     fn from_str(s: &str) -> Result<Self, String> {
         use serde::de::IntoDeserializer;
         Self::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| e.to_string())
@@ -64,10 +70,11 @@ impl std::str::FromStr for SolverKind {
 
 impl SolverKind {
     /// Every kind, in the order of the documentation.
-    pub const ALL: [SolverKind; 4] = [
+    pub const ALL: [SolverKind; 5] = [
         SolverKind::Apgd,
         SolverKind::Clarabel,
         SolverKind::Interior,
+        SolverKind::Newton,
         SolverKind::Auto,
     ];
 
@@ -82,6 +89,7 @@ impl SolverKind {
             SolverKind::Apgd => "apgd",
             SolverKind::Clarabel => "clarabel",
             SolverKind::Interior => "interior",
+            SolverKind::Newton => "newton",
             SolverKind::Auto => "auto",
         }
     }
@@ -112,6 +120,13 @@ impl SolverKind {
                     if large { apgd()? } else { clarabel() },
                 )
             }
+            SolverKind::Newton => {
+                let settings = NewtonSettings::builder().parallelism(parallelism).build()?;
+                (
+                    Box::new(Newton::new(settings)?),
+                    if large { apgd()? } else { clarabel() },
+                )
+            }
             SolverKind::Auto => (
                 Box::new(AutoSolver::new(AutoSettings {
                     parallelism,
@@ -131,6 +146,8 @@ impl SolverKind {
             (SolverKind::Apgd, _) => "APGD with Clarabel as fallback",
             (SolverKind::Interior, false) => "our interior point with Clarabel as fallback",
             (SolverKind::Interior, true) => "our interior point with APGD as fallback",
+            (SolverKind::Newton, false) => "our semismooth Newton with Clarabel as fallback",
+            (SolverKind::Newton, true) => "our semismooth Newton with APGD as fallback",
             (SolverKind::Auto, false) => {
                 "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
             }
@@ -166,10 +183,10 @@ mod tests {
             );
         }
         assert!(
-            "newton"
+            "simplex"
                 .parse::<SolverKind>()
                 .unwrap_err()
-                .contains("newton")
+                .contains("simplex")
         );
     }
 }

@@ -105,6 +105,16 @@ pub struct SolveReport {
     pub time_factorize: f64,
 }
 
+impl SolveReport {
+    /// Adds the work of `earlier` (an attempt on the same problem before this one: a chain's
+    /// first solver, auto's first choice): its iterations and stage times.
+    pub fn add_work(&mut self, earlier: &SolveReport) {
+        self.iterations += earlier.iterations;
+        self.time_analyse += earlier.time_analyse;
+        self.time_factorize += earlier.time_factorize;
+    }
+}
+
 /// A solver of [`ProjectionProblem`]s.
 ///
 /// `solution.lambda`, when it has one entry per row on entry, is the warm start.

@@ -3,7 +3,8 @@
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
     Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, InteriorPoint, InteriorPointSettings,
-    ProjectionProblem, ProjectionSolution, ProjectionSolver, Target, certify,
+    Newton, NewtonSettings, ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport,
+    Target, certify,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -179,6 +180,7 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
     // One interior point for all cases: its pattern and symbolic analysis must follow the
     // changing sizes and sparsity.
     let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut newton = Newton::new(NewtonSettings::default()).unwrap();
     for case in 0..cases {
         let inst = random_instance(&mut rng, kind);
         let p = ProjectionProblem {
@@ -190,6 +192,7 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
             &mut apgd as &mut dyn ProjectionSolver,
             &mut clarabel,
             &mut interior,
+            &mut newton,
         ] {
             let mut sol = ProjectionSolution::default();
             let rep = solver
@@ -204,17 +207,158 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
                 .unwrap();
             let name = format!("{} kind {kind} case {case}", solver.name());
             assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+            assert_eq!(rep.solver, solver.name());
             check_kkt(&inst, &name, &sol, rep.gap, rep.violation);
-            // The report is the certificate of what was returned.
-            let (mut sm, mut sn) = (vec![0.0; p.rows()], vec![0.0; p.dim()]);
-            let c = certify(&p, &sol.v, &sol.lambda, &mut sm, &mut sn);
-            assert!(
-                (c.gap - rep.gap).abs() <= 1e-9 + 1e-6 * rep.gap,
-                "{name}: certify {} vs report {}",
-                c.gap,
-                rep.gap
-            );
+            check_report(&p, &name, &sol, &rep);
         }
+    }
+}
+
+/// The report is the certificate of what was returned.
+fn check_report(
+    p: &ProjectionProblem<'_>,
+    name: &str,
+    sol: &ProjectionSolution,
+    rep: &SolveReport,
+) {
+    let (mut sm, mut sn) = (vec![0.0; p.rows()], vec![0.0; p.dim()]);
+    let c = certify(p, &sol.v, &sol.lambda, &mut sm, &mut sn);
+    assert!(
+        (c.gap - rep.gap).abs() <= 1e-9 + 1e-6 * rep.gap,
+        "{name}: certify {} vs report {}",
+        c.gap,
+        rep.gap
+    );
+    assert_eq!(c.violation, rep.violation, "{name}");
+}
+
+/// Row `i` scaled by `r_i`, log-uniform in [1, 100] (as rows of disks whose radii span
+/// 1:100): the same feasible set, multipliers of other scales.
+fn scale_rows(rng: &mut ChaCha8Rng, inst: &Instance) -> Instance {
+    let mut rows = ConstraintRows::new(inst.rows.dim());
+    let mut b = Vec::new();
+    for i in 0..inst.b.len() {
+        let r = 100f64.powf(rng.random_range(0.0..1.0));
+        let (c, a) = inst.rows.row(i);
+        rows.push(
+            inst.rows.keys()[i],
+            0.0,
+            c.iter().zip(a).map(|(&c, &a)| (c, r * a)),
+        );
+        b.push(r * inst.b[i]);
+    }
+    Instance {
+        w: inst.w.clone(),
+        rows,
+        b,
+    }
+}
+
+/// The next step's problem: `w` moved by up to `dw` and every `b` raised by up to `db`
+/// (so that `v0` stays feasible); with `churn`, a random third of the rows dropped and as
+/// many new random rows (new keys) added, all still satisfied by the instance's `v0`.
+fn perturb(rng: &mut ChaCha8Rng, inst: &Instance, dw: f64, db: f64, churn: bool) -> Instance {
+    let n = inst.rows.dim();
+    let w: Vec<f64> = inst
+        .w
+        .iter()
+        .map(|w| w + rng.random_range(-dw..=dw))
+        .collect();
+    let mut rows = ConstraintRows::new(n);
+    let mut b = Vec::new();
+    let mut next_key = 1000 + inst.rows.keys().iter().max().copied().unwrap_or(0);
+    for i in 0..inst.b.len() {
+        if churn && rng.random_bool(0.33) {
+            // Replaced by a new row through a point at most 0.5 from the origin's side.
+            let mut r: Vec<(usize, f64)> = Vec::new();
+            for c in 0..n {
+                if rng.random_bool(0.6) {
+                    r.push((c, rng.random_range(-2.0..2.0)));
+                }
+            }
+            // b ≥ |r|₁ keeps every instance's v0 (in [−1, 1]ⁿ) feasible.
+            let l1: f64 = r.iter().map(|(_, a)| a.abs()).sum();
+            rows.push(next_key, 0.0, r);
+            next_key += 1;
+            b.push(l1 * rng.random_range(1.0..1.5));
+            continue;
+        }
+        let (c, a) = inst.rows.row(i);
+        rows.push(
+            inst.rows.keys()[i],
+            0.0,
+            c.iter().copied().zip(a.iter().copied()),
+        );
+        b.push(inst.b[i] + rng.random_range(0.0..=db));
+    }
+    Instance { w, rows, b }
+}
+
+/// The multipliers of `old`'s rows matched to `new`'s by key (0 for new rows), as the
+/// integrator's warm start does.
+fn matched(old: &Instance, lambda: &[f64], new: &Instance) -> Vec<f64> {
+    new.rows
+        .keys()
+        .iter()
+        .map(|k| {
+            old.rows
+                .keys()
+                .iter()
+                .position(|o| o == k)
+                .map_or(0.0, |i| lambda[i])
+        })
+        .collect()
+}
+
+/// Newton cold, then warm from its answer on the next (perturbed) problem, both checked
+/// against the KKT conditions, the exact enumerator and Clarabel's objective.
+fn run_newton(kind: u32, cases: usize, seed: u64, scaled: bool, churn: bool) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let target = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut newton = Newton::new(NewtonSettings::default()).unwrap();
+    let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
+    let mut solve = |inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
+        let p = ProjectionProblem {
+            w: &inst.w,
+            jacobian: &inst.rows,
+            b: &inst.b,
+        };
+        let rep = newton.solve(&p, target, sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        check_kkt(inst, name, sol, rep.gap, rep.violation);
+        check_report(&p, name, sol, &rep);
+        // Clarabel, an independent interior point, reaches the same objective.
+        let mut reference = ProjectionSolution::default();
+        let crep = clarabel.solve(&p, target, &mut reference).unwrap();
+        assert!(crep.status.is_converged(), "{name}: clarabel {crep:?}");
+        let obj = |v: &[f64]| {
+            0.5 * v
+                .iter()
+                .zip(&inst.w)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+        };
+        assert!(
+            (obj(&sol.v) - obj(&reference.v)).abs() <= 2.0 * (rep.gap + crep.gap) + 1e-7,
+            "{name}: objective {} vs clarabel {}",
+            obj(&sol.v),
+            obj(&reference.v)
+        );
+    };
+    for case in 0..cases {
+        let mut inst = random_instance(&mut rng, kind);
+        if scaled {
+            inst = scale_rows(&mut rng, &inst);
+        }
+        let next = perturb(&mut rng, &inst, 0.05, 0.01, churn);
+        let name = format!("newton kind {kind} case {case} scaled {scaled} churn {churn}");
+        let mut sol = ProjectionSolution::default();
+        solve(&inst, &mut sol, &format!("{name} cold"));
+        sol.lambda = matched(&inst, &sol.lambda, &next);
+        solve(&next, &mut sol, &format!("{name} warm"));
     }
 }
 
@@ -241,6 +385,27 @@ fn zero_rows_meet_kkt() {
 #[test]
 fn all_degeneracies_together_meet_kkt() {
     run_all(4, 40, 5);
+}
+
+#[test]
+fn newton_cold_and_warm_meet_kkt_on_every_family() {
+    for kind in 0..5 {
+        run_newton(kind, 40, 100 + kind as u64, false, false);
+    }
+}
+
+#[test]
+fn newton_on_rows_scaled_1_to_100_meets_kkt() {
+    for kind in 0..5 {
+        run_newton(kind, 40, 200 + kind as u64, true, false);
+    }
+}
+
+#[test]
+fn newton_warm_across_a_pattern_change_meets_kkt() {
+    for kind in 0..5 {
+        run_newton(kind, 40, 300 + kind as u64, kind % 2 == 1, true);
+    }
 }
 
 #[test]
@@ -274,6 +439,12 @@ fn a_violated_zero_row_is_reported_infeasible_by_all() {
     let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
     assert_eq!(
         interior.solve(&p, t, &mut sol).unwrap().status,
+        SolveStatus::Infeasible
+    );
+    let mut sol = ProjectionSolution::default();
+    let mut newton = Newton::new(NewtonSettings::default()).unwrap();
+    assert_eq!(
+        newton.solve(&p, t, &mut sol).unwrap().status,
         SolveStatus::Infeasible
     );
 }
@@ -376,10 +547,10 @@ fn one_and_two_threads_give_the_same_answer() {
         gap: 1e-8,
         violation: 1e-9,
     };
-    let solve = |threads: usize, interior: bool| {
+    let solve = |threads: usize, which: &str| {
         let par = Parallelism::threads(threads);
-        let mut solver: Box<dyn ProjectionSolver> = if interior {
-            Box::new(
+        let mut solver: Box<dyn ProjectionSolver> = match which {
+            "interior" => Box::new(
                 InteriorPoint::new(
                     InteriorPointSettings::builder()
                         .parallelism(par)
@@ -387,9 +558,13 @@ fn one_and_two_threads_give_the_same_answer() {
                         .unwrap(),
                 )
                 .unwrap(),
-            )
-        } else {
-            Box::new(Apgd::new(ApgdSettings::builder().parallelism(par).build().unwrap()).unwrap())
+            ),
+            "newton" => Box::new(
+                Newton::new(NewtonSettings::builder().parallelism(par).build().unwrap()).unwrap(),
+            ),
+            _ => Box::new(
+                Apgd::new(ApgdSettings::builder().parallelism(par).build().unwrap()).unwrap(),
+            ),
         };
         let mut sol = ProjectionSolution::default();
         let rep = solver.solve(&p, t, &mut sol).unwrap();
@@ -397,24 +572,26 @@ fn one_and_two_threads_give_the_same_answer() {
         assert!(rep.iterations > 0);
         (sol, rep)
     };
-    let ((one, _), (two, _)) = (solve(1, false), solve(2, false));
+    let ((one, _), (two, _)) = (solve(1, "apgd"), solve(2, "apgd"));
     assert_eq!(one.v, two.v, "APGD");
     assert_eq!(one.lambda, two.lambda, "APGD");
     // ½|v − v*|² ≤ gap + |λ*|₁·violation for each answer (λ* approximated by the answer's λ).
-    let ((one, r1), (two, r2)) = (solve(1, true), solve(2, true));
-    let l1: f64 = one.lambda.iter().sum();
-    let radius = |r: &moreau_solve::SolveReport| (2.0 * (r.gap + l1 * r.violation)).sqrt();
-    let dist = one
-        .v
-        .iter()
-        .zip(&two.v)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        .sqrt();
-    assert!(
-        dist <= radius(&r1) + radius(&r2),
-        "interior: |v₁ − v₂| = {dist} > {} + {}",
-        radius(&r1),
-        radius(&r2)
-    );
+    for which in ["interior", "newton"] {
+        let ((one, r1), (two, r2)) = (solve(1, which), solve(2, which));
+        let l1: f64 = one.lambda.iter().sum();
+        let radius = |r: &SolveReport| (2.0 * (r.gap + l1 * r.violation)).sqrt();
+        let dist = one
+            .v
+            .iter()
+            .zip(&two.v)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            dist <= radius(&r1) + radius(&r2),
+            "{which}: |v₁ − v₂| = {dist} > {} + {}",
+            radius(&r1),
+            radius(&r2)
+        );
+    }
 }

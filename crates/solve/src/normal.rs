@@ -1,0 +1,520 @@
+//! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized by faer's
+//! sparse Cholesky: ordering, pattern, symbolic analysis (redone only when the columns of
+//! `J`'s rows change), numeric factorization, triangular solves, and the time spent in each.
+//!
+//! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
+//! rows, a person's x and y), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
+//! row's products land, and faer's *symbolic* Cholesky — all three redone only when the
+//! columns of `J`'s rows change — and the *numeric* factorization, as often as the caller
+//! asks. The matrix is `shift·I + Jᵀ D J` for any `D ≥ 0` and `shift > 0`: symmetric positive
+//! definite however redundant the rows are. Scratch memory is sized at each symbolic analysis.
+
+use std::time::Instant;
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par, Side};
+use moreau_core::{ConstraintRows, Parallelism};
+
+use crate::error::SolveError;
+use crate::problem::SolveReport;
+use crate::products::{Index, Transpose};
+use crate::workers::Workers;
+
+/// What the factorization machinery did over the solver's life (for benchmarks).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FactorizationCounts {
+    /// Orderings, patterns and symbolic analyses (the columns of the rows changed).
+    pub analyses: usize,
+    /// Numeric factorizations.
+    pub factorizations: usize,
+    /// Stored entries of the last factorized triangle of `I + Jᵀ D J`.
+    pub matrix_nnz: usize,
+    /// Stored entries of its last Cholesky factor (the fill the ordering left).
+    pub factor_nnz: usize,
+}
+
+/// Seconds spent per stage of the factorization machinery, accumulated.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct StageTimes {
+    /// Orderings, patterns and symbolic analyses (and the check whether they are current).
+    pub(crate) analyse: f64,
+    /// Numeric factorizations and triangular solves.
+    pub(crate) factorize: f64,
+}
+
+impl StageTimes {
+    /// The time spent since `earlier` (a reading of the same accumulator).
+    pub(crate) fn since(self, earlier: StageTimes) -> StageTimes {
+        StageTimes {
+            analyse: self.analyse - earlier.analyse,
+            factorize: self.factorize - earlier.factorize,
+        }
+    }
+
+    /// Writes these times into a report's stage fields.
+    pub(crate) fn report_into(self, report: &mut SolveReport) {
+        report.time_analyse = self.analyse;
+        report.time_factorize = self.factorize;
+    }
+}
+
+/// Runs `f` and adds its wall-clock time to `acc`.
+fn timed<R>(acc: &mut f64, f: impl FnOnce() -> R) -> R {
+    let clock = Instant::now();
+    let r = f();
+    *acc += clock.elapsed().as_secs_f64();
+    r
+}
+
+/// One triangle of `I + Jᵀ D J` in compressed columns, in a given symmetric ordering, and
+/// where each product `D_i a_ia a_ib` of row `i` of `J` lands in it.
+#[derive(Debug, Clone, Default)]
+struct NormalPattern {
+    n: usize,
+    col_ptr: Vec<Index>,
+    row_idx: Vec<Index>,
+    diag: Vec<usize>,
+    // For each row of J, each ordered pair (a, b) of its entries with col_a ≥ col_b, in
+    // traversal order: where the product lands in `row_idx`.
+    slots: Vec<Index>,
+    // Where each row's products start in `slots` (one more entry than rows).
+    slot_start: Vec<usize>,
+    // scratch for building
+    count: Vec<usize>,
+    fill: Vec<Index>,
+}
+
+/// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
+/// in the order [`NormalPattern::assemble`] visits them.
+fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
+    for i in 0..j.len() {
+        let cols = j.row(i).0;
+        for &ca in cols {
+            for &cb in cols {
+                if ca >= cb {
+                    f(ca, cb);
+                }
+            }
+        }
+    }
+}
+
+/// Numbers the runs of adjacent unknowns that appear in exactly the same rows
+/// (`group_of[c]`, increasing in `c`) and returns how many runs there are.
+fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
+    let n = jt.col_start.len() - 1;
+    group_of.clear();
+    let mut groups = 0;
+    for c in 0..n {
+        if c == 0 || jt.rows_of(c - 1) != jt.rows_of(c) {
+            groups += 1;
+        }
+        group_of.push(groups - 1);
+    }
+    groups
+}
+
+impl NormalPattern {
+    /// Builds the pattern of `j` with unknown `c` at position `at[c]` (identity without
+    /// `at`), storing the upper triangle (row ≤ column) when `upper`, else the lower one;
+    /// with `slots`, also where each product lands.
+    fn build(
+        &mut self,
+        j: &ConstraintRows,
+        at: Option<(&[usize], usize)>,
+        upper: bool,
+        slots: bool,
+    ) {
+        let n = at.map_or(j.dim(), |a| a.1);
+        self.n = n;
+        let at = at.map(|a| a.0);
+        let place = |ca: usize, cb: usize| -> (usize, usize) {
+            let (pa, pb) = match at {
+                Some(at) => (at[ca], at[cb]),
+                None => (ca, cb),
+            };
+            let (lo, hi) = if pa <= pb { (pa, pb) } else { (pb, pa) };
+            if upper { (lo, hi) } else { (hi, lo) } // (row, column)
+        };
+        // Bucket the entries by column, then sort and deduplicate each column.
+        self.count.clear();
+        self.count.resize(n, 1); // the diagonal
+        for_each_product(j, |ca, cb| self.count[place(ca, cb).1] += 1);
+        let mut total = 0;
+        for c in self.count.iter_mut() {
+            let k = *c;
+            *c = total;
+            total += k;
+        }
+        self.fill.clear();
+        self.fill.resize(total, 0);
+        {
+            let (count, fill) = (&mut self.count, &mut self.fill);
+            for c in 0..n {
+                fill[count[c]] = c as Index;
+                count[c] += 1;
+            }
+            for_each_product(j, |ca, cb| {
+                let (r, c) = place(ca, cb);
+                fill[count[c]] = r as Index;
+                count[c] += 1;
+            });
+        }
+        // count[c] is now the end of column c's bucket and the start of column c + 1's.
+        self.col_ptr.clear();
+        self.row_idx.clear();
+        let mut start = 0;
+        for c in 0..n {
+            let end = self.count[c];
+            let bucket = &mut self.fill[start..end];
+            bucket.sort_unstable();
+            self.col_ptr.push(self.row_idx.len() as Index);
+            let mut last = Index::MAX;
+            for &r in bucket.iter() {
+                if r != last {
+                    self.row_idx.push(r);
+                    last = r;
+                }
+            }
+            start = end;
+        }
+        self.col_ptr.push(self.row_idx.len() as Index);
+        self.diag.clear();
+        self.slots.clear();
+        self.slot_start.clear();
+        if !slots {
+            return;
+        }
+        let find = |col_ptr: &[Index], row_idx: &[Index], r: usize, c: usize| {
+            let (a, b) = (col_ptr[c] as usize, col_ptr[c + 1] as usize);
+            a + row_idx[a..b]
+                .binary_search(&(r as Index))
+                .expect("every product has a slot in the pattern")
+        };
+        for c in 0..n {
+            self.diag.push(find(&self.col_ptr, &self.row_idx, c, c));
+        }
+        let (col_ptr, row_idx, out) = (&self.col_ptr, &self.row_idx, &mut self.slots);
+        for i in 0..j.len() {
+            self.slot_start.push(out.len());
+            let cols = j.row(i).0;
+            for &ca in cols {
+                for &cb in cols {
+                    if ca >= cb {
+                        let (r, c) = place(ca, cb);
+                        out.push(find(col_ptr, row_idx, r, c) as Index);
+                    }
+                }
+            }
+        }
+        self.slot_start.push(out.len());
+    }
+
+    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
+        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
+    }
+
+    /// `values = triangle(shift·I + Jᵀ diag(d) J)`; rows with `d_i = 0` are skipped.
+    fn assemble(&self, j: &ConstraintRows, shift: f64, d: &[f64], values: &mut Vec<f64>) {
+        values.clear();
+        values.resize(self.row_idx.len(), 0.0);
+        for &p in &self.diag {
+            values[p] = shift;
+        }
+        for (i, &di) in d.iter().enumerate() {
+            if di == 0.0 {
+                continue;
+            }
+            let (cols, coefs) = j.row(i);
+            let mut k = self.slot_start[i];
+            for (&ca, &aa) in cols.iter().zip(coefs) {
+                for (&cb, &ab) in cols.iter().zip(coefs) {
+                    if ca >= cb {
+                        values[self.slots[k] as usize] += di * aa * ab;
+                        k += 1;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// faer's workspace, sized at each symbolic analysis.
+struct Scratch(MemBuffer);
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Scratch")
+    }
+}
+/// The normal equations `shift·I + Jᵀ diag(d) J` of one structure of `J`: analysed once per
+/// structure, factorized for any values, solved in the unknowns' natural order.
+///
+/// Owns the workers (thread pool) its factorizations run on; the solvers use the same ones
+/// for their own loops ([`NormalEquations::workers`]).
+#[derive(Debug)]
+pub(crate) struct NormalEquations {
+    parallelism: Parallelism,
+    workers: Workers,
+    // The structure of J the analysis below was made for.
+    j_row_start: Vec<usize>,
+    j_cols: Vec<usize>,
+    // The unpermuted lower triangle (input of the ordering), the fill-reducing ordering,
+    // and the permuted triangle that is factorized (no permutation per factorization).
+    natural: NormalPattern,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    group_of: Vec<usize>,
+    group_start: Vec<usize>,
+    group_perm: Vec<Index>,
+    group_perm_inv: Vec<Index>,
+    jt: Transpose,
+    pattern: NormalPattern,
+    symbolic: Option<SymbolicCholesky<Index>>,
+    side: Side,
+    counts: FactorizationCounts,
+    times: StageTimes,
+    h: Vec<f64>,
+    l: Vec<f64>,
+    mem: Scratch,
+    // The right-hand side in the factor's order.
+    x: Vec<f64>,
+}
+
+impl NormalEquations {
+    /// Nothing analysed yet; factorizations and loops on `parallelism` threads.
+    pub(crate) fn new(parallelism: Parallelism) -> Result<Self, SolveError> {
+        Ok(Self {
+            parallelism,
+            workers: Workers::new(parallelism)?,
+            j_row_start: Vec::new(),
+            j_cols: Vec::new(),
+            natural: NormalPattern::default(),
+            perm: Vec::new(),
+            perm_inv: Vec::new(),
+            group_of: Vec::new(),
+            group_start: Vec::new(),
+            group_perm: Vec::new(),
+            group_perm_inv: Vec::new(),
+            jt: Transpose::default(),
+            pattern: NormalPattern::default(),
+            symbolic: None,
+            side: Side::Upper,
+            counts: FactorizationCounts::default(),
+            times: StageTimes::default(),
+            h: Vec::new(),
+            l: Vec::new(),
+            mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
+            x: Vec::new(),
+        })
+    }
+
+    /// The workers the factorizations run on.
+    pub(crate) fn workers(&self) -> &Workers {
+        &self.workers
+    }
+
+    /// The structure of `Jᵀ` of the last analysis (valid after [`Self::analyse`]).
+    pub(crate) fn transpose(&self) -> &Transpose {
+        &self.jt
+    }
+
+    /// Patterns, analyses and factorizations done so far.
+    pub(crate) fn counts(&self) -> FactorizationCounts {
+        self.counts
+    }
+
+    /// Seconds spent so far, per stage.
+    pub(crate) fn times(&self) -> StageTimes {
+        self.times
+    }
+
+    fn par(&self) -> Par {
+        if self.parallelism.is_sequential() {
+            Par::Seq
+        } else {
+            Par::rayon(self.parallelism.get())
+        }
+    }
+
+    /// Makes the ordering, the pattern and the symbolic analysis fit `j`; nothing is redone
+    /// while the columns of `j`'s rows stay the same. True when they were redone.
+    pub(crate) fn analyse(&mut self, j: &ConstraintRows) -> Result<bool, SolveError> {
+        let mut acc = self.times.analyse;
+        let r = timed(&mut acc, || self.analyse_untimed(j));
+        self.times.analyse = acc;
+        r
+    }
+
+    fn analyse_untimed(&mut self, j: &ConstraintRows) -> Result<bool, SolveError> {
+        if self.symbolic.is_some()
+            && self.pattern.n == j.dim()
+            && self.j_row_start == j.row_starts()
+            && self.j_cols == j.columns()
+        {
+            return Ok(false);
+        }
+        self.j_row_start.clear();
+        self.j_row_start.extend_from_slice(j.row_starts());
+        self.j_cols.clear();
+        self.j_cols.extend_from_slice(j.columns());
+        let n = j.dim();
+        let starts = j.row_starts();
+        let products: usize = n
+            + (0..j.len())
+                .map(|i| {
+                    let k = starts[i + 1] - starts[i];
+                    k * (k + 1) / 2
+                })
+                .sum::<usize>();
+        if products.max(j.nnz()) > Index::MAX as usize {
+            return Err(SolveError::Factorization(format!(
+                "{products} products in I + JᵀDJ: more than 32-bit indices hold"
+            )));
+        }
+
+        // Fill-reducing ordering (AMD) of the pattern compressed to groups of adjacent
+        // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
+        self.jt.build(j);
+        let groups = column_groups(&self.jt, &mut self.group_of);
+        self.natural
+            .build(j, Some((&self.group_of, groups)), false, false);
+        let nnz = self.natural.row_idx.len();
+        self.group_perm.clear();
+        self.group_perm.resize(groups, 0);
+        self.group_perm_inv.clear();
+        self.group_perm_inv.resize(groups, 0);
+        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(groups, nnz));
+        amd::order_maybe_unsorted(
+            &mut self.group_perm,
+            &mut self.group_perm_inv,
+            self.natural.symbolic(),
+            amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        // Expand: the groups in their order, each group's unknowns in theirs.
+        self.group_start.clear();
+        self.group_start.resize(groups + 1, 0);
+        for &g in &self.group_of {
+            self.group_start[g + 1] += 1;
+        }
+        for g in 0..groups {
+            self.group_start[g + 1] += self.group_start[g];
+        }
+        self.perm.clear();
+        for &g in &self.group_perm {
+            let g = g as usize;
+            self.perm
+                .extend(self.group_start[g]..self.group_start[g + 1]);
+        }
+        self.perm_inv.clear();
+        self.perm_inv.resize(n, 0);
+        for (k, &c) in self.perm.iter().enumerate() {
+            self.perm_inv[c] = k;
+        }
+
+        // The permuted upper triangle: faer's simplicial factorization reads it without a
+        // copy (and its symbolic analysis without an ordering reads the upper triangle).
+        // The supernodal variant measured slower on crowds (benches/README.md): their
+        // factors are thin, 2×2-blocked and have few wide supernodes.
+        self.pattern.build(j, Some((&self.perm_inv, n)), true, true);
+        let symbolic = factorize_symbolic_cholesky(
+            self.pattern.symbolic(),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                // faer's rule (supernodal when flops per factor entry are many): it picks
+                // simplicial on these crowds, 1.6× faster than supernodal at 40,000 people,
+                // 1.5× slower on a fully jammed 1,000 (benches/README.md).
+                supernodal_flop_ratio_threshold: SupernodalThreshold::AUTO,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        self.side = match symbolic.raw() {
+            SymbolicCholeskyRaw::Simplicial(_) => Side::Upper,
+            SymbolicCholeskyRaw::Supernodal(_) => {
+                self.pattern
+                    .build(j, Some((&self.perm_inv, n)), false, true);
+                Side::Lower
+            }
+        };
+        let par = self.par();
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, par),
+        ]);
+        self.mem = Scratch(MemBuffer::new(req));
+        self.l.clear();
+        self.l.resize(symbolic.len_val(), 0.0);
+        self.counts.factor_nnz = symbolic.len_val();
+        self.counts.matrix_nnz = self.pattern.row_idx.len();
+        self.symbolic = Some(symbolic);
+        self.counts.analyses += 1;
+        Ok(true)
+    }
+
+    /// Factorizes `shift·I + Jᵀ diag(d) J` (after [`Self::analyse`] of the same `j`); false
+    /// when it is not numerically positive definite.
+    pub(crate) fn factorize(&mut self, j: &ConstraintRows, shift: f64, d: &[f64]) -> bool {
+        self.pattern.assemble(j, shift, d, &mut self.h);
+        let clock = Instant::now();
+        let par = self.par();
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
+        self.counts.factorizations += 1;
+        let (l, side, mem) = (&mut self.l, self.side, &mut self.mem.0);
+        let ok = self.workers.install(|| {
+            symbolic
+                .factorize_numeric_llt(
+                    l,
+                    a,
+                    side,
+                    LltRegularization::default(),
+                    par,
+                    MemStack::new(mem),
+                    Default::default(),
+                )
+                .is_ok()
+        });
+        self.times.factorize += clock.elapsed().as_secs_f64();
+        ok
+    }
+
+    /// Overwrites `rhs` (in the unknowns' natural order) by the solution of the last
+    /// factorized system: permuted into the factor's order, two triangular solves, permuted
+    /// back.
+    pub(crate) fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        let n = rhs.len();
+        self.x.resize(n, 0.0);
+        let w = &self.workers;
+        {
+            let (r, perm): (&[f64], _) = (rhs, &self.perm);
+            w.map(&mut self.x, |k, _| r[perm[k]]);
+        }
+        let clock = Instant::now();
+        let par = self.par();
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        let (l, x, mem) = (&self.l, &mut self.x, &mut self.mem.0);
+        w.install(|| {
+            LltRef::new(symbolic, l).solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(x, n, 1),
+                par,
+                MemStack::new(mem),
+            )
+        });
+        self.times.factorize += clock.elapsed().as_secs_f64();
+        let (x, perm_inv) = (&self.x, &self.perm_inv);
+        w.map(rhs, |c, _| x[perm_inv[c]]);
+    }
+}
