@@ -209,18 +209,34 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
             assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
             assert_eq!(rep.solver, solver.name());
             check_kkt(&inst, &name, &sol, rep.gap, rep.violation);
-            check_report(&p, &name, &sol, &rep);
+            check_report(
+                &p,
+                Target {
+                    gap: 1e-8,
+                    ..target
+                },
+                &name,
+                &sol,
+                &rep,
+            );
         }
     }
 }
 
-/// The report is the certificate of what was returned.
+/// The report is the certificate of what was returned, and a converged one meets the target.
 fn check_report(
     p: &ProjectionProblem<'_>,
+    target: Target,
     name: &str,
     sol: &ProjectionSolution,
     rep: &SolveReport,
 ) {
+    if rep.status.is_converged() {
+        assert!(
+            rep.gap <= target.gap && rep.violation <= target.violation,
+            "{name}: converged with {rep:?} for {target:?}"
+        );
+    }
     let (mut sm, mut sn) = (vec![0.0; p.rows()], vec![0.0; p.dim()]);
     let c = certify(p, &sol.v, &sol.lambda, &mut sm, &mut sn);
     assert!(
@@ -329,7 +345,7 @@ fn run_newton(kind: u32, cases: usize, seed: u64, scaled: bool, churn: bool) {
         let rep = newton.solve(&p, target, sol).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
         check_kkt(inst, name, sol, rep.gap, rep.violation);
-        check_report(&p, name, sol, &rep);
+        check_report(&p, target, name, sol, &rep);
         // Clarabel, an independent interior point, reaches the same objective.
         let mut reference = ProjectionSolution::default();
         let crep = clarabel.solve(&p, target, &mut reference).unwrap();
