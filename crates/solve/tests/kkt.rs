@@ -528,7 +528,7 @@ fn settings_are_validated() {
 }
 
 /// On 1 and 2 threads: APGD gives the same bits (its parallel loops sum in fixed chunks);
-/// the interior point's answers agree within their certified radii (faer's parallel
+/// the interior point's and Newton's answers agree within their certified radii (faer's parallel
 /// supernodal factorization, which it picks on this random problem, sums in another order).
 /// Problems larger than one chunk (4,096 rows) so that the loops do split.
 #[test]
