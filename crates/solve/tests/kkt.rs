@@ -209,18 +209,34 @@ fn run_all(kind: u32, cases: usize, seed: u64) {
             assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
             assert_eq!(rep.solver, solver.name());
             check_kkt(&inst, &name, &sol, rep.gap, rep.violation);
-            check_report(&p, &name, &sol, &rep);
+            check_report(
+                &p,
+                Target {
+                    gap: 1e-8,
+                    ..target
+                },
+                &name,
+                &sol,
+                &rep,
+            );
         }
     }
 }
 
-/// The report is the certificate of what was returned.
+/// The report is the certificate of what was returned, and a converged one meets the target.
 fn check_report(
     p: &ProjectionProblem<'_>,
+    target: Target,
     name: &str,
     sol: &ProjectionSolution,
     rep: &SolveReport,
 ) {
+    if rep.status.is_converged() {
+        assert!(
+            rep.gap <= target.gap && rep.violation <= target.violation,
+            "{name}: converged with {rep:?} for {target:?}"
+        );
+    }
     let (mut sm, mut sn) = (vec![0.0; p.rows()], vec![0.0; p.dim()]);
     let c = certify(p, &sol.v, &sol.lambda, &mut sm, &mut sn);
     assert!(
@@ -329,7 +345,7 @@ fn run_newton(kind: u32, cases: usize, seed: u64, scaled: bool, churn: bool) {
         let rep = newton.solve(&p, target, sol).unwrap();
         assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
         check_kkt(inst, name, sol, rep.gap, rep.violation);
-        check_report(&p, name, sol, &rep);
+        check_report(&p, target, name, sol, &rep);
         // Clarabel, an independent interior point, reaches the same objective.
         let mut reference = ProjectionSolution::default();
         let crep = clarabel.solve(&p, target, &mut reference).unwrap();
@@ -512,7 +528,7 @@ fn settings_are_validated() {
 }
 
 /// On 1 and 2 threads: APGD gives the same bits (its parallel loops sum in fixed chunks);
-/// the interior point's answers agree within their certified radii (faer's parallel
+/// the interior point's and Newton's answers agree within their certified radii (faer's parallel
 /// supernodal factorization, which it picks on this random problem, sums in another order).
 /// Problems larger than one chunk (4,096 rows) so that the loops do split.
 #[test]
