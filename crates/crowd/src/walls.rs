@@ -127,9 +127,8 @@ impl Walls {
         }
         let (x0, x1) = self.cell_range(lo[0], hi[0], 0);
         let (y0, y1) = self.cell_range(lo[1], hi[1], 1);
-        let cell = |c: usize| {
-            &self.entries[self.cell_start[c] as usize..self.cell_start[c + 1] as usize]
-        };
+        let cell =
+            |c: usize| &self.entries[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
         if x0 == x1 && y0 == y1 {
             // One cell: its list is already sorted and without repeats.
             out.extend_from_slice(cell(y0 * self.nx + x0));

@@ -39,6 +39,10 @@ pub struct FactorizationCounts {
     pub matrix_nnz: usize,
     /// Stored entries of its last Cholesky factor (the fill the ordering left).
     pub factor_nnz: usize,
+    /// Multiply–adds of one numeric factorization of the last analysed pattern,
+    /// `Σ_j c_j (c_j + 1) / 2` over the factor's column counts `c_j`: the cost a factorization
+    /// will have, known before any numeric work.
+    pub factor_flops: u64,
 }
 
 /// Seconds spent per stage of the factorization machinery, accumulated.
@@ -457,6 +461,33 @@ impl NormalEquations {
         self.l.clear();
         self.l.resize(symbolic.len_val(), 0.0);
         self.counts.factor_nnz = symbolic.len_val();
+        self.counts.factor_flops = match symbolic.raw() {
+            SymbolicCholeskyRaw::Simplicial(s) => s
+                .col_ptr()
+                .windows(2)
+                .map(|w| {
+                    let c = (w[1] - w[0]) as u64;
+                    c * (c + 1) / 2
+                })
+                .sum(),
+            // Supernode by supernode: columns × rows of each, a dense trapezoid.
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                let (begin, end) = (s.supernode_begin(), s.supernode_end());
+                let rows = s.col_ptr_for_row_idx();
+                (0..s.n_supernodes())
+                    .map(|k| {
+                        let width = (end[k] - begin[k]) as u64;
+                        let below = (rows[k + 1] - rows[k]) as u64;
+                        (0..width)
+                            .map(|c| {
+                                let h = width - c + below;
+                                h * (h + 1) / 2
+                            })
+                            .sum::<u64>()
+                    })
+                    .sum()
+            }
+        };
         self.counts.matrix_nnz = self.pattern.row_idx.len();
         self.symbolic = Some(symbolic);
         self.counts.analyses += 1;
