@@ -31,13 +31,14 @@ fn t_hit() -> f64 {
 }
 
 type Example = Scheme<ExactProjection<HalfSpace>>;
+type ExampleField = FnField<fn(f64, &[f64], &mut [f64])>;
 
 fn f(_t: f64, x: &[f64], out: &mut [f64]) {
     out[0] = -(A + 1.0) * x[0] + B;
 }
 
 /// The field, the set and the scheme.
-fn scheme() -> (FnField<fn(f64, &[f64], &mut [f64])>, HalfSpace, Example) {
+fn scheme() -> (ExampleField, HalfSpace, Example) {
     let half_line = HalfSpace::new(vec![-1.0], 0.0).unwrap();
     (
         FnField::new(1, f as fn(f64, &[f64], &mut [f64])),
