@@ -566,6 +566,17 @@ impl Simulation {
         if let Err(why) = state.people.check() {
             return refuse("people", format!("{} people", state.people.len()), why);
         }
+        let exits = self.exits.exits.len();
+        if let Some(place) = state.people.places().iter().find(|p| {
+            let (Place::ToExit(e) | Place::ToTarget(e) | Place::Arrived(e)) = **p;
+            e as usize >= exits
+        }) {
+            return refuse(
+                "people",
+                format!("{place:?}"),
+                format!("the scene has {exits} exits"),
+            );
+        }
         if state.exits_open.len() != self.exits.exits.len() {
             return refuse(
                 "exits_open",

@@ -152,6 +152,15 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("state"), "{err}");
+    // A place naming an exit the scene does not have (a damaged or forged state).
+    let mut forged: serde_json::Value = serde_json::to_value(&state).unwrap();
+    forged["people"]["place"][0] = serde_json::json!({"ToExit": 7});
+    let forged: SimState = serde_json::from_value(forged).unwrap();
+    let err = sim.restore(&forged).unwrap_err().to_string();
+    assert!(
+        err.contains("state.people") && err.contains("ToExit(7)"),
+        "{err}"
+    );
     let mut newer = state.clone();
     newer.format += 1;
     let err = sim.restore(&newer).unwrap_err().to_string();
