@@ -81,11 +81,6 @@ impl PersonPairs {
             pairs: Vec::new(),
         }
     }
-
-    /// The broad phase's name.
-    pub fn broad_phase(&self) -> &'static str {
-        self.broad.name()
-    }
 }
 
 impl ContactSource for PersonPairs {
@@ -183,11 +178,6 @@ impl ContactSources {
             check: ConstraintRows::default(),
             crossed: Vec::new(),
         }
-    }
-
-    /// Their names.
-    pub fn names(&self) -> Vec<&'static str> {
-        self.sources.iter().map(|s| s.name()).collect()
     }
 
     /// Appends every source's rows with `g ≤ margin` at `(t, q)`.

@@ -13,7 +13,6 @@ use crate::contacts::{ContactSources, CrowdContacts, PersonPairs, PersonWalls};
 use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
-use crate::geometry::Segment;
 use crate::people::{ExitRecord, People, Place};
 use crate::scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind};
 use crate::spawn::place_people;
@@ -105,8 +104,7 @@ struct Parts<'a> {
 pub struct Simulation {
     scene: Scene,
     exits: Exits,
-    /// The scene's walls, before closed exits add theirs.
-    scene_walls: Vec<Segment>,
+    /// The scene's walls, and those of closed exits.
     walls: Walls,
     people: People,
     exit_log: Vec<ExitRecord>,
@@ -139,8 +137,7 @@ impl Simulation {
     /// scene field at fault.
     pub fn new(scene: Scene) -> Result<Self, CrowdError> {
         scene.validate()?;
-        let scene_walls = scene.walls();
-        let walls = Walls::new(scene_walls.clone());
+        let walls = Walls::new(scene.walls());
         let exits = Exits::build(&scene)?;
         let people = place_people(&scene, &walls, &exits)?;
         let n = people.len();
@@ -171,7 +168,6 @@ impl Simulation {
         Ok(Self {
             scene,
             exits,
-            scene_walls,
             walls,
             people,
             exit_log: Vec::new(),
@@ -334,7 +330,7 @@ impl Simulation {
     }
 
     fn rebuild_walls(&mut self) {
-        let mut walls = self.scene_walls.clone();
+        let mut walls = self.scene.walls();
         walls.extend(
             self.exits
                 .exits

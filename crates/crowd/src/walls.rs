@@ -40,7 +40,7 @@ impl Walls {
         let span = [(hi[0] - lo[0]).max(1e-9), (hi[1] - lo[1]).max(1e-9)];
         let budget = (4 * walls.segments.len() + 16) as f64;
         let mut cell = (span[0] * span[1] / budget).sqrt().max(1e-9);
-        // Thin boxes: cells no wider than the box's long side / 1 keeps the count in budget.
+        // Rounding up each side can exceed the budget on thin boxes: grow the cells until not.
         while (span[0] / cell).ceil() * (span[1] / cell).ceil() > budget {
             cell *= 1.25;
         }

@@ -249,31 +249,26 @@ impl<C: Correction> Scheme<C> {
         steps: &StepSequence,
         mut observe: impl FnMut(&StepReport, &[f64]),
     ) -> Result<f64, IntegrateError> {
-        let mut t = t0;
-        let mut k = 0;
-        let next = |k: usize, t: f64| -> Result<Option<f64>, IntegrateError> {
-            Ok(match steps {
-                StepSequence::Fixed { h, t_end } => {
-                    check_step(*h)?;
-                    if !(t_end.is_finite() && *t_end >= t0) {
-                        return Err(IntegrateError::InvalidSetting {
-                            field: "t_end",
-                            value: t_end.to_string(),
-                            reason: "must be finite and ≥ t0",
-                        });
-                    }
-                    fixed_step(*h, t_end - t)
+        // Every setting is checked before the first step.
+        match steps {
+            StepSequence::Fixed { h, t_end } => {
+                check_step(*h)?;
+                if !(t_end.is_finite() && *t_end >= t0) {
+                    return Err(IntegrateError::InvalidSetting {
+                        field: "t_end",
+                        value: t_end.to_string(),
+                        reason: "must be finite and ≥ t0",
+                    });
                 }
-                StepSequence::Given(v) => match v.get(k) {
-                    Some(&mu) => {
-                        check_step(mu)?;
-                        Some(mu)
-                    }
-                    None => None,
-                },
-            })
+            }
+            StepSequence::Given(v) => v.iter().try_for_each(|&mu| check_step(mu))?,
+        }
+        let (mut t, mut k) = (t0, 0);
+        let next = |k: usize, t: f64| match steps {
+            StepSequence::Fixed { h, t_end } => fixed_step(*h, t_end - t),
+            StepSequence::Given(v) => v.get(k).copied(),
         };
-        while let Some(mu) = next(k, t)? {
+        while let Some(mu) = next(k, t) {
             let report = self.step(field, set, k, t, q, mu)?;
             t = report.t;
             k += 1;
