@@ -106,6 +106,25 @@ fn inspect(path: &std::path::Path) -> Result<()> {
         let eps = steps.iter().map(|s| s.eps).fold(0.0, f64::max);
         println!("  max certified ε {eps:.3e} m², max violation {worst:.3e} m");
     }
+    if h.contacts {
+        let contacts = f.contacts()?;
+        let walls = contacts
+            .iter()
+            .filter(|c| c.kind == moreau_io::ContactRow::PERSON_WALL)
+            .count();
+        match contacts.iter().max_by(|a, b| a.lambda.total_cmp(&b.lambda)) {
+            Some(top) => println!(
+                "  contacts: {} over {} frames ({walls} with walls); largest λ {:.3e} m/s \
+                 (person {}, frame {}); pressure per person in /frames/pressure",
+                contacts.len(),
+                times.len(),
+                top.lambda,
+                top.a,
+                top.frame
+            ),
+            None => println!("  contacts: recorded, none pushed"),
+        }
+    }
     println!("  command: {}", h.command);
     print!("{}", f.describe()?);
     Ok(())

@@ -8,9 +8,11 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
+use moreau_crowd::{
+    ContactKind, ExitRecord, Frame, Observer, ObserverError, Scene, Simulation,
+};
 use moreau_integrate::ErrorEstimate;
-use moreau_io::{Overwrite, RunFile, RunHeader, RunWriter};
+use moreau_io::{ContactRow, Overwrite, RunFile, RunHeader, RunWriter};
 use serde::Serialize;
 
 /// Arguments of `moreau run`.
@@ -164,6 +166,13 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
                 wkt_geometry: sim.scene().wkt(),
                 fps: 1.0 / sim.scene().time.output_interval,
                 radii: frame.radii.to_vec(),
+                walls: sim
+                    .walls()
+                    .segments()
+                    .iter()
+                    .map(|w| [w.a[0], w.a[1], w.b[0], w.b[1]])
+                    .collect(),
+                contacts: sim.scene().output.contacts,
             };
             Some(RunWriter::create(path, &header, overwrite)?)
         }
@@ -194,6 +203,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         frames: 0,
         exits: 0,
         people,
+        pressure: Vec::new(),
     };
     let outcome = sim.run(&mut record);
     let (stats, frames) = (record.stats, record.frames);
@@ -281,6 +291,7 @@ struct Record<'a> {
     frames: usize,
     exits: usize,
     people: usize,
+    pressure: Vec<f64>,
 }
 
 impl Observer for Record<'_> {
@@ -312,6 +323,21 @@ impl Observer for Record<'_> {
 
     fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
         if let Some(w) = self.writer.as_deref_mut() {
+            if w.records_contacts() {
+                self.pressure.resize(self.people, f64::NAN);
+                f.pressure_by_id(&mut self.pressure);
+                let rows = f.contact_forces().map(|c| ContactRow {
+                    frame: 0,
+                    kind: match c.kind {
+                        ContactKind::PersonPerson => ContactRow::PERSON_PERSON,
+                        ContactKind::PersonWall => ContactRow::PERSON_WALL,
+                    },
+                    a: c.a.into(),
+                    b: c.b.into(),
+                    lambda: c.lambda,
+                });
+                w.contacts(rows, &self.pressure)?;
+            }
             w.frame(f.t, f.ids, f.positions)?;
         }
         self.frames += 1;

@@ -232,6 +232,22 @@ impl Default for SolverSettings {
     }
 }
 
+/// What a run records beyond positions, exits and step reports: only what the scene asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    /// Contact forces: per output frame, the contacts of the last step with `λ > 0` and each
+    /// person's pressure `Σ λ` (m/s).
+    #[serde(default)]
+    pub contacts: bool,
+}
+
+impl Output {
+    fn is_default(&self) -> bool {
+        *self == Output::default()
+    }
+}
+
 /// A whole scene, as read from TOML; [`Scene::validate`] checks it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -252,6 +268,9 @@ pub struct Scene {
     /// Solver settings.
     #[serde(default)]
     pub solver: SolverSettings,
+    /// What a run records (absent: positions, exits and steps only).
+    #[serde(default, skip_serializing_if = "Output::is_default")]
+    pub output: Output,
 }
 
 fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {

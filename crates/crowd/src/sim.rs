@@ -4,12 +4,12 @@
 
 use std::cell::RefCell;
 
-use moreau_core::{ConstraintRows, Parallelism, RunStats, StepReport};
+use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, RunStats, StepReport};
 use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Stepping};
 use moreau_solve::ProjectionSolver;
 
 use crate::broad::{BroadPhaseKind, choose_broad_phase};
-use crate::contacts::{ContactSources, CrowdContacts, PersonPairs, PersonWalls};
+use crate::contacts::{ContactKind, ContactSources, CrowdContacts, PersonPairs, PersonWalls};
 use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
@@ -30,9 +30,59 @@ pub struct Frame<'a> {
     pub positions: &'a [f64],
     /// Their radii.
     pub radii: &'a [f64],
+    /// The multipliers of the step that ended here, by contact key (every row it assembled,
+    /// `λ = 0` for those not in contact; empty before the first step).
+    pub multipliers: &'a [(ConstraintKey, f64)],
+}
+
+/// A contact that pushed in the step that ended at a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactForce {
+    /// Person–person or person–wall.
+    pub kind: ContactKind,
+    /// The person (the smaller id of a pair).
+    pub a: u32,
+    /// The other person's id, or the wall segment's index in the scene's walls.
+    pub b: u32,
+    /// The multiplier `λ > 0` (m/s): the speed the contact removed along its normal,
+    /// `v = w + Σ λ ∇g`.
+    pub lambda: f64,
 }
 
 impl Frame<'_> {
+    /// The contacts with `λ > 0` of the step that ended at this frame, in key order.
+    pub fn contact_forces(&self) -> impl Iterator<Item = ContactForce> + '_ {
+        self.multipliers.iter().filter_map(|&(key, lambda)| {
+            let (kind, a, b) = ContactKind::of(key);
+            match kind {
+                Some(kind) if lambda > 0.0 => Some(ContactForce { kind, a, b, lambda }),
+                _ => None,
+            }
+        })
+    }
+
+    /// Each present person's pressure `Σ λ` over its contacts (m/s) into `out` at `id`: 0
+    /// for a present person without contacts, NaN for ids not present.
+    pub fn pressure_by_id(&self, out: &mut [f64]) {
+        out.fill(f64::NAN);
+        for &id in self.ids {
+            if let Some(p) = out.get_mut(id as usize) {
+                *p = 0.0;
+            }
+        }
+        for c in self.contact_forces() {
+            let mut add = |id: u32| {
+                if let Some(p) = out.get_mut(id as usize).filter(|p| !p.is_nan()) {
+                    *p += c.lambda;
+                }
+            };
+            add(c.a);
+            if c.kind == ContactKind::PersonPerson {
+                add(c.b);
+            }
+        }
+    }
+
     /// Writes the positions into `out` at `[2 id, 2 id + 1]`, NaN for ids not present (and
     /// ids beyond `out` skipped).
     pub fn positions_by_id(&self, out: &mut [f64]) {
@@ -218,6 +268,7 @@ impl Simulation {
             ids: self.people.ids(),
             positions: self.people.positions(),
             radii: self.people.radii(),
+            multipliers: self.scheme.correction().warm_start(),
         }
     }
 

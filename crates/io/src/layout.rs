@@ -5,7 +5,9 @@ use hdf5::types::FixedAscii;
 use moreau_core::StepReport;
 
 /// The value of the root attribute `format`; bumped when the layout changes.
-pub const FORMAT: &str = "moreau-run/1";
+pub const FORMAT: &str = "moreau-run/2";
+/// Earlier formats this moreau still reads (their layout is a subset of this one's).
+pub const FORMATS_READ: &[&str] = &["moreau-run/1", FORMAT];
 
 pub(crate) const TRAJECTORY: &str = "trajectory";
 pub(crate) const FRAME_TIME: &str = "frames/time";
@@ -16,6 +18,9 @@ pub(crate) const PEOPLE_RADIUS: &str = "people/radius";
 pub(crate) const PEOPLE_EXIT_TIME: &str = "people/exit_time";
 pub(crate) const EXITS: &str = "exits";
 pub(crate) const STEPS: &str = "steps";
+pub(crate) const WALLS: &str = "walls";
+pub(crate) const CONTACTS: &str = "contacts";
+pub(crate) const FRAME_PRESSURE: &str = "frames/pressure";
 
 /// Rows per chunk of the appended tables (32 bytes a trajectory row: 256 KiB chunks).
 pub(crate) const ROWS_PER_CHUNK: usize = 8192;
@@ -46,6 +51,30 @@ pub struct ExitRow {
     pub id: i64,
     /// Time the person passed an exit (s).
     pub t: f64,
+}
+
+/// One row of `/contacts`: a contact that pushed (`λ > 0`) in the step that ended at an
+/// output frame.
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub struct ContactRow {
+    /// Output frame, from 0.
+    pub frame: i64,
+    /// 0: person–person; 1: person–wall.
+    pub kind: i64,
+    /// Person id (the smaller of a pair).
+    pub a: i64,
+    /// The other person's id, or the wall's row in `/walls`.
+    pub b: i64,
+    /// The multiplier `λ` (m/s): the speed the contact removed along its normal.
+    pub lambda: f64,
+}
+
+impl ContactRow {
+    /// `kind` of a contact between two people.
+    pub const PERSON_PERSON: i64 = 0;
+    /// `kind` of a contact between a person and a wall.
+    pub const PERSON_WALL: i64 = 1;
 }
 
 /// One row of `/steps`: a [`StepReport`] as stored.
@@ -144,4 +173,8 @@ pub struct RunHeader {
     pub fps: f64,
     /// `people/radius`: the radius of person `id`, for every id `0..n`.
     pub radii: Vec<f64>,
+    /// `walls`: the wall segments `[x0, y0, x1, y1]` at the start (contacts name them by row).
+    pub walls: Vec<[f64; 4]>,
+    /// Whether the file records contact forces (`/contacts`, `/frames/pressure`).
+    pub contacts: bool,
 }

@@ -12,6 +12,9 @@
 //! | `/people/exit_time` | time each person passed an exit, NaN if never (written when the run ends) |
 //! | `/exits` | compound rows `id`, `t`, appended as people pass exits (complete up to the last frame) |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |
+//! | `/walls` | float64 `[segments, 4]`: the wall segments `x0, y0, x1, y1` at the start |
+//! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall), `a`, `b` (person ids; for a wall, its row in `/walls`), `lambda` (float64, m/s): the contacts with `λ > 0` of the step that ended at each frame; attribute `units` |
+//! | `/frames/pressure` | only with contacts: float64 `[frames, people]`, each person's `Σ λ` over its contacts (m/s), NaN when absent |
 //!
 //! Root attributes: `wkt_geometry` (the walkable area, WKT), `format`, `moreau_version`,
 //! `scene` (the whole scene, TOML), `scene_name`, `seed`, `solver` (the settings in force),
@@ -27,6 +30,6 @@ mod reader;
 mod writer;
 
 pub use error::IoError;
-pub use layout::{ExitRow, FORMAT, RunHeader, StepRow, TrajectoryRow};
+pub use layout::{ContactRow, ExitRow, FORMAT, FORMATS_READ, RunHeader, StepRow, TrajectoryRow};
 pub use reader::RunFile;
 pub use writer::{Overwrite, RunWriter, check_output};

@@ -31,8 +31,11 @@ impl RunFile {
             file,
         };
         let format = me.text("format")?;
-        if format != FORMAT {
-            return Err(me.layout(format!("format '{format}', this moreau reads '{FORMAT}'")));
+        if !FORMATS_READ.contains(&format.as_str()) {
+            return Err(me.layout(format!(
+                "format '{format}', this moreau reads {}",
+                FORMATS_READ.join(", ")
+            )));
         }
         Ok(me)
     }
@@ -90,6 +93,8 @@ impl RunFile {
             wkt_geometry: self.text("wkt_geometry")?,
             fps,
             radii: self.read(PEOPLE_RADIUS)?,
+            walls: self.walls()?,
+            contacts: self.has_contacts(),
         })
     }
 
@@ -135,6 +140,48 @@ impl RunFile {
     /// The `/steps` rows.
     pub fn steps(&self) -> Result<Vec<StepRow>, IoError> {
         self.read(STEPS)
+    }
+
+    /// The wall segments `[x0, y0, x1, y1]` (empty for a file written before they were
+    /// stored).
+    pub fn walls(&self) -> Result<Vec<[f64; 4]>, IoError> {
+        if self.file.dataset(WALLS).is_err() {
+            return Ok(Vec::new());
+        }
+        let flat: Vec<f64> = self.read(WALLS)?;
+        Ok(flat
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect())
+    }
+
+    /// Whether the run recorded contact forces.
+    pub fn has_contacts(&self) -> bool {
+        self.file.dataset(CONTACTS).is_ok()
+    }
+
+    /// The `/contacts` rows (empty when the run did not record them).
+    pub fn contacts(&self) -> Result<Vec<ContactRow>, IoError> {
+        if !self.has_contacts() {
+            return Ok(Vec::new());
+        }
+        self.read(CONTACTS)
+    }
+
+    /// Pressures by person id at output frame `frame` (NaN: absent), when recorded.
+    pub fn pressure(&self, frame: usize) -> Result<Option<Vec<f64>>, IoError> {
+        if !self.has_contacts() {
+            return Ok(None);
+        }
+        let ds = self.dataset(FRAME_PRESSURE)?;
+        let frames = ds.shape().first().copied().unwrap_or(0);
+        if frame >= frames {
+            return Err(self.layout(format!("pressure of frame {frame} of {frames}")));
+        }
+        let a = ds
+            .read_slice::<f64, _, ndarray::Ix1>((frame, ..))
+            .at(&self.path, || format!("reading the pressure of frame {frame}"))?;
+        Ok(Some(a.to_vec()))
     }
 
     /// The `/exits` rows.

@@ -32,16 +32,21 @@ pub struct RunWriter {
     positions: Dataset,
     exits: Dataset,
     steps: Dataset,
+    /// `/contacts` and `/frames/pressure`, when the run records contact forces.
+    contacts: Option<(Dataset, Dataset)>,
     people: usize,
     frames: usize,
     trajectory_rows: usize,
     exit_rows: usize,
     step_rows: usize,
+    contact_rows: usize,
     exit_times: Vec<f64>,
     pending_steps: Vec<StepRow>,
     pending_exits: Vec<ExitRow>,
     rows: Vec<TrajectoryRow>,
     dense: Vec<f64>,
+    pending_contacts: Vec<ContactRow>,
+    pending_pressure: Vec<f64>,
 }
 
 fn text(s: &str) -> VarLenUnicode {
@@ -188,6 +193,39 @@ impl RunWriter {
             .shape((0.., n, 2))
             .create(FRAME_POSITIONS)
             .at(path, at("creating 'frames/positions'"))?;
+        let walls: Vec<f64> = header.walls.iter().flatten().copied().collect();
+        file.new_dataset_builder()
+            .with_data(
+                &ndarray::Array2::from_shape_vec((header.walls.len(), 4), walls)
+                    .expect("4 numbers a wall"),
+            )
+            .create(WALLS)
+            .at(path, at("writing 'walls'"))?;
+        let contacts = if header.contacts {
+            let rows =
+                table::<ContactRow>(&file, CONTACTS).at(path, at("creating 'contacts'"))?;
+            rows.new_attr::<VarLenUnicode>()
+                .shape(())
+                .create("units")
+                .and_then(|a| {
+                    a.write_scalar(&text(
+                        "lambda: m/s, the speed a contact removed along its normal (v = w + Σ λ ∇g)",
+                    ))
+                })
+                .at(path, at("writing attribute 'contacts.units'"))?;
+            let pressure = file
+                .new_dataset::<f64>()
+                .chunk((1, n.clamp(1, 2 * PEOPLE_PER_CHUNK)))
+                .shuffle()
+                .deflate(DEFLATE)
+                .fill_value(f64::NAN)
+                .shape((0.., n))
+                .create(FRAME_PRESSURE)
+                .at(path, at("creating 'frames/pressure'"))?;
+            Some((rows, pressure))
+        } else {
+            None
+        };
         let ids: Vec<i64> = (0..n as i64).collect();
         file.new_dataset_builder()
             .with_data(&ids)
@@ -207,16 +245,20 @@ impl RunWriter {
             positions,
             exits,
             steps,
+            contacts,
             people: n,
             frames: 0,
             trajectory_rows: 0,
             exit_rows: 0,
             step_rows: 0,
+            contact_rows: 0,
             exit_times: vec![f64::NAN; n],
             pending_steps: Vec::new(),
             pending_exits: Vec::new(),
             rows: Vec::new(),
             dense: Vec::new(),
+            pending_contacts: Vec::new(),
+            pending_pressure: Vec::new(),
         })
     }
 
@@ -249,6 +291,38 @@ impl RunWriter {
             })?;
         *slot = t;
         self.pending_exits.push(ExitRow { id: id as i64, t });
+        Ok(())
+    }
+
+    /// Whether the file records contact forces.
+    pub fn records_contacts(&self) -> bool {
+        self.contacts.is_some()
+    }
+
+    /// Records the contact forces of the next frame (written with it): the contacts with
+    /// `λ > 0` (their `frame` is set here) and the pressure by person id (`people` values,
+    /// NaN when absent). Ignored when the file does not record contacts.
+    pub fn contacts(
+        &mut self,
+        rows: impl IntoIterator<Item = ContactRow>,
+        pressure_by_id: &[f64],
+    ) -> Result<(), IoError> {
+        if self.contacts.is_none() {
+            return Ok(());
+        }
+        if pressure_by_id.len() != self.people {
+            return Err(self.layout_error(format!(
+                "pressure of {} people, but the file holds {}",
+                pressure_by_id.len(),
+                self.people
+            )));
+        }
+        let frame = self.frames as i64;
+        self.pending_contacts.clear();
+        self.pending_contacts
+            .extend(rows.into_iter().map(|r| ContactRow { frame, ..r }));
+        self.pending_pressure.clear();
+        self.pending_pressure.extend_from_slice(pressure_by_id);
         Ok(())
     }
 
@@ -304,6 +378,22 @@ impl RunWriter {
         let mut n_frames = frame;
         append(&self.frame_count, &mut n_frames, &[ids.len() as i64])
             .at(&path, what("writing 'frames/count'"))?;
+        if let Some((rows, pressure)) = &self.contacts {
+            append(rows, &mut self.contact_rows, &self.pending_contacts)
+                .at(&path, what("appending to 'contacts'"))?;
+            if self.pending_pressure.len() != self.people {
+                self.pending_pressure.clear();
+                self.pending_pressure.resize(self.people, f64::NAN);
+            }
+            pressure
+                .resize((frame + 1, self.people))
+                .and_then(|_| {
+                    pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..))
+                })
+                .at(&path, what("writing 'frames/pressure'"))?;
+            self.pending_contacts.clear();
+            self.pending_pressure.clear();
+        }
         self.flush_rows()
             .at(&path, what("writing 'steps' and 'exits'"))?;
         self.file.flush().at(&path, what("flushing"))?;
@@ -349,9 +439,10 @@ impl RunWriter {
             positions,
             exits,
             steps,
+            contacts,
             ..
         } = self;
-        drop((trajectory, frame_time, frame_count, positions, exits, steps));
+        drop((trajectory, frame_time, frame_count, positions, exits, steps, contacts));
         file.close().at(&path, || "closing".into())
     }
 }

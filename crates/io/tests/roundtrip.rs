@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use moreau_core::{SolveStatus, StepReport};
-use moreau_io::{IoError, Overwrite, RunFile, RunHeader, RunWriter};
+use moreau_io::{ContactRow, IoError, Overwrite, RunFile, RunHeader, RunWriter};
 
 /// `name` in a directory of its own: tests run in parallel, and one checks that its directory
 /// holds no `.partial` file while another may be laying one out.
@@ -27,6 +27,8 @@ fn header(n: usize) -> RunHeader {
         wkt_geometry: "POLYGON ((0 0, 1 0, 1 1, 0 1, 0 0))".into(),
         fps: 10.0,
         radii: (0..n).map(|i| 0.1 + 0.01 * i as f64).collect(),
+        walls: vec![[0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 1.0, 1.0]],
+        contacts: false,
     }
 }
 
@@ -95,6 +97,63 @@ fn a_run_file_reads_back_what_was_written() {
     assert!(
         text.contains("/trajectory") && text.contains("@fps") && text.contains("@wkt_geometry")
     );
+}
+
+#[test]
+fn contact_forces_read_back_frame_by_frame() {
+    let path = scratch("contacts.h5");
+    let h = RunHeader {
+        contacts: true,
+        ..header(3)
+    };
+    let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+    assert!(w.records_contacts());
+    // The first frame: no step yet, no contacts given (the pressure row stays NaN).
+    w.frame(0.0, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+        .unwrap();
+    let pair = ContactRow {
+        frame: -1,
+        kind: ContactRow::PERSON_PERSON,
+        a: 0,
+        b: 2,
+        lambda: 0.25,
+    };
+    let wall = ContactRow {
+        kind: ContactRow::PERSON_WALL,
+        a: 2,
+        b: 1,
+        lambda: 0.5,
+        ..pair
+    };
+    w.contacts([pair, wall], &[0.25, f64::NAN, 0.75]).unwrap();
+    w.frame(0.1, &[0, 2], &[0.11, 0.21, 0.51, 0.61]).unwrap();
+    // A pressure of the wrong length is refused and names both sizes.
+    let err = w.contacts([], &[0.0; 2]).unwrap_err();
+    assert!(err.to_string().contains("2 people") && err.to_string().contains("3"), "{err}");
+    w.finish("complete", "{}").unwrap();
+
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.header().unwrap(), h);
+    assert_eq!(f.walls().unwrap(), h.walls);
+    let rows = f.contacts().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(rows[0], ContactRow { frame: 1, ..pair });
+    assert_eq!(rows[1], ContactRow { frame: 1, ..wall });
+    assert!(f.pressure(0).unwrap().unwrap().iter().all(|p| p.is_nan()));
+    let p1 = f.pressure(1).unwrap().unwrap();
+    assert_eq!((p1[0], p1[2]), (0.25, 0.75));
+    assert!(p1[1].is_nan());
+    assert!(f.describe().unwrap().contains("/contacts"));
+
+    // Without contacts: no datasets, and the reader says so.
+    let plain = scratch("no-contacts.h5");
+    let mut w = RunWriter::create(&plain, &header(1), Overwrite::Never).unwrap();
+    w.contacts([pair], &[1.0]).unwrap();
+    w.frame(0.0, &[0], &[0.0, 0.0]).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&plain).unwrap();
+    assert!(!f.has_contacts());
+    assert!(f.contacts().unwrap().is_empty() && f.pressure(0).unwrap().is_none());
 }
 
 #[test]
