@@ -5,6 +5,13 @@ speed over time and the per-step solver statistics.
 
 writes evacuation.png, flow.png, density.png, speed.png, solver.png and overview.png (all
 five on one figure) into the output directory.
+
+    .venv/bin/python python/plot_run.py out/room-150.h5 --animate out/room-150.mp4
+
+animates the run instead (MP4 through ffmpeg, GIF through Pillow): people to scale,
+coloured by speed (viridis) or, with ``--color pressure`` on a run that recorded contacts,
+by pressure Σλ (plasma); both scaled from 0 to the 99.5th percentile over the run, as in
+``moreau view``'s player.
 """
 
 from __future__ import annotations
@@ -92,14 +99,124 @@ def solver(ax, run):
     ax.legend(fontsize=7, loc="lower left")
 
 
+def frame_speeds(run) -> np.ndarray:
+    """(F, N) speeds from frame differences: backward, and forward for the first frame (the
+    player's rule); NaN where a person is absent."""
+    p = run.positions
+    f = len(run.time)
+    v = np.full(p.shape[:2], np.nan)
+    if f > 1:
+        dt = np.diff(run.time)[:, None]
+        d = np.linalg.norm(np.diff(p, axis=0), axis=2) / dt
+        v[1:] = d
+        v[0] = d[0]
+    return v
+
+
+def colour_scale(values: np.ndarray) -> float:
+    """The top of the colour scale: the 99.5th percentile of the finite values (1 if none)."""
+    finite = values[np.isfinite(values)]
+    top = float(np.percentile(finite, 99.5)) if finite.size else 0.0
+    return top if top > 0 else 1.0
+
+
+def animate(run, out: pathlib.Path, color: str = "speed", fps: float | None = None,
+            max_frames: int | None = None, dpi: int = 100) -> int:
+    """Writes the run as an animation (``.mp4`` through ffmpeg, ``.gif`` through Pillow);
+    returns the number of frames written."""
+    import h5py
+    from matplotlib import animation
+    from matplotlib.collections import EllipseCollection, LineCollection
+
+    if out.suffix.lower() not in (".mp4", ".gif"):
+        raise SystemExit(f"--animate {out}: the file must end in .mp4 or .gif")
+    if color == "pressure":
+        with h5py.File(run.path, "r") as f:
+            if "frames/pressure" not in f:
+                raise SystemExit(f"{run.path}: no contact forces recorded "
+                                 "(run the scene with [output] contacts = true)")
+            values = f["frames/pressure"][...]
+        cmap, label = "plasma", "pressure Σλ (m/s)"
+    else:
+        values, cmap, label = frame_speeds(run), "viridis", "speed (m/s)"
+    frames = np.arange(len(run.time))
+    if max_frames and len(frames) > max_frames:
+        frames = frames[:: int(np.ceil(len(frames) / max_frames))]
+    if not len(frames):
+        raise SystemExit(f"{run.path}: the run has no frames")
+    top = colour_scale(values)
+
+    with h5py.File(run.path, "r") as f:
+        walls = f["walls"][...] if "walls" in f else np.zeros((0, 4))
+    fig, ax = plt.subplots(figsize=(8, 6), constrained_layout=True)
+    ax.set_aspect("equal")
+    outer = np.asarray(run.scene["area"]["outer"], dtype=float)
+    pad = 0.5
+    ax.set_xlim(outer[:, 0].min() - pad, outer[:, 0].max() + pad)
+    ax.set_ylim(outer[:, 1].min() - pad, outer[:, 1].max() + pad)
+    for exit_ in run.scene.get("exits", []):
+        if exit_.get("area"):
+            pts = np.asarray(exit_["area"], dtype=float)
+            ax.fill(pts[:, 0], pts[:, 1], color="tab:green", alpha=0.25, lw=0)
+        elif exit_.get("segment"):
+            pts = np.asarray(exit_["segment"], dtype=float)
+            ax.plot(pts[:, 0], pts[:, 1], color="tab:green", lw=3, alpha=0.8)
+    ax.add_collection(LineCollection(walls.reshape(-1, 2, 2), colors="0.2", linewidths=1.5))
+    disks = EllipseCollection(widths=[], heights=[], angles=[], units="xy", offsets=np.zeros((0, 2)),
+                              offset_transform=ax.transData, cmap=cmap)
+    disks.set_clim(0.0, top)
+    ax.add_collection(disks)
+    fig.colorbar(disks, ax=ax, label=label, shrink=0.8)
+    title = ax.set_title("")
+
+    def draw(k):
+        present = np.isfinite(run.positions[k, :, 0])
+        disks.set_offsets(run.positions[k, present])
+        d = 2.0 * run.radius[present]
+        disks.set_widths(d)
+        disks.set_heights(d)
+        disks.set_angles(np.zeros_like(d))
+        disks.set_array(np.nan_to_num(values[k, present]))
+        title.set_text(f"{run.attrs['scene_name']}  t = {run.time[k]:.2f} s  "
+                       f"{int(present.sum())} people")
+        return disks, title
+
+    rate = fps or (run.fps / max(1, frames[1] - frames[0] if len(frames) > 1 else 1))
+    anim = animation.FuncAnimation(fig, draw, frames=frames, blit=False)
+    if out.suffix.lower() == ".mp4":
+        if not animation.writers.is_available("ffmpeg"):
+            raise SystemExit("--animate .mp4 needs ffmpeg (scripts/setup.sh installs it); "
+                             "or write a .gif")
+        writer = animation.FFMpegWriter(fps=rate, codec="libx264",
+                                        extra_args=["-pix_fmt", "yuv420p"])
+    else:
+        writer = animation.PillowWriter(fps=rate)
+    anim.save(out, writer=writer, dpi=dpi)
+    plt.close(fig)
+    return len(frames)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=pathlib.Path, help="the run file (HDF5)")
     parser.add_argument("-o", "--out", type=pathlib.Path,
                         help="output directory (default: <run>-plots next to the file)")
+    parser.add_argument("--animate", type=pathlib.Path, metavar="OUT.mp4|OUT.gif",
+                        help="write an animation of the run instead of the plots")
+    parser.add_argument("--color", choices=["speed", "pressure"], default="speed",
+                        help="what colours the people in the animation (default: speed)")
+    parser.add_argument("--fps", type=float,
+                        help="frames per second of the animation (default: real time)")
+    parser.add_argument("--max-frames", type=int,
+                        help="at most this many frames in the animation (every k-th frame)")
     args = parser.parse_args(argv)
     if not args.run.is_file():
         parser.error(f"no such run file: {args.run}")
+    if args.animate:
+        n = animate(moreau_run.load(args.run), args.animate, args.color, args.fps,
+                    args.max_frames)
+        print(f"wrote {args.animate} ({n} frames)")
+        return 0
     out = args.out or args.run.with_name(args.run.stem + "-plots")
     out.mkdir(parents=True, exist_ok=True)
 

@@ -9,6 +9,7 @@ mod run;
 mod study;
 mod svg;
 mod tradeoff;
+mod view;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,6 +52,11 @@ enum Command {
     /// The scale table: dense evacuation halls of 10³…10⁶ people, per-step time and stages,
     /// iterations, certified ε, violation, peak memory; the cost exponent; Clarabel at 40k.
     Bench(bench::BenchArgs),
+    /// Writes one self-contained HTML page that plays a run: walls, exits, people to scale
+    /// coloured by speed or pressure, play/pause, speed, a time slider, the step's certified
+    /// ε and violation per frame. No server, no network: open it in any browser.
+    #[command(after_help = EXIT_CODES)]
+    View(view::ViewArgs),
     /// Prints what a run file holds: the run, its status, datasets and attributes.
     #[command(after_help = EXIT_CODES)]
     Inspect {
@@ -137,6 +143,7 @@ fn run() -> Result<ExitCode> {
         Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
         Command::Bench(args) => bench::bench(&args).map(|()| ExitCode::SUCCESS),
         Command::Tradeoff(args) => tradeoff::tradeoff(&args).map(|()| ExitCode::SUCCESS),
+        Command::View(args) => view::view(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
         Command::Example81 { a, b, x0, h, t_end } => {
             example::example_8_1(a, b, x0, h, t_end).map(|()| ExitCode::SUCCESS)

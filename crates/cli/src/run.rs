@@ -8,9 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{
-    ContactKind, ExitRecord, Frame, Observer, ObserverError, Scene, Simulation,
-};
+use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
 use moreau_integrate::ErrorEstimate;
 use moreau_io::{ContactRow, Overwrite, RunFile, RunHeader, RunWriter};
 use serde::Serialize;

@@ -236,7 +236,7 @@ impl Default for SolverSettings {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Output {
-    /// Contact forces: per output frame, the contacts of the last step with `λ > 0` and each
+    /// Contact forces: per output frame, the contacts of the last step with `λ > 10⁻⁶ m/s` and each
     /// person's pressure `Σ λ` (m/s).
     #[serde(default)]
     pub contacts: bool,

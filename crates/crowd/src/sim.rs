@@ -49,19 +49,30 @@ pub struct ContactForce {
     pub lambda: f64,
 }
 
+impl ContactForce {
+    /// Multipliers at or below this (m/s) are not contact forces: an interior point leaves
+    /// every row it did not activate a tiny positive multiplier (`λ_i s_i → 0`), and a
+    /// micrometre per second is far below the velocity the step's certificate resolves
+    /// (`√ε / μ`, millimetres per second and more).
+    pub const FLOOR: f64 = 1e-6;
+}
+
 impl Frame<'_> {
-    /// The contacts with `λ > 0` of the step that ended at this frame, in key order.
+    /// The contacts with `λ > ContactForce::FLOOR` of the step that ended at this frame, in
+    /// key order.
     pub fn contact_forces(&self) -> impl Iterator<Item = ContactForce> + '_ {
         self.multipliers.iter().filter_map(|&(key, lambda)| {
             let (kind, a, b) = ContactKind::of(key);
             match kind {
-                Some(kind) if lambda > 0.0 => Some(ContactForce { kind, a, b, lambda }),
+                Some(kind) if lambda > ContactForce::FLOOR => {
+                    Some(ContactForce { kind, a, b, lambda })
+                }
                 _ => None,
             }
         })
     }
 
-    /// Each present person's pressure `Σ λ` over its contacts (m/s) into `out` at `id`: 0
+    /// Each present person's pressure `Σ λ` over its [contact forces](Self::contact_forces) (m/s) into `out` at `id`: 0
     /// for a present person without contacts, NaN for ids not present.
     pub fn pressure_by_id(&self, out: &mut [f64]) {
         out.fill(f64::NAN);

@@ -89,7 +89,10 @@ fn contact_forces_balance_every_persons_change_of_velocity() {
             report.step
         );
     }
-    assert!(pairs > 50 && walls > 5, "a jam has contacts: {pairs} pairs, {walls} walls");
+    assert!(
+        pairs > 50 && walls > 5,
+        "a jam has contacts: {pairs} pairs, {walls} walls"
+    );
     assert!(checked > 300);
 }
 
@@ -137,7 +140,10 @@ fn contact_forces_agree_with_clarabel_on_the_same_projection() {
         let mut jw = vec![0.0; p.rows()];
         p.jacobian.mul(p.w, &mut jw);
         -0.5 * jtl.iter().map(|x| x * x).sum::<f64>()
-            - l.iter().zip(p.b.iter().zip(&jw)).map(|(l, (b, jw))| l * (b + jw)).sum::<f64>()
+            - l.iter()
+                .zip(p.b.iter().zip(&jw))
+                .map(|(l, (b, jw))| l * (b + jw))
+                .sum::<f64>()
     };
     let primal_ref: f64 = 0.5
         * reference
@@ -155,5 +161,8 @@ fn contact_forces_agree_with_clarabel_on_the_same_projection() {
         c_ref.gap
     );
     let active = clamped.iter().filter(|&&l| l > 0.0).count();
-    assert!(active > 20 && report.active > 20, "{active} contacts pushing");
+    assert!(
+        active > 20 && report.active > 20,
+        "{active} contacts pushing"
+    );
 }

@@ -53,7 +53,7 @@ pub struct ExitRow {
     pub t: f64,
 }
 
-/// One row of `/contacts`: a contact that pushed (`λ > 0`) in the step that ended at an
+/// One row of `/contacts`: a contact that pushed (`λ > 10⁻⁶ m/s`) in the step that ended at an
 /// output frame.
 #[derive(H5Type, Clone, Copy, Debug, PartialEq)]
 #[repr(C)]

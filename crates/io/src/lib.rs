@@ -13,7 +13,7 @@
 //! | `/exits` | compound rows `id`, `t`, appended as people pass exits (complete up to the last frame) |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |
 //! | `/walls` | float64 `[segments, 4]`: the wall segments `x0, y0, x1, y1` at the start |
-//! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall), `a`, `b` (person ids; for a wall, its row in `/walls`), `lambda` (float64, m/s): the contacts with `λ > 0` of the step that ended at each frame; attribute `units` |
+//! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall), `a`, `b` (person ids; for a wall, its row in `/walls`), `lambda` (float64, m/s): the contacts with `λ > 10⁻⁶ m/s` of the step that ended at each frame; attribute `units` |
 //! | `/frames/pressure` | only with contacts: float64 `[frames, people]`, each person's `Σ λ` over its contacts (m/s), NaN when absent |
 //!
 //! Root attributes: `wkt_geometry` (the walkable area, WKT), `format`, `moreau_version`,

@@ -180,7 +180,9 @@ impl RunFile {
         }
         let a = ds
             .read_slice::<f64, _, ndarray::Ix1>((frame, ..))
-            .at(&self.path, || format!("reading the pressure of frame {frame}"))?;
+            .at(&self.path, || {
+                format!("reading the pressure of frame {frame}")
+            })?;
         Ok(Some(a.to_vec()))
     }
 

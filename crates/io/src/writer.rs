@@ -202,8 +202,7 @@ impl RunWriter {
             .create(WALLS)
             .at(path, at("writing 'walls'"))?;
         let contacts = if header.contacts {
-            let rows =
-                table::<ContactRow>(&file, CONTACTS).at(path, at("creating 'contacts'"))?;
+            let rows = table::<ContactRow>(&file, CONTACTS).at(path, at("creating 'contacts'"))?;
             rows.new_attr::<VarLenUnicode>()
                 .shape(())
                 .create("units")
@@ -300,7 +299,7 @@ impl RunWriter {
     }
 
     /// Records the contact forces of the next frame (written with it): the contacts with
-    /// `λ > 0` (their `frame` is set here) and the pressure by person id (`people` values,
+    /// `λ > 10⁻⁶ m/s` (their `frame` is set here) and the pressure by person id (`people` values,
     /// NaN when absent). Ignored when the file does not record contacts.
     pub fn contacts(
         &mut self,
@@ -387,9 +386,7 @@ impl RunWriter {
             }
             pressure
                 .resize((frame + 1, self.people))
-                .and_then(|_| {
-                    pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..))
-                })
+                .and_then(|_| pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..)))
                 .at(&path, what("writing 'frames/pressure'"))?;
             self.pending_contacts.clear();
             self.pending_pressure.clear();
@@ -442,7 +439,15 @@ impl RunWriter {
             contacts,
             ..
         } = self;
-        drop((trajectory, frame_time, frame_count, positions, exits, steps, contacts));
+        drop((
+            trajectory,
+            frame_time,
+            frame_count,
+            positions,
+            exits,
+            steps,
+            contacts,
+        ));
         file.close().at(&path, || "closing".into())
     }
 }

@@ -129,7 +129,10 @@ fn contact_forces_read_back_frame_by_frame() {
     w.frame(0.1, &[0, 2], &[0.11, 0.21, 0.51, 0.61]).unwrap();
     // A pressure of the wrong length is refused and names both sizes.
     let err = w.contacts([], &[0.0; 2]).unwrap_err();
-    assert!(err.to_string().contains("2 people") && err.to_string().contains("3"), "{err}");
+    assert!(
+        err.to_string().contains("2 people") && err.to_string().contains("3"),
+        "{err}"
+    );
     w.finish("complete", "{}").unwrap();
 
     let f = RunFile::open(&path).unwrap();
