@@ -3,9 +3,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# System packages (HDF5 for the output writer, pkg-config to find it, Python for analysis).
+# System packages (HDF5 for the output writer, pkg-config to find it, Python for analysis,
+# Chromium and its driver for the player's browser test, ffmpeg for MP4 animations).
 missing=()
-for pkg in pkg-config libhdf5-dev; do
+for pkg in pkg-config libhdf5-dev chromium chromium-driver ffmpeg; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 command -v python3 >/dev/null 2>&1 || missing+=(python3)
@@ -27,7 +28,7 @@ fi
 # The Rust build (the binary ends up in target/release/moreau).
 cargo build --release --workspace --locked
 
-# The Python venv (h5py, PedPy, matplotlib, pytest), reinstalled when the requirements change.
+# The Python venv (h5py, PedPy, matplotlib, pytest, selenium), reinstalled when the requirements change.
 if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv"
   python3 -m venv .venv

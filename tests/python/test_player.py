@@ -1,0 +1,285 @@
+"""The player (`moreau view`) in a real browser: headless Chromium (Debian's `chromium` and
+`chromium-driver`, installed by scripts/setup.sh) opens the self-contained HTML written for a
+run, a script presses play, pauses, moves the slider to a known frame and takes a screenshot
+(kept as docs/player.png); the page must show the frame asked for with the people present in
+it (counted here from the run file with h5py), and log nothing to the console."""
+
+from __future__ import annotations
+
+import base64
+import json
+import pathlib
+import re
+import shutil
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+import player_data
+from conftest import DENSE, ROOM, ROOT, moreau
+
+SCREENSHOT = ROOT / "docs" / "player.png"
+WINDOW = (1200, 800)
+DENSE_10K = DENSE.with_name("dense-10k.toml")
+
+
+# ---- the HTML under test ----------------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def make_html():
+    """The one function that writes the player of a run file: `make(run, out) -> out`.
+
+    For now python/player_data.py (the stand-in); once `moreau view RUN.h5 -o OUT.html`
+    exists, the binary, with python/player_data.py kept as the independent cross-check."""
+    def make(run: pathlib.Path, out: pathlib.Path) -> pathlib.Path:
+        return player_data.write_html(run, out)
+    return make
+
+
+def read_player_data(html: pathlib.Path) -> dict:
+    """The JSON a player HTML holds (the contents of its `moreau-data` script tag)."""
+    text = html.read_text(encoding="utf-8")
+    found = re.findall(r'<script id="moreau-data" type="application/json">(.*?)</script>', text, re.S)
+    assert len(found) == 1, "exactly one data tag"
+    return json.loads(found[0])
+
+
+def floats(b64: str) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(b64), dtype="<f4")
+
+
+def present(run: pathlib.Path) -> np.ndarray:
+    """People present (finite position) in each frame, from /frames/positions."""
+    with h5py.File(run, "r") as f:
+        frames = f["frames/time"].shape[0]
+        return np.isfinite(f["frames/positions"][:frames, :, 0]).sum(axis=1)
+
+
+# ---- the browser ------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium through chromedriver, 1200×800, with the console log kept."""
+    chromium, driver_path = shutil.which("chromium"), shutil.which("chromedriver")
+    if not chromium or not driver_path:
+        pytest.fail("Debian's chromium and chromium-driver are missing: ./scripts/setup.sh "
+                    "installs them (apt-get install chromium chromium-driver)")
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        pytest.fail("the selenium Python package is missing: ./scripts/setup.sh installs "
+                    "python/requirements.txt into .venv")
+    options = webdriver.ChromeOptions()
+    options.binary_location = chromium
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu",
+                f"--window-size={WINDOW[0]},{WINDOW[1]}"):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    # Explicit paths: Selenium Manager never looks for (or downloads) a browser or driver.
+    driver = webdriver.Chrome(options=options, service=Service(driver_path))
+    driver.set_script_timeout(120)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def open_player(browser, html: pathlib.Path) -> float:
+    """Loads the player and waits until it has drawn its first frame; returns the seconds."""
+    from selenium.webdriver.support.ui import WebDriverWait
+    browser.get_log("browser")  # drop what earlier pages logged
+    start = time.perf_counter()
+    browser.get(html.resolve().as_uri())
+    WebDriverWait(browser, 60).until(
+        lambda d: d.execute_script("return document.body.dataset.frame !== undefined"))
+    return time.perf_counter() - start
+
+
+def console_problems(browser) -> list:
+    """Console entries at warning level or above since the last call."""
+    return [e for e in browser.get_log("browser") if e["level"] in ("SEVERE", "WARNING")]
+
+
+def js(browser, script: str, *args):
+    return browser.execute_script(script, *args)
+
+
+def set_slider(browser, k: int) -> None:
+    js(browser, "const s = document.getElementById('slider');"
+                "s.value = arguments[0]; s.dispatchEvent(new Event('input'));", k)
+
+
+def shown(browser) -> tuple[int, int]:
+    d = js(browser, "return [document.body.dataset.frame, document.body.dataset.drawn]")
+    return int(d[0]), int(d[1])
+
+
+# ---- the tests --------------------------------------------------------------------------------
+
+def test_the_player_data_is_the_run_file(room_run, make_html, tmp_path):
+    """The JSON in the HTML against the run file read with h5py: frames, times, positions
+    (float32), radii, the per-frame ε and violation of the last step at or before the frame."""
+    data = read_player_data(make_html(room_run, tmp_path / "room.html"))
+    with h5py.File(room_run, "r") as f:
+        t = f["frames/time"][:]
+        positions = f["frames/positions"][: len(t)]
+        radius = f["people/radius"][:]
+        steps = f["steps"][:]
+    assert data["format"] == "moreau-player-1"
+    assert data["title"] == "room-150" and data["note"] == ""
+    assert data["people_total"] == data["people_shown"] == len(radius) == 150
+    assert data["frames_total"] == len(t) == len(data["time"]) == 201
+    np.testing.assert_allclose(data["time"], t, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(floats(data["radius"]), radius.astype("f4"))
+    np.testing.assert_array_equal(floats(data["positions"]).reshape(positions.shape),
+                                  positions.astype("f4"))  # NaN where NaN
+    assert data["pressure"] is None  # the room does not record contacts
+    assert data["eps"][0] is None and data["violation"][0] is None  # no step before t = 0
+    for k in (1, 57, 200):
+        row = steps[np.flatnonzero(steps["t"] <= t[k])[-1]]
+        assert data["eps"][k] == pytest.approx(row["eps"], rel=1e-12)
+        assert data["violation"][k] == pytest.approx(row["violation"], rel=1e-12, abs=0)
+    # The room's 12 outer corners: 12 walls; one exit, the door.
+    assert len(data["geometry"]["area"]) == 1 and len(data["geometry"]["walls"]) == 12
+    assert [e["name"] for e in data["geometry"]["exits"]] == ["door"]
+    assert data["bbox"] == [0.0, 0.0, 20.0, 10.0]
+
+
+def test_the_player_plays_the_room_and_shows_the_frame_asked_for(browser, room_run, make_html,
+                                                                  tmp_path):
+    from selenium.webdriver.support.ui import WebDriverWait
+    html = make_html(room_run, tmp_path / "room.html")
+    counts = present(room_run)
+    seconds = open_player(browser, html)
+    print(f"room: {html.stat().st_size / 1e6:.2f} MB, loaded and drawn in {seconds:.2f} s")
+    assert js(browser, "return moreauPlayer.frameCount") == len(counts)
+    assert shown(browser) == (0, counts[0])
+
+    play = browser.find_element("id", "play")
+    play.click()
+    WebDriverWait(browser, 10).until(lambda d: js(d, "return moreauPlayer.frame") >= 3)
+    play.click()
+    assert not js(browser, "return moreauPlayer.playing")
+    paused_at = js(browser, "return moreauPlayer.frame")
+    time.sleep(0.3)
+    assert js(browser, "return moreauPlayer.frame") == paused_at, "pause stops the clock"
+
+    k = 40  # t = 4 s: the crowd reaches the door
+    browser.find_element("id", "trails").click()
+    set_slider(browser, k)
+    assert shown(browser) == (k, counts[k])
+    assert js(browser, "return [moreauPlayer.frame, moreauPlayer.drawn]") == [k, counts[k]]
+    status = browser.find_element("id", "status").text
+    assert "t = 4.00 s" in status and f"frame {k + 1}/{len(counts)}" in status
+    assert re.search(r"ε = \d\.\de-\d+ m²", status), status
+    # Pressure is not offered for a run without contacts.
+    assert js(browser, "return document.querySelector('#color option[value=pressure]').disabled")
+    browser.save_screenshot(str(SCREENSHOT))
+
+    # The other controls draw without complaint: trails off, playback speed, frame stepping.
+    browser.find_element("id", "trails").click()
+    js(browser, "const s = document.getElementById('speed'); s.value = '8';"
+                "s.dispatchEvent(new Event('change'));")
+    browser.find_element("id", "next").click()
+    assert shown(browser) == (k + 1, counts[k + 1])
+    browser.find_element("id", "prev").click()
+    browser.find_element("id", "prev").click()
+    assert shown(browser) == (k - 1, counts[k - 1])
+    assert console_problems(browser) == []
+
+
+def test_people_who_leave_are_not_drawn(browser, make_html, tmp_path):
+    """The room with people removed at the door: the count drawn follows the run file, frame by
+    frame, through the slider, the keyboard and seek(); a decimated file says so on screen."""
+    from selenium.webdriver.common.keys import Keys
+    scene = tmp_path / "room-remove.toml"
+    text = ROOM.read_text().replace('action = "continue"', 'action = "remove"')
+    text = re.sub(r"target = \[\[.*\]\]\n", "", text).replace("horizon = 20.0", "horizon = 14.0")
+    scene.write_text(text)
+    run = tmp_path / "room-remove.h5"
+    moreau("run", scene, "-o", run, "--quiet")
+    counts = present(run)
+    assert counts[-1] < counts[0], "people left"
+
+    open_player(browser, make_html(run, tmp_path / "room-remove.html"))
+    for k in (0, 60, 100, len(counts) - 1):
+        set_slider(browser, k)
+        assert shown(browser) == (k, counts[k])
+    body = browser.find_element("tag name", "body")
+    js(browser, "document.activeElement.blur()")
+    body.send_keys(Keys.ARROW_LEFT)
+    body.send_keys(Keys.ARROW_LEFT)
+    assert shown(browser) == (len(counts) - 3, counts[-3])
+    body.send_keys(Keys.SPACE)
+    assert js(browser, "return moreauPlayer.playing")
+    body.send_keys(Keys.SPACE)
+    assert not js(browser, "return moreauPlayer.playing")
+    js(browser, "moreauPlayer.seek(80)")
+    assert shown(browser) == (80, counts[80])
+    assert console_problems(browser) == []
+
+    # Decimated (fewer values than the run has): said on screen, counts of the people kept.
+    small = tmp_path / "room-remove-small.html"
+    player_data.write_html(run, small, max_values=20_000)
+    data = read_player_data(small)
+    assert player_data.strides(len(counts), 150, 2, 20_000) == (1, 3)
+    assert data["note"] == "every 3rd person shown" and data["people_shown"] == 50
+    open_player(browser, small)
+    assert browser.find_element("id", "note").text == data["note"]
+    with h5py.File(run, "r") as f:
+        kept = f["frames/positions"][: len(counts), ::3, 0]
+    set_slider(browser, 40)
+    assert shown(browser) == (40, np.isfinite(kept[40]).sum())
+    assert console_problems(browser) == []
+
+
+def test_colour_by_pressure(browser, room_run, tmp_path):
+    """A run file with a per-person pressure (`/frames/pressure`, here made up: 1/distance to
+    the door) offers colour by pressure, with its legend; the run without one does not."""
+    run = tmp_path / "room-pressure.h5"
+    shutil.copy(room_run, run)
+    with h5py.File(run, "r+") as f:
+        p = f["frames/positions"][: f["frames/time"].shape[0]]
+        f["frames/pressure"] = 1.0 / np.hypot(p[..., 0] - 10.1, p[..., 1] - 5.0)
+    html = player_data.write_html(run, tmp_path / "room-pressure.html")
+    assert read_player_data(html)["pressure"] is not None
+    open_player(browser, html)
+    assert not js(browser, "return document.querySelector('#color option[value=pressure]').disabled")
+    js(browser, "const s = document.getElementById('color'); s.value = 'pressure';"
+                "s.dispatchEvent(new Event('change'));")
+    set_slider(browser, 100)
+    assert shown(browser) == (100, 150)
+    assert browser.find_element("id", "legend-min").text.startswith("pressure Σλ (m/s)")
+    assert console_problems(browser) == []
+
+
+def test_decimation_keeps_100_frames_then_thins_people():
+    assert player_data.strides(201, 150, 2, 10**6) == (1, 1)
+    assert player_data.strides(201, 10_000, 2, 2_100_000) == (2, 1)  # 101 frames
+    assert player_data.strides(201, 1_000_000, 2, 16_000_000) == (2, 13)
+    assert player_data.strides(1001, 1_000_000, 3, 16_000_000) == (10, 19)
+
+
+def test_ten_thousand_people(browser, make_html, tmp_path):
+    """10,000 people (the dense hall, 3 s at 10 frames/s): the HTML's size and the player's
+    frame rate, printed (headless Chromium without a GPU: software rasterization)."""
+    scene = tmp_path / "dense-10k-short.toml"
+    scene.write_text(DENSE_10K.read_text().replace("horizon = 5.0", "horizon = 3.0")
+                     .replace("output_interval = 0.5", "output_interval = 0.1"))
+    run = tmp_path / "dense-10k.h5"
+    moreau("run", scene, "-o", run, "--quiet")
+    counts = present(run)
+    html = make_html(run, tmp_path / "dense-10k.html")
+    seconds = open_player(browser, html)
+    assert shown(browser) == (0, counts[0]) and counts[0] == 10_000
+    fps = browser.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        "moreauPlayer.measureFps(60).then((fps) => done([fps, moreauPlayer.lastDrawMs]));")
+    print(f"10,000 people, {len(counts)} frames: HTML {html.stat().st_size / 1e6:.1f} MB, "
+          f"loaded and drawn in {seconds:.2f} s, {fps[0]:.0f} frames/s over 60 frames "
+          f"(mean draw {fps[1]:.1f} ms)")
+    assert fps[0] > 0
+    assert console_problems(browser) == []
