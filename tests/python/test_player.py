@@ -29,12 +29,11 @@ DENSE_10K = DENSE.with_name("dense-10k.toml")
 
 @pytest.fixture(scope="session")
 def make_html():
-    """The one function that writes the player of a run file: `make(run, out) -> out`.
-
-    For now python/player_data.py (the stand-in); once `moreau view RUN.h5 -o OUT.html`
-    exists, the binary, with python/player_data.py kept as the independent cross-check."""
+    """The one function that writes the player of a run file: `make(run, out) -> out`, by
+    `moreau view RUN.h5 -o OUT.html` (python/player_data.py is the independent cross-check)."""
     def make(run: pathlib.Path, out: pathlib.Path) -> pathlib.Path:
-        return player_data.write_html(run, out)
+        moreau("view", run, "-o", out, "--force")
+        return out
     return make
 
 
@@ -236,16 +235,19 @@ def test_people_who_leave_are_not_drawn(browser, make_html, tmp_path):
     assert console_problems(browser) == []
 
 
-def test_colour_by_pressure(browser, room_run, tmp_path):
-    """A run file with a per-person pressure (`/frames/pressure`, here made up: 1/distance to
-    the door) offers colour by pressure, with its legend; the run without one does not."""
-    run = tmp_path / "room-pressure.h5"
-    shutil.copy(room_run, run)
-    with h5py.File(run, "r+") as f:
-        p = f["frames/positions"][: f["frames/time"].shape[0]]
-        f["frames/pressure"] = 1.0 / np.hypot(p[..., 0] - 10.1, p[..., 1] - 5.0)
-    html = player_data.write_html(run, tmp_path / "room-pressure.html")
-    assert read_player_data(html)["pressure"] is not None
+def test_colour_by_pressure(browser, make_html, tmp_path):
+    """A run that records contact forces (`[output] contacts = true`) offers colour by
+    pressure Σλ, with its legend; the pressure in the page is the file's."""
+    scene = tmp_path / "room-contacts.toml"
+    scene.write_text(ROOM.read_text() + "\n[output]\ncontacts = true\n")
+    run = tmp_path / "room-contacts.h5"
+    moreau("run", scene, "-o", run, "--quiet")
+    html = make_html(run, tmp_path / "room-pressure.html")
+    data = read_player_data(html)
+    with h5py.File(run, "r") as f:
+        pressure = f["frames/pressure"][:]
+    np.testing.assert_array_equal(floats(data["pressure"]).reshape(pressure.shape),
+                                  pressure.astype("f4"))
     open_player(browser, html)
     assert not js(browser, "return document.querySelector('#color option[value=pressure]').disabled")
     js(browser, "const s = document.getElementById('color'); s.value = 'pressure';"
@@ -254,6 +256,27 @@ def test_colour_by_pressure(browser, room_run, tmp_path):
     assert shown(browser) == (100, 150)
     assert browser.find_element("id", "legend-min").text.startswith("pressure Σλ (m/s)")
     assert console_problems(browser) == []
+
+
+def test_moreau_view_and_the_python_stand_in_write_the_same_data(room_run, make_html,
+                                                                  tmp_path):
+    """Two independent writers of the page's data (Rust from the crates' reader and scene,
+    Python from h5py and tomllib) agree on everything a player draws."""
+    ours = read_player_data(make_html(room_run, tmp_path / "room.html"))
+    theirs = player_data.player_json(room_run)
+    for key in ("format", "title", "people_total", "people_shown", "frames_total", "note",
+                "radius", "positions", "pressure"):
+        assert ours[key] == theirs[key], key
+    np.testing.assert_allclose(ours["time"], theirs["time"], rtol=0, atol=0)
+    for key in ("eps", "violation"):
+        assert [x is None for x in ours[key]] == [x is None for x in theirs[key]]
+        np.testing.assert_allclose([x for x in ours[key] if x is not None],
+                                   [x for x in theirs[key] if x is not None], rtol=1e-15)
+    np.testing.assert_allclose(ours["bbox"], theirs["bbox"])
+    undirected = lambda walls: sorted(tuple(sorted([(w[0], w[1]), (w[2], w[3])])) for w in walls)
+    assert undirected(ours["geometry"]["walls"]) == undirected(theirs["geometry"]["walls"])
+    assert ours["geometry"]["exits"] == theirs["geometry"]["exits"]
+    assert ours["geometry"]["area"] == theirs["geometry"]["area"]
 
 
 def test_decimation_keeps_100_frames_then_thins_people():

@@ -182,7 +182,8 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         f64::NEG_INFINITY,
         f64::NEG_INFINITY,
     ];
-    for p in area.iter().flatten() {
+    let exits = exits(&scene);
+    for p in area.iter().flatten().chain(exits.iter().flat_map(|e| &e.points)) {
         bbox = [
             bbox[0].min(p[0]),
             bbox[1].min(p[1]),
@@ -217,7 +218,7 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         geometry: Geometry {
             area,
             walls,
-            exits: exits(&scene),
+            exits,
         },
         time: frames.iter().map(|&k| times[k]).collect(),
         eps: Some(eps),
