@@ -142,7 +142,7 @@ pub struct Time {
     pub output_interval: f64,
     /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
     /// 1e-6 s and min(0.5 s, output interval, horizon), starting from `step`) and the
-    /// projection accuracy `ε_k = (θ·tol)² μ_k/μ_max` with θ = 0.1. Absent: fixed steps.
+    /// projection accuracy `ε_k = (θ·tol)² (μ_k/μ_max)³` with θ = 0.1. Absent: fixed steps.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tol: Option<f64>,
     /// The error estimate of adaptive steps (`velocity-change`, the default, or

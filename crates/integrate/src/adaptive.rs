@@ -113,7 +113,7 @@ impl AdaptiveSettings {
         Ok(())
     }
 
-    /// The projection accuracy policy tied to the tolerance: `ε = θ² tol² μ / μ_max`.
+    /// The projection accuracy policy tied to the tolerance: `ε = θ² tol² (μ / μ_max)³`.
     pub fn eps_policy(&self) -> EpsPolicy {
         EpsPolicy::tied_to_tolerance(self.theta * self.tol, self.mu_max)
     }

@@ -5,7 +5,7 @@
 
 use moreau_core::{FnField, HalfSpace};
 use moreau_integrate::{
-    AdaptiveSettings, ErrorEstimate, ExactProjection, IntegrateError, Scheme, StepController,
+    AdaptiveSettings, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError, Scheme, StepController,
     StepSequence,
 };
 
@@ -205,4 +205,30 @@ fn bad_settings_name_the_field() {
             ..
         })
     ));
+}
+
+/// seeds/000 asks `ε_k/μ_k² → 0` of the steps a run takes: with adaptive steps the tolerance
+/// fixes the budget, and `ε/μ²` must still fall as `μ` falls (the power-1 policy used before
+/// made it grow: 10 at `μ = 10⁻⁶`, tol = 0.01).
+#[test]
+fn adaptive_eps_over_mu_squared_vanishes_as_the_steps_shrink() {
+    let settings = AdaptiveSettings::new(0.01);
+    let policy = settings.eps_policy();
+    assert!(
+        EpsPolicy::new(policy.kappa, policy.power).is_ok(),
+        "the adaptive policy passes the fixed-step check (p > 2): {policy:?}"
+    );
+    let budget = settings.theta * settings.tol;
+    let mut mu = settings.mu_max;
+    let mut last = f64::INFINITY;
+    while mu >= settings.mu_min {
+        let eps = policy.eps(mu);
+        assert!(eps.sqrt() <= budget * (1.0 + 1e-12), "√ε within the budget at μ = {mu}");
+        let ratio = eps / (mu * mu);
+        assert!(ratio < last, "ε/μ² = {ratio:e} at μ = {mu:e} did not fall");
+        last = ratio;
+        mu /= 10.0;
+    }
+    // Five decades below μ_max, ε/μ² is five decades below its value there.
+    assert!(last <= 1.0001e-5 * policy.eps(settings.mu_max) / settings.mu_max.powi(2));
 }
