@@ -183,7 +183,11 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         f64::NEG_INFINITY,
     ];
     let exits = exits(&scene);
-    for p in area.iter().flatten().chain(exits.iter().flat_map(|e| &e.points)) {
+    for p in area
+        .iter()
+        .flatten()
+        .chain(exits.iter().flat_map(|e| &e.points))
+    {
         bbox = [
             bbox[0].min(p[0]),
             bbox[1].min(p[1]),
@@ -215,11 +219,7 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         frames_total: times.len(),
         note,
         bbox,
-        geometry: Geometry {
-            area,
-            walls,
-            exits,
-        },
+        geometry: Geometry { area, walls, exits },
         time: frames.iter().map(|&k| times[k]).collect(),
         eps: Some(eps),
         violation: Some(violation),

@@ -90,10 +90,10 @@ fn interior_point_matches_clarabel_with_radii_one_to_a_hundred() {
     assert!(compared > 20, "{compared}");
 }
 
-/// A jammed hall run with 1 and with 2 threads: the positions agree within the certified
-/// tolerance. (Here in fact bit for bit: the solver's loops sum in fixed chunks and faer picks
-/// its sequential simplicial factorization on crowds; its parallel supernodal one would not
-/// keep the bits.)
+/// A jammed hall run with 1 and with 2 threads: the positions agree bit for bit, as the
+/// README says (the solver's loops sum in fixed chunks and faer picks its sequential
+/// simplicial factorization on crowds), and in any case within the certified tolerance (what
+/// `solver.threads` promises where faer's parallel supernodal factorization would run).
 #[test]
 fn thread_count_does_not_change_the_answer() {
     let mut hall = Hall::new(3000, 2.6);
@@ -142,6 +142,11 @@ fn thread_count_does_not_change_the_answer() {
         .sum::<f64>()
         .sqrt();
     assert!(dist <= eps1 + eps2, "|q₁ − q₂| = {dist} > {}", eps1 + eps2);
+    let bits = |q: &[f64]| q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert!(
+        bits(&q1) == bits(&q2) && eps1.to_bits() == eps2.to_bits(),
+        "1 and 2 threads differ: |q₁ − q₂| = {dist:e}"
+    );
 }
 
 /// Regression: the evacuation study's jammed step (door 0.8 m, seed 20130707, step 123 at

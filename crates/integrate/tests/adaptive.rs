@@ -5,8 +5,8 @@
 
 use moreau_core::{FnField, HalfSpace};
 use moreau_integrate::{
-    AdaptiveSettings, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError, Scheme, StepController,
-    StepSequence,
+    AdaptiveSettings, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError, Scheme,
+    StepController, StepSequence,
 };
 
 const A: f64 = 1.0;
@@ -223,7 +223,10 @@ fn adaptive_eps_over_mu_squared_vanishes_as_the_steps_shrink() {
     let mut last = f64::INFINITY;
     while mu >= settings.mu_min {
         let eps = policy.eps(mu);
-        assert!(eps.sqrt() <= budget * (1.0 + 1e-12), "√ε within the budget at μ = {mu}");
+        assert!(
+            eps.sqrt() <= budget * (1.0 + 1e-12),
+            "√ε within the budget at μ = {mu}"
+        );
         let ratio = eps / (mu * mu);
         assert!(ratio < last, "ε/μ² = {ratio:e} at μ = {mu:e} did not fall");
         last = ratio;

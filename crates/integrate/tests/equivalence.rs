@@ -1,8 +1,10 @@
 //! `seeds/003` Theorem 2: for monotone `f` and polyhedral `C`, catching-up, the projected
 //! system (PDS) and the complementarity system (CDS) have the same solution and multipliers.
 //!
-//! Catching-up runs through the library (APGD on the linearized set); PDS and CDS steps are
-//! built here from the independent exact enumerator of `support`.
+//! Catching-up runs through the library (APGD on the projection in velocity form); the CDS is
+//! solved as what it is, a linear complementarity problem in the multipliers, by Lemke's
+//! complementary pivoting written here (no projection and no library solver on that path);
+//! PDS steps are built from the independent exact enumerator of `support`.
 
 #[path = "../../solve/tests/support/mod.rs"]
 mod support;
@@ -77,28 +79,115 @@ fn minus_h() -> Vec<Vec<f64>> {
     H.iter().map(|r| r.iter().map(|a| -a).collect()).collect()
 }
 
+/// Lemke's complementary pivoting for `LCP(q, M)`: `w = q + M z ≥ 0`, `z ≥ 0`, `wᵀz = 0`,
+/// covering vector `e`, ties broken towards the artificial variable, then by row. `None` on
+/// ray termination. (It terminates for the positive semidefinite `M` here.)
+fn lemke(m: &[Vec<f64>], q: &[f64]) -> Option<Vec<f64>> {
+    let n = q.len();
+    if q.iter().all(|&v| v >= 0.0) {
+        return Some(vec![0.0; n]);
+    }
+    // Columns: w_0..w_{n−1}, z_0..z_{n−1}, z0 (artificial); then the right-hand side.
+    let (z0, rhs) = (2 * n, 2 * n + 1);
+    let mut t: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            let mut row = vec![0.0; 2 * n + 2];
+            row[i] = 1.0;
+            for j in 0..n {
+                row[n + j] = -m[i][j];
+            }
+            row[z0] = -1.0;
+            row[rhs] = q[i];
+            row
+        })
+        .collect();
+    let mut basis: Vec<usize> = (0..n).collect();
+    let pivot = |t: &mut Vec<Vec<f64>>, r: usize, c: usize| {
+        let p = t[r][c];
+        t[r].iter_mut().for_each(|x| *x /= p);
+        let pr = t[r].clone();
+        for (i, row) in t.iter_mut().enumerate() {
+            if i != r && row[c] != 0.0 {
+                let f = row[c];
+                row.iter_mut().zip(&pr).for_each(|(x, y)| *x -= f * y);
+            }
+        }
+    };
+    let r0 = (0..n).min_by(|&a, &b| q[a].total_cmp(&q[b])).unwrap();
+    pivot(&mut t, r0, z0);
+    let mut leaving = basis[r0];
+    basis[r0] = z0;
+    for _ in 0..100 {
+        let entering = if leaving < n {
+            leaving + n
+        } else {
+            leaving - n
+        };
+        let mut best: Option<(usize, f64)> = None;
+        for i in 0..n {
+            if t[i][entering] > 1e-12 {
+                let ratio = t[i][rhs] / t[i][entering];
+                let better = match best {
+                    None => true,
+                    Some((b, r)) => {
+                        ratio < r - 1e-12
+                            || (ratio <= r + 1e-12 && basis[i] == z0 && basis[b] != z0)
+                    }
+                };
+                if better {
+                    best = Some((i, ratio));
+                }
+            }
+        }
+        let (r, _) = best?;
+        pivot(&mut t, r, entering);
+        leaving = basis[r];
+        basis[r] = entering;
+        if leaving == z0 {
+            let mut z = vec![0.0; n];
+            for (i, &b) in basis.iter().enumerate() {
+                if (n..2 * n).contains(&b) {
+                    z[b - n] = t[i][rhs];
+                }
+            }
+            return Some(z);
+        }
+    }
+    None
+}
+
 /// CDS, time-discretized: `x_{k+1} = x_k − h(f(x_k) + Hᵀλ)` with the LCP
-/// `0 ≤ λ ⟂ d − H x_{k+1} ≥ 0`, solved exactly by enumeration.
+/// `0 ≤ λ ⟂ d − H x_{k+1} = q + M λ ≥ 0`, `M = h H Hᵀ`, `q = d − H(x_k − h f(x_k))`, solved by
+/// Lemke's method.
 fn cds(h: f64) -> Trajectory {
     let mut x = X0;
     let mut traj = Trajectory {
         x: vec![X0],
         lambda: Vec::new(),
     };
+    let m: Vec<Vec<f64>> = (0..3)
+        .map(|i| {
+            (0..3)
+                .map(|j| h * (H[i][0] * H[j][0] + H[i][1] * H[j][1]))
+                .collect()
+        })
+        .collect();
     let n = (T_END / h).round() as usize;
     for _ in 0..n {
         let fx = f(&x);
-        let w = [-fx[0], -fx[1]];
-        // In velocity form: b_i = (d_i − H_i x)/h, J = −H; the LCP's λ is the QP's multiplier.
-        let b: Vec<f64> = (0..3)
-            .map(|i| (D[i] - H[i][0] * x[0] - H[i][1] * x[1]) / h)
+        let free = [x[0] - h * fx[0], x[1] - h * fx[1]];
+        let q: Vec<f64> = (0..3)
+            .map(|i| D[i] - H[i][0] * free[0] - H[i][1] * free[1])
             .collect();
-        let (v, l) = support::exact_qp(&w, &minus_h(), &b);
-        // Check it is the LCP's solution: complementarity of λ with d − H x_{k+1}.
-        let xn = [x[0] + h * v[0], x[1] + h * v[1]];
+        let l = lemke(&m, &q).expect("the CDS step's LCP has a solution");
+        let xn = [
+            free[0] - h * (H[0][0] * l[0] + H[1][0] * l[1] + H[2][0] * l[2]),
+            free[1] - h * (H[0][1] * l[0] + H[1][1] * l[1] + H[2][1] * l[2]),
+        ];
+        // The LCP's conditions, checked on the new state.
         for i in 0..3 {
             let slack = D[i] - H[i][0] * xn[0] - H[i][1] * xn[1];
-            assert!(slack >= -1e-9 && (l[i] * slack).abs() < 1e-9);
+            assert!(l[i] >= -1e-12 && slack >= -1e-9 && (l[i] * slack).abs() < 1e-9);
         }
         x = xn;
         traj.x.push(x);
@@ -171,8 +260,10 @@ fn the_trajectory_reaches_and_slides_on_faces() {
 
 #[test]
 fn catching_up_and_cds_agree_in_states_and_multipliers() {
-    // For a polyhedron the linearized set is the set itself, so catching-up and the
-    // discretized CDS solve the same LCP: they agree to solver accuracy at every h.
+    // For a polyhedron the linearized set is the set itself, so a catching-up step (a
+    // projection in velocity, by APGD) and a CDS step (an LCP in the multipliers, by Lemke's
+    // pivoting) are the same step stated twice: two formulations, two algorithms, and they
+    // must agree to solver accuracy at every h.
     for h in [0.05, 0.01] {
         let (a, b) = (catching_up(h), cds(h));
         assert!(
