@@ -375,7 +375,9 @@ pub unsafe extern "C" fn fmi2SetString(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi2GetFMUstate(c: *mut c_void, state: *mut *mut c_void) -> Status {
     // SAFETY: passed on.
-    with(c, "fmi2GetFMUstate", |comp| unsafe { get_state(comp, state) })
+    with(c, "fmi2GetFMUstate", |comp| unsafe {
+        get_state(comp, state)
+    })
 }
 
 /// `fmi2SetFMUstate`: refused (error, log line, nothing changes) for a state of another scene.
@@ -385,7 +387,9 @@ pub unsafe extern "C" fn fmi2GetFMUstate(c: *mut c_void, state: *mut *mut c_void
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi2SetFMUstate(c: *mut c_void, state: *mut c_void) -> Status {
     // SAFETY: passed on.
-    with(c, "fmi2SetFMUstate", |comp| unsafe { set_state(comp, state) })
+    with(c, "fmi2SetFMUstate", |comp| unsafe {
+        set_state(comp, state)
+    })
 }
 
 /// `fmi2FreeFMUstate`: frees `*state` and sets it to null.

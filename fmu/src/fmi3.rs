@@ -9,8 +9,7 @@ use std::sync::LazyLock;
 use crate::FmuError;
 use crate::glue::{
     Component, Status, c_text, deserialize_state, free_state, get_scalars, get_state, get_strings,
-    refs, serialize_state, set_scalars, set_state, set_strings, state_size, text, values_mut,
-    with,
+    refs, serialize_state, set_scalars, set_state, set_strings, state_size, text, values_mut, with,
 };
 use crate::model::{Kind, variable, vr as refs_of};
 use crate::runtime::{Instance, Level, State};
@@ -523,7 +522,9 @@ pub extern "C" fn fmi3ExitConfigurationMode(c: *mut c_void) -> Status {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi3GetFMUState(c: *mut c_void, state: *mut *mut c_void) -> Status {
     // SAFETY: passed on.
-    with(c, "fmi3GetFMUState", |comp| unsafe { get_state(comp, state) })
+    with(c, "fmi3GetFMUState", |comp| unsafe {
+        get_state(comp, state)
+    })
 }
 
 /// `fmi3SetFMUState`: refused (error, log line, nothing changes) for a state of another scene.
@@ -533,7 +534,9 @@ pub unsafe extern "C" fn fmi3GetFMUState(c: *mut c_void, state: *mut *mut c_void
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi3SetFMUState(c: *mut c_void, state: *mut c_void) -> Status {
     // SAFETY: passed on.
-    with(c, "fmi3SetFMUState", |comp| unsafe { set_state(comp, state) })
+    with(c, "fmi3SetFMUState", |comp| unsafe {
+        set_state(comp, state)
+    })
 }
 
 /// `fmi3FreeFMUState`: frees `*state` and sets it to null.

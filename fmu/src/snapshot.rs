@@ -71,8 +71,8 @@ impl Snapshot {
             ));
         }
         let hash = u64::from_le_bytes(bytes[12..HEADER].try_into().expect("8 bytes"));
-        let (snapshot, rest): (Self, _) = postcard::take_from_bytes(&bytes[HEADER..])
-            .map_err(|e| {
+        let (snapshot, rest): (Self, _) =
+            postcard::take_from_bytes(&bytes[HEADER..]).map_err(|e| {
                 FmuError::Setting(format!(
                     "serializedState: {} bytes, damaged ({e})",
                     bytes.len()
