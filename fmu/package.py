@@ -28,12 +28,13 @@ def package(version: str, library: pathlib.Path, out: pathlib.Path) -> pathlib.P
     text = description.read_text()
     if f'modelIdentifier="{IDENTIFIER}"' not in text:
         sys.exit(f"{description}: modelIdentifier is not {IDENTIFIER}")
-    # The arrays of FMI 3 are sized from the scene the FMU ships.
+    # FMI 3 sizes its arrays by the structural parameter n_people, whose start value (what
+    # importers that read only the XML size the arrays with) is the shipped scene's count.
     scene = tomllib.loads((ROOT / "data" / "scenes" / "room-150.toml").read_text())
     people = sum(g.get("count", len(g.get("positions", []))) for g in scene["groups"])
-    for dims in re.findall(r'<Dimension start="(\d+)"/>\s*(?:<Dimension start="2"/>)?', text):
-        if int(dims) != people:
-            sys.exit(f"{description}: an array is sized {dims}, the scene has {people} people")
+    for start in re.findall(r'<UInt64 name="n_people"[^>]* start="(\d+)"', text):
+        if int(start) != people:
+            sys.exit(f"{description}: n_people starts at {start}, the scene has {people} people")
     target = out / f"moreau-crowd-fmi{version}.fmu"
     tmp = target.with_suffix(".fmu.partial")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:

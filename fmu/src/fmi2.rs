@@ -8,7 +8,8 @@ use std::sync::LazyLock;
 
 use crate::FmuError;
 use crate::glue::{
-    Component, ERROR, OK, Status, c_text, get_scalars, get_strings, set_scalars, set_strings, text,
+    Component, ERROR, OK, Status, c_text, deserialize_state, free_state, get_scalars, get_state,
+    get_strings, serialize_state, set_scalars, set_state, set_strings, state_size, text,
     values_mut, with,
 };
 use crate::runtime::{Instance, Level, State};
@@ -365,6 +366,93 @@ pub unsafe extern "C" fn fmi2SetString(
     })
 }
 
+// ---- FMU states (canGetAndSetFMUstate, canSerializeFMUstate) ------------------------------
+
+/// `fmi2GetFMUstate`: a new state in `*state` when it is null, else overwrites that state.
+///
+/// # Safety
+/// `state` points to the host's `fmi2FMUstate` (null or a state of this FMU).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2GetFMUstate(c: *mut c_void, state: *mut *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2GetFMUstate", |comp| unsafe {
+        get_state(comp, state)
+    })
+}
+
+/// `fmi2SetFMUstate`: refused (error, log line, nothing changes) for a state of another scene.
+///
+/// # Safety
+/// `state` is a state of this FMU, not freed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SetFMUstate(c: *mut c_void, state: *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SetFMUstate", |comp| unsafe {
+        set_state(comp, state)
+    })
+}
+
+/// `fmi2FreeFMUstate`: frees `*state` and sets it to null.
+///
+/// # Safety
+/// `state` points to the host's `fmi2FMUstate` (null or a state of this FMU).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2FreeFMUstate(c: *mut c_void, state: *mut *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2FreeFMUstate", |_| unsafe { free_state(state) })
+}
+
+/// `fmi2SerializedFMUstateSize`.
+///
+/// # Safety
+/// `state` is a state of this FMU; `size` points to one `size_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
+    c: *mut c_void,
+    state: *mut c_void,
+    size: *mut usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SerializedFMUstateSize", |_| unsafe {
+        state_size(state, size)
+    })
+}
+
+/// `fmi2SerializeFMUstate`: `size` is what `fmi2SerializedFMUstateSize` said.
+///
+/// # Safety
+/// `state` is a state of this FMU; `bytes` has room for `size` bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2SerializeFMUstate(
+    c: *mut c_void,
+    state: *mut c_void,
+    bytes: *mut c_char,
+    size: usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2SerializeFMUstate", |_| unsafe {
+        serialize_state(state, bytes as *mut u8, size)
+    })
+}
+
+/// `fmi2DeSerializeFMUstate`: checks that the bytes are a state of this FMU and format; the
+/// scene is checked by `fmi2SetFMUstate`.
+///
+/// # Safety
+/// `bytes` holds `size` bytes; `state` points to the host's `fmi2FMUstate`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
+    c: *mut c_void,
+    bytes: *const c_char,
+    size: usize,
+    state: *mut *mut c_void,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi2DeSerializeFMUstate", |_| unsafe {
+        deserialize_state(bytes as *const u8, size, state)
+    })
+}
+
 // ---- What this FMU does not provide ----------------------------------------------------
 
 macro_rules! unsupported {
@@ -378,12 +466,6 @@ macro_rules! unsupported {
     };
 }
 
-unsupported!(fmi2GetFMUstate, "fmi2GetFMUstate", (state: *mut *mut c_void));
-unsupported!(fmi2SetFMUstate, "fmi2SetFMUstate", (state: *mut c_void));
-unsupported!(fmi2FreeFMUstate, "fmi2FreeFMUstate", (state: *mut *mut c_void));
-unsupported!(fmi2SerializedFMUstateSize, "fmi2SerializedFMUstateSize", (state: *mut c_void, size: *mut usize));
-unsupported!(fmi2SerializeFMUstate, "fmi2SerializeFMUstate", (state: *mut c_void, bytes: *mut c_char, size: usize));
-unsupported!(fmi2DeSerializeFMUstate, "fmi2DeSerializeFMUstate", (bytes: *const c_char, size: usize, state: *mut *mut c_void));
 unsupported!(fmi2GetDirectionalDerivative, "fmi2GetDirectionalDerivative", (unknown: *const c_uint, n_unknown: usize, known: *const c_uint, n_known: usize, dv_known: *const f64, dv_unknown: *mut f64));
 unsupported!(fmi2SetRealInputDerivatives, "fmi2SetRealInputDerivatives", (vr: *const c_uint, nvr: usize, order: *const c_int, value: *const f64));
 unsupported!(fmi2GetRealOutputDerivatives, "fmi2GetRealOutputDerivatives", (vr: *const c_uint, nvr: usize, order: *const c_int, value: *mut f64));

@@ -8,10 +8,10 @@ use std::sync::LazyLock;
 
 use crate::FmuError;
 use crate::glue::{
-    Component, Status, c_text, get_scalars, get_strings, refs, set_scalars, set_strings, text,
-    values_mut, with,
+    Component, Status, c_text, deserialize_state, free_state, get_scalars, get_state, get_strings,
+    refs, serialize_state, set_scalars, set_state, set_strings, state_size, text, values_mut, with,
 };
-use crate::model::{Kind, variable};
+use crate::model::{Kind, variable, vr as refs_of};
 use crate::runtime::{Instance, Level, State};
 
 /// The FMI 3 model description, as shipped in the FMU.
@@ -280,8 +280,20 @@ pub unsafe extern "C" fn fmi3GetFloat64(
             at += len;
         }
         if at != n_values {
+            let arrays = refs
+                .iter()
+                .any(|&r| matches!(variable(r).map(|v| v.kind), Some(Kind::RealArray)));
+            let sizes = if arrays {
+                format!(
+                    " (positions holds 2 × n_people values, radii n_people; n_people = {} for \
+                     this scene)",
+                    inst.get_uint64(refs_of::N_PEOPLE)?
+                )
+            } else {
+                String::new()
+            };
             return Err(FmuError::Setting(format!(
-                "nValues = {n_values}, the references hold {at}"
+                "nValues = {n_values}, the references hold {at}{sizes}"
             )));
         }
         Ok(())
@@ -449,6 +461,145 @@ pub unsafe extern "C" fn fmi3DoStep(
     })
 }
 
+/// `fmi3GetUInt64` (`n_people`, the scene's count).
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` room for `n_values` values.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3GetUInt64(
+    c: *mut c_void,
+    vr: *const u32,
+    nvr: usize,
+    value: *mut u64,
+    n_values: usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3GetUInt64", |comp| unsafe {
+        get_scalars(comp, vr, nvr, value, n_values, Instance::get_uint64)
+    })
+}
+
+/// `fmi3SetUInt64` (`n_people`: must be the scene's count, checked when the model is built).
+///
+/// # Safety
+/// `vr` holds `nvr` references and `value` `n_values` values.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3SetUInt64(
+    c: *mut c_void,
+    vr: *const u32,
+    nvr: usize,
+    value: *const u64,
+    n_values: usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3SetUInt64", |comp| unsafe {
+        set_scalars(comp, vr, nvr, value, n_values, Instance::set_uint64)
+    })
+}
+
+/// `fmi3EnterConfigurationMode`: from Instantiated, to set the structural parameter.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi3EnterConfigurationMode(c: *mut c_void) -> Status {
+    with(c, "fmi3EnterConfigurationMode", |comp| {
+        comp.instance.enter_configuration()
+    })
+}
+
+/// `fmi3ExitConfigurationMode`: back to Instantiated.
+#[unsafe(no_mangle)]
+pub extern "C" fn fmi3ExitConfigurationMode(c: *mut c_void) -> Status {
+    with(c, "fmi3ExitConfigurationMode", |comp| {
+        comp.instance.exit_configuration()
+    })
+}
+
+// ---- FMU states (canGetAndSetFMUState, canSerializeFMUState) ------------------------------
+
+/// `fmi3GetFMUState`: a new state in `*state` when it is null, else overwrites that state.
+///
+/// # Safety
+/// `state` points to the host's `fmi3FMUState` (null or a state of this FMU).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3GetFMUState(c: *mut c_void, state: *mut *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3GetFMUState", |comp| unsafe {
+        get_state(comp, state)
+    })
+}
+
+/// `fmi3SetFMUState`: refused (error, log line, nothing changes) for a state of another scene.
+///
+/// # Safety
+/// `state` is a state of this FMU, not freed.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3SetFMUState(c: *mut c_void, state: *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3SetFMUState", |comp| unsafe {
+        set_state(comp, state)
+    })
+}
+
+/// `fmi3FreeFMUState`: frees `*state` and sets it to null.
+///
+/// # Safety
+/// `state` points to the host's `fmi3FMUState` (null or a state of this FMU).
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3FreeFMUState(c: *mut c_void, state: *mut *mut c_void) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3FreeFMUState", |_| unsafe { free_state(state) })
+}
+
+/// `fmi3SerializedFMUStateSize`.
+///
+/// # Safety
+/// `state` is a state of this FMU; `size` points to one `size_t`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3SerializedFMUStateSize(
+    c: *mut c_void,
+    state: *mut c_void,
+    size: *mut usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3SerializedFMUStateSize", |_| unsafe {
+        state_size(state, size)
+    })
+}
+
+/// `fmi3SerializeFMUState`: `size` is what `fmi3SerializedFMUStateSize` said.
+///
+/// # Safety
+/// `state` is a state of this FMU; `bytes` has room for `size` bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3SerializeFMUState(
+    c: *mut c_void,
+    state: *mut c_void,
+    bytes: *mut u8,
+    size: usize,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3SerializeFMUState", |_| unsafe {
+        serialize_state(state, bytes, size)
+    })
+}
+
+/// `fmi3DeserializeFMUState`: checks that the bytes are a state of this FMU and format; the
+/// scene is checked by `fmi3SetFMUState`.
+///
+/// # Safety
+/// `bytes` holds `size` bytes; `state` points to the host's `fmi3FMUState`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fmi3DeserializeFMUState(
+    c: *mut c_void,
+    bytes: *const u8,
+    size: usize,
+    state: *mut *mut c_void,
+) -> Status {
+    // SAFETY: passed on.
+    with(c, "fmi3DeserializeFMUState", |_| unsafe {
+        deserialize_state(bytes, size, state)
+    })
+}
+
 // ---- What this FMU does not provide ----------------------------------------------------
 
 macro_rules! unsupported {
@@ -471,7 +622,6 @@ unsupported! {
     fmi3GetUInt16(vr: *const u32, nvr: usize, value: *mut u16, n: usize);
     fmi3GetUInt32(vr: *const u32, nvr: usize, value: *mut u32, n: usize);
     fmi3GetInt64(vr: *const u32, nvr: usize, value: *mut i64, n: usize);
-    fmi3GetUInt64(vr: *const u32, nvr: usize, value: *mut u64, n: usize);
     fmi3GetBinary(vr: *const u32, nvr: usize, sizes: *mut usize, value: *mut *const u8, n: usize);
     fmi3GetClock(vr: *const u32, nvr: usize, value: *mut bool);
     fmi3SetFloat32(vr: *const u32, nvr: usize, value: *const f32, n: usize);
@@ -481,21 +631,12 @@ unsupported! {
     fmi3SetUInt16(vr: *const u32, nvr: usize, value: *const u16, n: usize);
     fmi3SetUInt32(vr: *const u32, nvr: usize, value: *const u32, n: usize);
     fmi3SetInt64(vr: *const u32, nvr: usize, value: *const i64, n: usize);
-    fmi3SetUInt64(vr: *const u32, nvr: usize, value: *const u64, n: usize);
     fmi3SetBinary(vr: *const u32, nvr: usize, sizes: *const usize, value: *const *const u8, n: usize);
     fmi3SetClock(vr: *const u32, nvr: usize, value: *const bool);
     fmi3GetNumberOfVariableDependencies(vr: u32, n: *mut usize);
     fmi3GetVariableDependencies(dependent: u32, element_dependent: *mut usize, independents: *mut u32, element_independents: *mut usize, kinds: *mut i32, n: usize);
-    fmi3GetFMUState(state: *mut *mut c_void);
-    fmi3SetFMUState(state: *mut c_void);
-    fmi3FreeFMUState(state: *mut *mut c_void);
-    fmi3SerializedFMUStateSize(state: *mut c_void, size: *mut usize);
-    fmi3SerializeFMUState(state: *mut c_void, bytes: *mut u8, size: usize);
-    fmi3DeserializeFMUState(bytes: *const u8, size: usize, state: *mut *mut c_void);
     fmi3GetDirectionalDerivative(unknowns: *const u32, n_unknowns: usize, knowns: *const u32, n_knowns: usize, seed: *const f64, n_seed: usize, sensitivity: *mut f64, n_sensitivity: usize);
     fmi3GetAdjointDerivative(unknowns: *const u32, n_unknowns: usize, knowns: *const u32, n_knowns: usize, seed: *const f64, n_seed: usize, sensitivity: *mut f64, n_sensitivity: usize);
-    fmi3EnterConfigurationMode();
-    fmi3ExitConfigurationMode();
     fmi3GetIntervalDecimal(vr: *const u32, nvr: usize, intervals: *mut f64, qualifiers: *mut i32);
     fmi3GetIntervalFraction(vr: *const u32, nvr: usize, counters: *mut u64, resolutions: *mut u64, qualifiers: *mut i32);
     fmi3GetShiftDecimal(vr: *const u32, nvr: usize, shifts: *mut f64);

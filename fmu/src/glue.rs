@@ -1,11 +1,14 @@
-//! What both FMI layers share: the component behind an instance pointer, and `with`, which
-//! checks the pointer, catches panics and turns errors into a status and a log line.
+//! What both FMI layers share: the component behind an instance pointer, the FMI state
+//! machine (which function each state allows, checked at every entry), `with`, which checks
+//! the pointer and the state, catches panics and turns errors into a status and a log line,
+//! and the FMU-state entry points (get, set, free, serialize) over opaque pointers.
 
 use std::ffi::{CStr, CString, c_char, c_int, c_uint, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use crate::FmuError;
 use crate::runtime::{Instance, State};
+use crate::snapshot::Snapshot;
 
 /// `fmi2Status` / `fmi3Status` (the same values).
 pub type Status = c_int;
@@ -26,8 +29,64 @@ pub(crate) fn c_text(s: &str) -> CString {
     CString::new(s.replace('\0', " ")).expect("no NUL left")
 }
 
-/// Runs `f` on the component behind `c`: null, panics and errors become `fmi2Error` (errors
-/// logged); `fatal` errors also put the instance in the error state.
+use State::{Configuration, Error, Initialization, Instantiated, Stepping, Terminated};
+
+/// Every state.
+const ANY: &[State] = &[
+    Instantiated,
+    Configuration,
+    Initialization,
+    Stepping,
+    Terminated,
+    Error,
+];
+/// Every state but Error.
+const ALIVE: &[State] = &[
+    Instantiated,
+    Configuration,
+    Initialization,
+    Stepping,
+    Terminated,
+];
+/// Where values may be set (which variable in which state: the runtime's check).
+const SETTABLE: &[State] = &[Instantiated, Configuration, Initialization, Stepping];
+
+/// The states in which the FMI function `function` (`fmi2…` or `fmi3…`) may be called: the
+/// co-simulation state machines of FMI 2.0 (§4.2.4) and FMI 3.0 (§4.2), folded onto
+/// [`State`]. Which variable may be set or read in which state is the runtime's finer check.
+pub(crate) fn allowed(function: &str) -> &'static [State] {
+    match function.get(4..).unwrap_or("") {
+        "SetupExperiment" | "EnterInitializationMode" | "EnterConfigurationMode" => &[Instantiated],
+        "ExitConfigurationMode" => &[Configuration],
+        "ExitInitializationMode" => &[Initialization],
+        "DoStep" => &[Stepping],
+        "Terminate" => &[Stepping],
+        "GetReal" | "GetInteger" | "GetBoolean" | "GetString" | "GetFloat64" | "GetInt32"
+        | "GetUInt64" => ALIVE,
+        "SetReal" | "SetInteger" | "SetBoolean" | "SetString" | "SetFloat64" | "SetInt32"
+        | "SetUInt64" => SETTABLE,
+        // Nothing sound to save once a call failed; but going back to a saved state is how a
+        // master recovers from a failed step, so setting (and handling) states stays allowed.
+        "GetFMUstate" | "GetFMUState" => ALIVE,
+        "SetFMUstate"
+        | "SetFMUState"
+        | "FreeFMUstate"
+        | "FreeFMUState"
+        | "SerializedFMUstateSize"
+        | "SerializedFMUStateSize"
+        | "SerializeFMUstate"
+        | "SerializeFMUState"
+        | "DeSerializeFMUstate"
+        | "DeserializeFMUState" => ANY,
+        // Logging, reset, the status queries, and the functions this FMU does not provide
+        // (they answer that, in any state).
+        _ => ANY,
+    }
+}
+
+/// Runs `f` on the component behind `c` once the state machine allows `function`: null,
+/// a state that does not allow it, panics and errors become an error status (logged); a
+/// failed step also puts the instance in the error state, a panic makes it unusable.
 pub(crate) fn with(
     c: *mut c_void,
     function: &'static str,
@@ -40,23 +99,18 @@ pub(crate) fn with(
     // fmi2FreeInstance has not freed (the standard's contract with the host).
     let component = unsafe { &mut *(c as *mut Component) };
     let outcome = catch_unwind(AssertUnwindSafe(|| {
-        if component.instance.state == State::Error
-            && !matches!(
-                function,
-                "fmi2Reset" | "fmi2GetRealStatus" | "fmi2GetBooleanStatus" | "fmi3Reset"
-            )
-        {
-            return Err(FmuError::State {
-                function: function.to_string(),
-                state: State::Error,
-            });
-        }
+        component.instance.expect(function, allowed(function))?;
         f(component)
     }));
     match outcome {
         Ok(Ok(())) => OK,
         Ok(Err(e)) => {
-            component.instance.error(&format!("{function}: {e}"));
+            match &e {
+                FmuError::State { function: f, .. } if f.as_str() == function => {
+                    component.instance.error(&e.to_string())
+                }
+                _ => component.instance.error(&format!("{function}: {e}")),
+            }
             if matches!(e, FmuError::Crowd(_)) && function.ends_with("DoStep") {
                 component.instance.state = State::Error;
             }
@@ -214,5 +268,491 @@ pub(crate) unsafe fn set_strings(
         set_scalars(comp, vr, nvr, value, n_values, |inst, r, v| {
             inst.set_string(r, text(v, "value")?)
         })
+    }
+}
+
+// ---- FMU states ---------------------------------------------------------------------------
+
+/// What an `fmi2FMUstate` / `fmi3FMUState` points to: a tag first (so that a pointer that is
+/// not a state of this FMU is refused rather than read as one), the snapshot, and its
+/// serialized form once asked for (size, then serialize: serialized once).
+#[repr(C)]
+pub(crate) struct StateBox {
+    tag: u64,
+    snapshot: Snapshot,
+    bytes: Option<Vec<u8>>,
+}
+
+const STATE_TAG: u64 = u64::from_le_bytes(*b"moreauST");
+
+/// The state behind `state`, refusing null and pointers that are no state of this FMU.
+///
+/// # Safety
+/// `state` is null or a pointer this FMU handed out as a state and has not freed.
+unsafe fn state_box<'a>(state: *mut c_void) -> Result<&'a mut StateBox, FmuError> {
+    if state.is_null() {
+        return Err(FmuError::Null("FMUstate"));
+    }
+    // SAFETY: the caller's contract: at least the 8 bytes of a tag are readable there. Only
+    // the tag (first field of a `repr(C)` struct) is read before it is known to be ours.
+    let tag = unsafe { std::ptr::read_unaligned(state as *const u64) };
+    if tag != STATE_TAG {
+        return Err(FmuError::Setting(
+            "FMUstate does not point to a state of this FMU (freed already?)".into(),
+        ));
+    }
+    // SAFETY: the tag says it is a live `StateBox` this FMU made (the caller's contract).
+    Ok(unsafe { &mut *(state as *mut StateBox) })
+}
+
+/// Puts `snapshot` behind `*slot`: a new state when `*slot` is null, else into the state it
+/// points to (FMI: a non-null `*FMUstate` is a state of this instance to overwrite).
+///
+/// # Safety
+/// `slot` is null or points to a pointer that is null or a live state of this FMU.
+unsafe fn store(slot: *mut *mut c_void, snapshot: Snapshot) -> Result<(), FmuError> {
+    if slot.is_null() {
+        return Err(FmuError::Null("FMUstate"));
+    }
+    // SAFETY: `slot` points to the host's pointer variable.
+    let slot = unsafe { &mut *slot };
+    if slot.is_null() {
+        *slot = Box::into_raw(Box::new(StateBox {
+            tag: STATE_TAG,
+            snapshot,
+            bytes: None,
+        })) as *mut c_void;
+    } else {
+        // SAFETY: a state of this FMU (the caller's contract; the tag is checked).
+        let b = unsafe { state_box(*slot)? };
+        b.snapshot = snapshot;
+        b.bytes = None;
+    }
+    Ok(())
+}
+
+/// `fmi2GetFMUstate` / `fmi3GetFMUState`.
+///
+/// # Safety
+/// `slot` points to the host's `FMUstate` variable (null, or a state of this FMU).
+pub(crate) unsafe fn get_state(
+    comp: &mut Component,
+    slot: *mut *mut c_void,
+) -> Result<(), FmuError> {
+    if slot.is_null() {
+        return Err(FmuError::Null("FMUstate"));
+    }
+    let snapshot = comp.instance.snapshot()?;
+    // SAFETY: as the caller's contract.
+    unsafe { store(slot, snapshot) }
+}
+
+/// `fmi2SetFMUstate` / `fmi3SetFMUState`.
+///
+/// # Safety
+/// `state` is a state of this FMU, not freed.
+pub(crate) unsafe fn set_state(comp: &mut Component, state: *mut c_void) -> Result<(), FmuError> {
+    // SAFETY: as the caller's contract.
+    let b = unsafe { state_box(state)? };
+    comp.instance.restore(&b.snapshot)?;
+    comp.instance.info("FMU state restored");
+    Ok(())
+}
+
+/// `fmi2FreeFMUstate` / `fmi3FreeFMUState`: frees `*slot` and sets it to null (a null
+/// `*slot` is nothing to free).
+///
+/// # Safety
+/// `slot` points to the host's `FMUstate` variable (null, or a state of this FMU).
+pub(crate) unsafe fn free_state(slot: *mut *mut c_void) -> Result<(), FmuError> {
+    if slot.is_null() {
+        return Err(FmuError::Null("FMUstate"));
+    }
+    // SAFETY: `slot` points to the host's pointer variable.
+    let slot = unsafe { &mut *slot };
+    if slot.is_null() {
+        return Ok(());
+    }
+    // SAFETY: a state of this FMU (tag checked).
+    let b = unsafe { state_box(*slot)? };
+    b.tag = 0;
+    // SAFETY: the state came from `Box::into_raw` in `store` and is freed once: its tag is
+    // gone and the host's pointer is cleared.
+    drop(unsafe { Box::from_raw(*slot as *mut StateBox) });
+    *slot = std::ptr::null_mut();
+    Ok(())
+}
+
+/// The serialized form of the state behind `state`, made once.
+///
+/// # Safety
+/// `state` is a state of this FMU, not freed.
+unsafe fn serialized<'a>(state: *mut c_void) -> Result<&'a [u8], FmuError> {
+    // SAFETY: as the caller's contract.
+    let b = unsafe { state_box(state)? };
+    let snapshot = &b.snapshot;
+    Ok(b.bytes.get_or_insert_with(|| snapshot.to_bytes()))
+}
+
+/// `fmi2SerializedFMUstateSize` / `fmi3SerializedFMUStateSize`.
+///
+/// # Safety
+/// `state` is a state of this FMU; `size` points to one `size_t`.
+pub(crate) unsafe fn state_size(state: *mut c_void, size: *mut usize) -> Result<(), FmuError> {
+    // SAFETY: as the caller's contract.
+    let (bytes, out) = unsafe { (serialized(state)?, values_mut(size, 1)?) };
+    out[0] = bytes.len();
+    Ok(())
+}
+
+/// `fmi2SerializeFMUstate` / `fmi3SerializeFMUState`: `size` must be the size
+/// [`state_size`] gave.
+///
+/// # Safety
+/// `state` is a state of this FMU; `out` has room for `size` bytes.
+pub(crate) unsafe fn serialize_state(
+    state: *mut c_void,
+    out: *mut u8,
+    size: usize,
+) -> Result<(), FmuError> {
+    // SAFETY: as the caller's contract.
+    let bytes = unsafe { serialized(state)? };
+    if size != bytes.len() {
+        return Err(FmuError::Setting(format!(
+            "size = {size}: the serialized state is {} bytes (SerializedFMUstateSize)",
+            bytes.len()
+        )));
+    }
+    // SAFETY: room for `size` bytes at `out`.
+    unsafe { values_mut(out, size)? }.copy_from_slice(bytes);
+    Ok(())
+}
+
+/// `fmi2DeSerializeFMUstate` / `fmi3DeserializeFMUState`: a state from its serialized form
+/// (checked: this FMU's, its format; the scene is checked when it is set).
+///
+/// # Safety
+/// `bytes` holds `size` bytes; `slot` points to the host's `FMUstate` variable.
+pub(crate) unsafe fn deserialize_state(
+    bytes: *const u8,
+    size: usize,
+    slot: *mut *mut c_void,
+) -> Result<(), FmuError> {
+    if size == 0 {
+        return Err(FmuError::Setting(
+            "size = 0: an empty serialized state".into(),
+        ));
+    }
+    // SAFETY: `size` bytes at `bytes`.
+    let snapshot = Snapshot::from_bytes(unsafe { values(bytes, size)? })?;
+    // SAFETY: as the caller's contract.
+    unsafe { store(slot, snapshot) }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::RefCell;
+    use std::path::PathBuf;
+    use std::rc::Rc;
+
+    use super::*;
+    use crate::model::vr;
+
+    fn scenes() -> PathBuf {
+        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data/scenes"))
+    }
+
+    /// A component on the room (or `scene`), with the log lines it sends.
+    fn component(scene: Option<&str>) -> (Box<Component>, Rc<RefCell<Vec<String>>>) {
+        let lines = Rc::new(RefCell::new(Vec::new()));
+        let sink = lines.clone();
+        let mut instance = Instance::new(
+            "test".into(),
+            Some(scenes()),
+            false,
+            Box::new(move |_, m: &str| sink.borrow_mut().push(m.to_string())),
+        );
+        if let Some(s) = scene {
+            instance.settings.scene = scenes().join(s).display().to_string();
+        }
+        let comp = Box::new(Component {
+            instance,
+            strings: Vec::new(),
+        });
+        (comp, lines)
+    }
+
+    fn stepping(scene: Option<&str>) -> (Box<Component>, Rc<RefCell<Vec<String>>>) {
+        let (mut comp, lines) = component(scene);
+        comp.instance.enter_initialization().unwrap();
+        comp.instance.exit_initialization().unwrap();
+        (comp, lines)
+    }
+
+    fn ptr(comp: &mut Component) -> *mut c_void {
+        comp as *mut Component as *mut c_void
+    }
+
+    /// What a master reads: every scalar output and the FMI 3 positions.
+    fn outputs(comp: &mut Component) -> (Vec<i32>, Vec<f64>, Vec<f64>) {
+        let inst = &mut comp.instance;
+        let ints = [vr::PEOPLE_INSIDE, vr::PEOPLE_EVACUATED, vr::INTERNAL_STEPS]
+            .map(|r| inst.get_integer(r).unwrap())
+            .to_vec();
+        let mut reals: Vec<f64> = [vr::MEAN_SPEED, vr::MIN_GAP, vr::EPS]
+            .map(|r| inst.get_real(r).unwrap())
+            .to_vec();
+        reals.push(inst.time().unwrap());
+        let mut q = vec![0.0; inst.array_len(vr::POSITIONS).unwrap()];
+        inst.get_array(vr::POSITIONS, &mut q).unwrap();
+        (ints, reals, q)
+    }
+
+    fn steps(comp: &mut Component, from: f64, n: usize, h: f64) {
+        for k in 0..n {
+            comp.instance.do_step(from + k as f64 * h, h).unwrap();
+        }
+    }
+
+    #[test]
+    fn each_call_is_refused_outside_the_states_the_standard_allows_it_in() {
+        let (mut comp, lines) = component(None);
+        let c = ptr(&mut comp);
+        let mut ran = false;
+        assert_eq!(
+            with(c, "fmi2DoStep", |_| {
+                ran = true;
+                Ok(())
+            }),
+            ERROR
+        );
+        assert!(!ran, "the glue refuses before the runtime is asked");
+        assert_eq!(
+            lines.borrow().last().unwrap(),
+            "fmi2DoStep is not allowed in state Instantiated (only in Stepping)"
+        );
+        assert_eq!(with(c, "fmi3ExitConfigurationMode", |_| Ok(())), ERROR);
+        assert!(
+            lines
+                .borrow()
+                .last()
+                .unwrap()
+                .contains("only in Configuration")
+        );
+        assert_eq!(with(c, "fmi2SetupExperiment", |_| Ok(())), OK);
+        assert_eq!(with(c, "fmi2GetFMUstate", |_| Ok(())), OK);
+
+        comp.instance.state = State::Terminated;
+        let c = ptr(&mut comp);
+        assert_eq!(with(c, "fmi2DoStep", |_| Ok(())), ERROR);
+        assert_eq!(with(c, "fmi3SetFloat64", |_| Ok(())), ERROR);
+        assert_eq!(with(c, "fmi2GetReal", |_| Ok(())), OK);
+
+        // After a failed call: reset, status and going back to a saved state only.
+        comp.instance.state = State::Error;
+        let c = ptr(&mut comp);
+        for refused in [
+            "fmi2GetReal",
+            "fmi2DoStep",
+            "fmi2GetFMUstate",
+            "fmi3GetFMUState",
+        ] {
+            assert_eq!(with(c, refused, |_| Ok(())), ERROR, "{refused}");
+        }
+        for fine in [
+            "fmi2SetFMUstate",
+            "fmi2FreeFMUstate",
+            "fmi2DeSerializeFMUstate",
+            "fmi3SetFMUState",
+            "fmi3SerializeFMUState",
+            "fmi2Reset",
+            "fmi2GetRealStatus",
+        ] {
+            assert_eq!(with(c, fine, |_| Ok(())), OK, "{fine}");
+        }
+        assert_eq!(with(std::ptr::null_mut(), "fmi2Reset", |_| Ok(())), ERROR);
+    }
+
+    #[test]
+    fn a_state_set_back_gives_what_followed_it_bit_for_bit() {
+        let (mut comp, _) = stepping(None);
+        steps(&mut comp, 0.0, 4, 0.5);
+        let at_2s = outputs(&mut comp);
+        let mut slot: *mut c_void = std::ptr::null_mut();
+        // SAFETY: a slot of ours; the state is freed below.
+        unsafe { get_state(&mut comp, &mut slot).unwrap() };
+        assert!(!slot.is_null());
+
+        comp.instance.set_boolean(vr::DOOR_OPEN, false).unwrap();
+        steps(&mut comp, 2.0, 4, 0.5);
+        let closed = outputs(&mut comp);
+
+        // SAFETY: the live state from above.
+        unsafe { set_state(&mut comp, slot).unwrap() };
+        assert_eq!(outputs(&mut comp), at_2s, "the outputs at the saved point");
+        assert!(
+            comp.instance.get_boolean(vr::DOOR_OPEN).unwrap(),
+            "inputs too"
+        );
+        comp.instance.set_boolean(vr::DOOR_OPEN, false).unwrap();
+        steps(&mut comp, 2.0, 4, 0.5);
+        assert_eq!(outputs(&mut comp), closed, "the same inputs: the same run");
+
+        // Getting into a live state overwrites it in place.
+        let before = slot;
+        // SAFETY: as above.
+        unsafe { get_state(&mut comp, &mut slot).unwrap() };
+        assert_eq!(slot, before);
+        // SAFETY: as above; freed once, then the slot is null and freeing it is a no-op.
+        unsafe {
+            free_state(&mut slot).unwrap();
+            assert!(slot.is_null());
+            free_state(&mut slot).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_serialized_state_restores_into_a_new_instance_of_the_scene_only() {
+        let (mut comp, _) = stepping(None);
+        steps(&mut comp, 0.0, 6, 0.5);
+        let mut slot: *mut c_void = std::ptr::null_mut();
+        let mut size = 0usize;
+        // SAFETY: our slot, size and buffer.
+        let bytes = unsafe {
+            get_state(&mut comp, &mut slot).unwrap();
+            state_size(slot, &mut size).unwrap();
+            let mut bytes = vec![0u8; size];
+            let short = serialize_state(slot, bytes.as_mut_ptr(), size - 1);
+            assert!(
+                short
+                    .unwrap_err()
+                    .to_string()
+                    .contains(&format!("{size} bytes"))
+            );
+            serialize_state(slot, bytes.as_mut_ptr(), size).unwrap();
+            free_state(&mut slot).unwrap();
+            bytes
+        };
+        steps(&mut comp, 3.0, 4, 0.5);
+        let straight = outputs(&mut comp);
+
+        // A new instance of the same scene, never initialized: the state puts it in step mode.
+        let (mut again, _) = component(None);
+        // SAFETY: the bytes above; our slot.
+        unsafe {
+            deserialize_state(bytes.as_ptr(), bytes.len(), &mut slot).unwrap();
+            set_state(&mut again, slot).unwrap();
+        }
+        assert_eq!(again.instance.state, State::Stepping);
+        steps(&mut again, 3.0, 4, 0.5);
+        assert_eq!(outputs(&mut again), straight);
+
+        // Another scene: refused with a log line, and that instance goes on unchanged.
+        let (mut other, lines) = stepping(Some("room-60.toml"));
+        steps(&mut other, 0.0, 2, 0.5);
+        let c = ptr(&mut other);
+        // SAFETY: the live state.
+        let status = with(c, "fmi2SetFMUstate", |comp| unsafe {
+            set_state(comp, slot)
+        });
+        assert_eq!(status, ERROR);
+        let line = lines.borrow().last().unwrap().clone();
+        assert!(
+            line.contains("saved from another scene") && line.contains("room-60.toml"),
+            "{line}"
+        );
+        assert_eq!(other.instance.time(), Some(1.0));
+        steps(&mut other, 1.0, 1, 0.5);
+
+        // Damaged or foreign bytes are refused when deserialized, naming what is wrong.
+        let mut fresh: *mut c_void = std::ptr::null_mut();
+        // SAFETY: slices of ours.
+        unsafe {
+            let e = deserialize_state(bytes.as_ptr(), bytes.len() - 3, &mut fresh).unwrap_err();
+            assert!(e.to_string().starts_with("serializedState:"), "{e}");
+            let junk = [7u8; 64];
+            let e = deserialize_state(junk.as_ptr(), junk.len(), &mut fresh).unwrap_err();
+            assert!(
+                e.to_string().contains("not start as a state of this FMU"),
+                "{e}"
+            );
+            let mut newer = bytes.clone();
+            newer[8] = 99;
+            let e = deserialize_state(newer.as_ptr(), newer.len(), &mut fresh).unwrap_err();
+            assert!(e.to_string().contains("format 99"), "{e}");
+            assert!(fresh.is_null());
+            free_state(&mut slot).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_failed_step_is_undone_by_going_back_to_a_saved_state() {
+        let (mut comp, _) = stepping(None);
+        steps(&mut comp, 0.0, 2, 0.5);
+        let saved = comp.instance.snapshot().unwrap();
+        comp.instance.state = State::Error; // as after a failed step
+        let mut slot: *mut c_void = std::ptr::null_mut();
+        let c = ptr(&mut comp);
+        // SAFETY: our slot.
+        assert_eq!(
+            with(c, "fmi2GetFMUstate", |comp| unsafe {
+                get_state(comp, &mut slot)
+            }),
+            ERROR
+        );
+        // SAFETY: our slot, then the live state.
+        unsafe {
+            store(&mut slot, saved).unwrap();
+            assert_eq!(with(c, "fmi2SetFMUstate", |comp| set_state(comp, slot)), OK);
+            free_state(&mut slot).unwrap();
+        }
+        assert_eq!(comp.instance.state, State::Stepping);
+        steps(&mut comp, 1.0, 1, 0.5);
+    }
+
+    #[test]
+    fn a_pointer_that_is_no_state_of_this_fmu_is_refused() {
+        let (mut comp, _) = stepping(None);
+        let mut not_a_state = [0u64; 8];
+        let p = not_a_state.as_mut_ptr() as *mut c_void;
+        // SAFETY: 64 readable bytes; the tag check refuses them before anything else is read.
+        let e = unsafe { set_state(&mut comp, p) }.unwrap_err();
+        assert!(
+            e.to_string().contains("not point to a state of this FMU"),
+            "{e}"
+        );
+        // SAFETY: null is refused.
+        let e = unsafe { set_state(&mut comp, std::ptr::null_mut()) }.unwrap_err();
+        assert!(e.to_string().contains("FMUstate is a null pointer"), "{e}");
+    }
+
+    #[test]
+    fn n_people_is_the_scenes_count_and_another_value_is_refused() {
+        let (mut comp, _) = component(Some("room-60.toml"));
+        assert_eq!(comp.instance.get_uint64(vr::N_PEOPLE).unwrap(), 60);
+        assert_eq!(
+            comp.instance.array_len(vr::RADII).ok(),
+            None,
+            "an output: not yet"
+        );
+        comp.instance.enter_configuration().unwrap();
+        comp.instance.set_uint64(vr::N_PEOPLE, 150).unwrap();
+        comp.instance.exit_configuration().unwrap();
+        comp.instance.enter_initialization().unwrap();
+        let e = comp.instance.exit_initialization().unwrap_err().to_string();
+        assert!(
+            e.starts_with("n_people = 150: the scene") && e.contains("has 60 people"),
+            "{e}"
+        );
+        // Not settable once initializing.
+        let e = comp
+            .instance
+            .set_uint64(vr::N_PEOPLE, 60)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("n_people cannot be set in state Initialization"),
+            "{e}"
+        );
     }
 }

@@ -3,7 +3,8 @@
 //! instance state, pointers and numbers, catch panics and translate), a small runtime
 //! ([`runtime`]: instance, state machine, logging, stepping to the communication point), and
 //! the model ([`model`]: the scene driven by the catching-up scheme). The glue translates; it
-//! does not simulate.
+//! does not simulate. FMU states (get, set, serialize: what co-simulation masters roll back
+//! with) are [`snapshot::Snapshot`]s of an instance, built on the crowd's `SimState`.
 //!
 //! The model descriptions are `fmu/fmi2/modelDescription.xml` and
 //! `fmu/fmi3/modelDescription.xml`; the binary embeds them, so the GUID and the instantiation
@@ -16,6 +17,7 @@ pub mod fmi3;
 mod glue;
 pub mod model;
 pub mod runtime;
+pub mod snapshot;
 
 use runtime::State;
 
@@ -23,12 +25,14 @@ use runtime::State;
 #[derive(Debug, thiserror::Error)]
 pub enum FmuError {
     /// A function called in a state that does not allow it.
-    #[error("{function} is not allowed in state {state:?}")]
+    #[error("{function} is not allowed in state {state:?} (only in {})", states(.allowed))]
     State {
         /// The FMI function.
         function: String,
         /// The instance's state.
         state: State,
+        /// The states that allow it.
+        allowed: &'static [State],
     },
     /// No variable has this value reference.
     #[error("unknown value reference {0}")]
@@ -53,6 +57,16 @@ pub enum FmuError {
     /// The scene or a step failed.
     #[error(transparent)]
     Crowd(#[from] moreau_crowd::CrowdError),
+}
+
+/// `A, B or C`.
+fn states(list: &[State]) -> String {
+    let names: Vec<String> = list.iter().map(|s| format!("{s:?}")).collect();
+    match names.split_last() {
+        None => "no state".into(),
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+    }
 }
 
 /// The value of `attribute="…"` in an XML text (the GUID or instantiation token of a model

@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use moreau_core::StepReport;
-use moreau_crowd::{Observer, ObserverError, Scene, Simulation};
+use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation};
+use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
 
@@ -19,6 +20,8 @@ pub enum Kind {
     Boolean,
     /// String.
     String,
+    /// UInt64 (FMI 3 only).
+    UInt64,
     /// Float64 array (FMI 3 only).
     RealArray,
 }
@@ -26,6 +29,8 @@ pub enum Kind {
 /// The role of a variable.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Causality {
+    /// Sizes arrays (FMI 3): set in configuration mode (or, as fmpy does, when instantiated).
+    StructuralParameter,
     /// Set before initialization.
     Parameter,
     /// Set at any communication point.
@@ -51,6 +56,8 @@ pub struct Variable {
 pub mod vr {
     /// The scene file (empty: the room shipped in `resources/`).
     pub const SCENE: u32 = 1;
+    /// People in the scene: the first dimension of the FMI 3 arrays (a structural parameter).
+    pub const N_PEOPLE: u32 = 5;
     /// The internal step (s); 0: the scene's.
     pub const STEP: u32 = 2;
     /// κ in ε_k = κ μ³; 0: the scene's.
@@ -86,6 +93,12 @@ pub const VARIABLES: &[Variable] = &[
         name: "scene",
         kind: Kind::String,
         causality: Causality::Parameter,
+    },
+    Variable {
+        vr: vr::N_PEOPLE,
+        name: "n_people",
+        kind: Kind::UInt64,
+        causality: Causality::StructuralParameter,
     },
     Variable {
         vr: vr::STEP,
@@ -177,6 +190,8 @@ pub fn variable(vr: u32) -> Option<&'static Variable> {
 pub struct Settings {
     /// `scene`.
     pub scene: String,
+    /// `n_people` when the master set it (a check: it must be the scene's count).
+    pub people: Option<u64>,
     /// `step`.
     pub step: f64,
     /// `eps_kappa`.
@@ -195,6 +210,7 @@ impl Default for Settings {
     fn default() -> Self {
         Self {
             scene: String::new(),
+            people: None,
             step: 0.0,
             eps_kappa: 0.0,
             desired_speed_factor: 1.0,
@@ -219,6 +235,23 @@ pub struct CrowdModel {
     people: usize,
     before: Vec<f64>,
     after: Vec<f64>,
+}
+
+/// Everything a [`CrowdModel`] answers from besides its scene: the simulation's state and the
+/// outputs it keeps between communication points, so that a restored model reports exactly
+/// what the model it was saved from reported, and goes on exactly as it would have.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelState {
+    /// The simulation (time, people, exits, step controller, warm start, step count).
+    pub sim: SimState,
+    /// The last communication point reached.
+    pub time: f64,
+    /// Certified ε of the last internal step.
+    pub eps: f64,
+    /// Mean speed over the last communication step.
+    pub mean_speed: f64,
+    /// The smallest gap, once computed for this configuration.
+    pub min_gap: Option<f64>,
 }
 
 /// Keeps the certified ε of the last step.
@@ -269,6 +302,12 @@ impl CrowdModel {
         }
         let sim = Simulation::new(scene)?;
         let people = sim.total_people();
+        if let Some(n) = settings.people.filter(|&n| n != people as u64) {
+            return Err(FmuError::Setting(format!(
+                "n_people = {n}: the scene {} has {people} people (leave n_people unset to take the scene's)",
+                path.display()
+            )));
+        }
         let mut model = Self {
             sim,
             time: settings.start_time,
@@ -291,6 +330,40 @@ impl CrowdModel {
     /// The model's time.
     pub fn time(&self) -> f64 {
         self.time
+    }
+
+    /// The hash of the scene the model runs (with the `step` and `eps_kappa` it was built
+    /// with): a saved state restores only into a model of the same hash.
+    pub fn scene_hash(&self) -> u64 {
+        SimState::hash_scene(self.sim.scene())
+    }
+
+    /// The model's state (see [`ModelState`]).
+    pub fn save(&self) -> ModelState {
+        ModelState {
+            sim: self.sim.state(),
+            time: self.time,
+            eps: self.eps,
+            mean_speed: self.mean_speed,
+            min_gap: self.min_gap,
+        }
+    }
+
+    /// Goes back to `state`, saved from a model of the same scene; refused (and nothing
+    /// changes) for another scene or format.
+    pub fn load(&mut self, state: &ModelState) -> Result<(), FmuError> {
+        if !state.time.is_finite() {
+            return Err(FmuError::Setting(format!(
+                "state.time = {}: not a finite number",
+                state.time
+            )));
+        }
+        self.sim.restore(&state.sim)?;
+        self.time = state.time;
+        self.eps = state.eps;
+        self.mean_speed = state.mean_speed;
+        self.min_gap = state.min_gap;
+        Ok(())
     }
 
     /// Applies the inputs (and the fixed speed factor).

@@ -1,16 +1,22 @@
 //! The small generic runtime under both FMI layers: an instance, its state machine, its
-//! settings, logging, and stepping the model to the communication point.
+//! settings, logging, stepping the model to the communication point, and its FMU states
+//! (taking and restoring a [`Snapshot`]).
 
 use std::path::PathBuf;
 
+use serde::{Deserialize, Serialize};
+
 use crate::FmuError;
 use crate::model::{Causality, CrowdModel, Kind, Settings, variable, vr};
+use crate::snapshot::Snapshot;
 
 /// The states of a co-simulation instance (FMI 2 names in brackets).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum State {
     /// After instantiation: parameters may be set.
     Instantiated,
+    /// FMI 3 configuration mode: structural parameters may be set.
+    Configuration,
     /// Initialization mode.
     Initialization,
     /// Stepping (slaveInitialized / stepMode).
@@ -87,14 +93,24 @@ impl Instance {
     }
 
     /// Fails unless the instance is in one of `allowed` states.
-    pub fn expect(&self, function: &str, allowed: &[State]) -> Result<(), FmuError> {
+    pub fn expect(&self, function: &str, allowed: &'static [State]) -> Result<(), FmuError> {
         if allowed.contains(&self.state) {
             Ok(())
         } else {
             Err(FmuError::State {
                 function: function.to_string(),
                 state: self.state,
+                allowed,
             })
+        }
+    }
+
+    /// The scene the instance runs, as a user names it.
+    pub fn scene_name(&self) -> String {
+        if self.settings.scene.is_empty() {
+            format!("resources/{}", crate::model::DEFAULT_SCENE)
+        } else {
+            self.settings.scene.clone()
         }
     }
 
@@ -114,6 +130,7 @@ impl Instance {
             return Err(FmuError::WrongType { vr, name: v.name });
         }
         match (v.causality, self.state) {
+            (Causality::StructuralParameter, State::Instantiated | State::Configuration) => {}
             (Causality::Parameter, State::Instantiated | State::Initialization) => {}
             (Causality::Input, State::Instantiated | State::Initialization | State::Stepping) => {}
             (Causality::Output, _) => {
@@ -134,7 +151,7 @@ impl Instance {
 
     fn changed(&mut self, causality: Causality) -> Result<(), FmuError> {
         match causality {
-            Causality::Parameter => self.stale = true,
+            Causality::Parameter | Causality::StructuralParameter => self.stale = true,
             _ => {
                 if let Some(m) = self.model.as_mut().filter(|_| !self.stale) {
                     m.apply(&self.settings)?;
@@ -188,12 +205,24 @@ impl Instance {
         self.settable(vr, Kind::Integer).map(|_| ())
     }
 
+    /// Sets a UInt64 (`n_people`: checked against the scene when the model is built).
+    pub fn set_uint64(&mut self, vr: u32, value: u64) -> Result<(), FmuError> {
+        let causality = self.settable(vr, Kind::UInt64)?;
+        match vr {
+            vr::N_PEOPLE => self.settings.people = Some(value),
+            _ => return Err(FmuError::UnknownReference(vr)),
+        }
+        self.changed(causality)
+    }
+
     fn readable(&self, vr: u32, kind: Kind) -> Result<(), FmuError> {
         let v = variable(vr).ok_or(FmuError::UnknownReference(vr))?;
         if v.kind != kind {
             return Err(FmuError::WrongType { vr, name: v.name });
         }
-        if v.causality == Causality::Output && self.state == State::Instantiated {
+        if v.causality == Causality::Output
+            && matches!(self.state, State::Instantiated | State::Configuration)
+        {
             return Err(FmuError::Setting(format!(
                 "{} is not available before initialization",
                 v.name
@@ -223,6 +252,15 @@ impl Instance {
         self.model()?
             .integer(vr)
             .ok_or(FmuError::UnknownReference(vr))
+    }
+
+    /// Gets a UInt64 (`n_people`: the scene's count).
+    pub fn get_uint64(&mut self, vr: u32) -> Result<u64, FmuError> {
+        self.readable(vr, Kind::UInt64)?;
+        match vr {
+            vr::N_PEOPLE => Ok(self.model()?.people() as u64),
+            _ => Err(FmuError::UnknownReference(vr)),
+        }
     }
 
     /// Gets a Boolean.
@@ -261,6 +299,20 @@ impl Instance {
             vr::POSITIONS => model.positions(out),
             _ => model.radii(out),
         }
+        Ok(())
+    }
+
+    /// Instantiated → Configuration (FMI 3).
+    pub fn enter_configuration(&mut self) -> Result<(), FmuError> {
+        self.expect("EnterConfigurationMode", &[State::Instantiated])?;
+        self.state = State::Configuration;
+        Ok(())
+    }
+
+    /// Configuration → Instantiated (FMI 3).
+    pub fn exit_configuration(&mut self) -> Result<(), FmuError> {
+        self.expect("ExitConfigurationMode", &[State::Configuration])?;
+        self.state = State::Instantiated;
         Ok(())
     }
 
@@ -303,10 +355,56 @@ impl Instance {
         self.model.as_ref().map(|m| m.time())
     }
 
-    /// Stepping/Initialization → Terminated.
+    /// Stepping → Terminated.
     pub fn terminate(&mut self) -> Result<(), FmuError> {
-        self.expect("Terminate", &[State::Stepping, State::Initialization])?;
+        self.expect("Terminate", &[State::Stepping])?;
         self.state = State::Terminated;
+        Ok(())
+    }
+
+    /// The FMU state: the instance's state, start time, inputs and fixed speed factor, and
+    /// the model's state (the model is built first if nothing asked for it yet).
+    pub fn snapshot(&mut self) -> Result<Snapshot, FmuError> {
+        let model = self.model()?.save();
+        Ok(Snapshot {
+            state: self.state,
+            start_time: self.settings.start_time,
+            speed_factor: self.settings.speed_factor,
+            door_open: self.settings.door_open,
+            desired_speed_factor: self.settings.desired_speed_factor,
+            model,
+        })
+    }
+
+    /// Goes back to `snapshot`. The instance keeps its parameters: a snapshot of another
+    /// scene (or of another `step`, `eps_kappa` or `desired_speed_factor`) is refused, and then
+    /// nothing changes.
+    pub fn restore(&mut self, snapshot: &Snapshot) -> Result<(), FmuError> {
+        if snapshot.state == State::Error {
+            return Err(FmuError::Setting(
+                "FMUstate: saved in state Error; nothing to go back to".into(),
+            ));
+        }
+        let scene = self.scene_name();
+        let hash = self.model()?.scene_hash();
+        if snapshot.scene_hash() != hash {
+            return Err(FmuError::Setting(format!(
+                "FMUstate: saved from another scene (scene hash {:016x}); this instance runs {scene} \
+                 (scene hash {hash:016x}, with its step and eps_kappa): refused",
+                snapshot.scene_hash()
+            )));
+        }
+        if snapshot.desired_speed_factor != self.settings.desired_speed_factor {
+            return Err(FmuError::Setting(format!(
+                "FMUstate: saved with desired_speed_factor = {}, this instance has {}: refused",
+                snapshot.desired_speed_factor, self.settings.desired_speed_factor
+            )));
+        }
+        self.model()?.load(&snapshot.model)?;
+        self.settings.start_time = snapshot.start_time;
+        self.settings.speed_factor = snapshot.speed_factor;
+        self.settings.door_open = snapshot.door_open;
+        self.state = snapshot.state;
         Ok(())
     }
 
