@@ -77,13 +77,48 @@ fn the_room_runs_to_the_horizon_without_overlap() {
     assert_eq!(frames, 201);
     assert!((last_t - 20.0).abs() < 1e-9);
     assert!(max_reported <= bound);
-    // People moved: a good part of the room passed the door (the paper's room empties in ~30 s).
+    // As many through the door as an independent solver lets through: within the range
+    // Clarabel gives over seeds (CLARABEL_PASSED), widened by one seed-to-seed spread.
     let out = sim.exit_records().len();
-    assert!((50..150).contains(&out), "{out} people passed the door");
+    let (lo, hi) = (CLARABEL_PASSED[0] - 8, CLARABEL_PASSED[5] + 8);
+    assert!(
+        (lo..=hi).contains(&out),
+        "{out} people passed the door, not in {lo}..={hi}"
+    );
     // The state keeps its size (people continue to the target area).
     assert_eq!(sim.frame().ids.len(), 150);
     eprintln!(
         "worst overlap {worst:e}, max reported violation {max_reported:e}, {out} through the door"
+    );
+}
+
+/// People through the door in 20 s with every projection solved by Clarabel (the reference
+/// interior point, not ours), for seeds 1 to 6, sorted: `moreau run` of room-150.toml with
+/// `seed = s` and `[solver] kind = "clarabel"`, 2026-11-23. The count is chaotic in the seed
+/// and in the solver's rounding (the same seed gives up to 8 more or fewer with another
+/// solver); its median over seeds is the stable statistic.
+const CLARABEL_PASSED: [usize; 6] = [114, 116, 121, 122, 125, 131];
+
+/// The median over seeds of the people through the door with the scene's own solver lies
+/// within two standard errors (±8: a seed-to-seed spread of ~6, a median of six) of
+/// Clarabel's median.
+#[test]
+fn the_rooms_passing_count_matches_clarabels_over_seeds() {
+    let mut counts: Vec<usize> = (1..=6)
+        .map(|seed| {
+            let mut scene = room();
+            scene.seed = seed;
+            let mut sim = Simulation::new(scene).unwrap();
+            sim.run(&mut ()).unwrap();
+            sim.exit_records().len()
+        })
+        .collect();
+    counts.sort_unstable();
+    let median = |c: &[usize]| (c[2] + c[3]) as f64 / 2.0;
+    let (ours, reference) = (median(&counts), median(&CLARABEL_PASSED));
+    assert!(
+        (ours - reference).abs() <= 8.0,
+        "median {ours} through the door over seeds 1–6 ({counts:?}), Clarabel's {reference}"
     );
 }
 
