@@ -8,14 +8,28 @@ use anyhow::{Context, Result, bail};
 use moreau_crowd::Scene;
 use serde::Serialize;
 
-use crate::study::{How, error, sample};
-use crate::svg::{LogLog, Series, fit_power};
+use crate::study::{How, Leaving, error, error_in_room, sample};
+use crate::svg::{LogLog, Series, fit_power, order_interval};
+
+/// Whom error (24) counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Count {
+    /// Everyone, wherever they are (the paper's (24); exits must keep everyone).
+    All,
+    /// At each t_i, the people who have passed no exit in either run (exits may remove
+    /// people); the rows also give how many had passed in one run and not the other.
+    InRoom,
+}
 
 /// Arguments of `moreau converge`.
 #[derive(Debug, clap::Args)]
 pub struct ConvergeArgs {
-    /// The scene (its exits must keep everyone, `action = "continue"`).
+    /// The scene (with `--count all` its exits must keep everyone, `action = "continue"`).
     scene: PathBuf,
+    /// Whom the error counts: everyone (the paper's (24)) or the people still in the room.
+    #[arg(long, value_enum, default_value_t = Count::All)]
+    count: Count,
     /// The step sizes to measure (s).
     #[arg(
         long,
@@ -53,12 +67,17 @@ struct Row {
     max_eps: f64,
     max_violation: f64,
     wall_seconds: f64,
+    /// With `--count in-room`: the most people, at one t_i, through an exit in one run and
+    /// not in the other (0 with `--count all`).
+    passed_mismatch: usize,
 }
 
 #[derive(Debug, Serialize)]
 struct Fit {
     points: String,
     order: f64,
+    /// Half-width of the 95 % confidence interval of the order (least squares in log–log).
+    order_95: Option<f64>,
     constant: f64,
     r2: f64,
 }
@@ -71,6 +90,7 @@ struct Report {
     h_min: f64,
     samples: usize,
     eps_kappa: f64,
+    count: Count,
     error_definition: String,
     rows: Vec<Row>,
     fits: Vec<Fit>,
@@ -85,6 +105,11 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
     if let Some(k) = args.eps_kappa {
         scene.solver.eps_kappa = k;
     }
+    if let Some(t) = args.horizon
+        && !(t > 0.0 && t.is_finite())
+    {
+        bail!("--horizon {t}: must be finite and > 0");
+    }
     if args.steps.iter().any(|&h| !(h > args.h_min)) {
         bail!("every step must be larger than --h-min {}", args.h_min);
     }
@@ -97,17 +122,27 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         }
     };
     say(format!("reference run, h_min = {} ...", args.h_min));
-    let reference = sample(&scene, &How::Fixed(args.h_min), args.samples)
+    let leaving = match args.count {
+        Count::All => Leaving::Refused,
+        Count::InRoom => Leaving::Allowed,
+    };
+    let reference = sample(&scene, &How::Fixed(args.h_min), args.samples, leaving)
         .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
     say(format!("  {} steps", reference.steps));
-    let reference = reference.states;
-    let n = reference[0].len() / 2;
+    let n = reference.states[0].len() / 2;
     let mut rows = Vec::new();
     for &h in &args.steps {
-        let run = sample(&scene, &How::Fixed(h), args.samples)
+        let run = sample(&scene, &How::Fixed(h), args.samples, leaving)
             .with_context(|| format!("run with h = {h}"))?;
-        // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates.
-        let (error, per_person) = error(&reference, &run.states);
+        // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates (or
+        // over the people still in the room).
+        let (error, per_person, passed_mismatch) = match args.count {
+            Count::All => {
+                let (e, p) = error(&reference.states, &run.states);
+                (e, p, 0)
+            }
+            Count::InRoom => error_in_room(&reference, &run),
+        };
         let (steps, wall) = (run.steps, run.wall);
         let it = run.iterations as f64 / steps.max(1) as f64;
         say(format!(
@@ -122,6 +157,7 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
             max_eps: run.max_eps,
             max_violation: run.max_violation,
             wall_seconds: wall,
+            passed_mismatch,
         });
     }
 
@@ -137,6 +173,7 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
             fits.push(Fit {
                 points: label.into(),
                 order,
+                order_95: order_interval(pts),
                 constant,
                 r2,
             });
@@ -149,15 +186,24 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         h_min: args.h_min,
         samples: args.samples,
         eps_kappa: scene.solver.eps_kappa,
-        error_definition: "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2, t_i = i T / samples (Bernicot & Venel (24))".into(),
+        count: args.count,
+        error_definition: match args.count {
+            Count::All => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over everyone, t_i = i T / samples (Bernicot & Venel (24))",
+            Count::InRoom => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over the people who passed no exit by t_i in either run, t_i = i T / samples ((24) restricted to the room)",
+        }
+        .into(),
         rows,
         fits,
     };
     write(&args.out, &report)?;
     for f in &report.fits {
         println!(
-            "observed order ({}): {:.3} (R² = {:.3})",
-            f.points, f.order, f.r2
+            "observed order ({}): {:.3}{} (R² = {:.3})",
+            f.points,
+            f.order,
+            f.order_95
+                .map_or(String::new(), |w| format!(" ± {w:.3} (95 %)")),
+            f.r2
         );
     }
     println!(
@@ -175,18 +221,27 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "Convergence on `{}` ({} people, T = {} s, h_min = {}, ε_k = {:e} μ³), error (24) at t_i = iT/{}:\n",
-        report.scene, report.people, report.horizon, report.h_min, report.eps_kappa, report.samples
+        "Convergence on `{}` ({} people, T = {} s, h_min = {}, ε_k = {:e} μ³), error (24) at t_i = iT/{}, {}:\n",
+        report.scene,
+        report.people,
+        report.horizon,
+        report.h_min,
+        report.eps_kappa,
+        report.samples,
+        match report.count {
+            Count::All => "over everyone",
+            Count::InRoom => "over the people still in the room",
+        }
     );
     let _ = writeln!(
         md,
-        "| h (s) | steps | e_h (m) | worst person (m) | iterations/step | max ε (m²) | max violation (m) | wall (s) |"
+        "| h (s) | steps | e_h (m) | worst person (m) | iterations/step | max ε (m²) | max violation (m) | wall (s) | passed in one run only |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
     for r in &report.rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {:.4e} | {:.4e} | {:.0} | {:.2e} | {:.2e} | {:.2} |",
+            "| {} | {} | {:.4e} | {:.4e} | {:.0} | {:.2e} | {:.2e} | {:.2} | {} |",
             r.h,
             r.steps,
             r.error,
@@ -194,15 +249,20 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
             r.iterations_per_step,
             r.max_eps,
             r.max_violation,
-            r.wall_seconds
+            r.wall_seconds,
+            r.passed_mismatch
         );
     }
     let _ = writeln!(md);
     for f in &report.fits {
         let _ = writeln!(
             md,
-            "Fitted order ({}): **{:.3}**, R² = {:.3}.",
-            f.points, f.order, f.r2
+            "Fitted order ({}): **{:.3}**{}, R² = {:.3}.",
+            f.points,
+            f.order,
+            f.order_95
+                .map_or(String::new(), |w| format!(" ± {w:.3} (95 %)")),
+            f.r2
         );
     }
     std::fs::write(dir.join("converge.md"), md)?;

@@ -23,6 +23,8 @@ pub struct Sampled {
     pub states: Vec<Vec<f64>>,
     /// People through an exit by each `t_i`.
     pub passed: Vec<usize>,
+    /// Whether person `id` passed an exit by each `t_i` (`[i][id]`).
+    pub passed_by_id: Vec<Vec<bool>>,
     /// Accepted steps.
     pub steps: usize,
     /// Rejected trial steps (adaptive runs).
@@ -40,10 +42,22 @@ pub struct Sampled {
 /// Collects everyone's position by id at every frame (the sampling times), and the steps.
 struct Samples {
     people: usize,
+    leaving: Leaving,
     states: Vec<Vec<f64>>,
     passed: Vec<usize>,
+    passed_by_id: Vec<Vec<bool>>,
+    through: Vec<bool>,
     exits: usize,
     stats: RunStats,
+}
+
+/// Whether a study accepts people who leave the scene at an exit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Leaving {
+    /// Everyone must stay (error (24) compares everyone at every `t_i`).
+    Refused,
+    /// People may leave (their positions are NaN from then on).
+    Allowed,
 }
 
 impl Observer for Samples {
@@ -51,12 +65,15 @@ impl Observer for Samples {
         self.stats.add(report);
         Ok(())
     }
-    fn exit(&mut self, _record: &ExitRecord) -> Result<(), ObserverError> {
+    fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
         self.exits += 1;
+        if let Some(p) = self.through.get_mut(record.id as usize) {
+            *p = true;
+        }
         Ok(())
     }
     fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
-        if f.ids.len() != self.people {
+        if self.leaving == Leaving::Refused && f.ids.len() != self.people {
             return Err(format!(
                 "people left the scene at t = {}: the study compares everyone at every t_i, use \
                  exits with action = \"continue\"",
@@ -68,13 +85,14 @@ impl Observer for Samples {
         f.positions_by_id(&mut q);
         self.states.push(q);
         self.passed.push(self.exits);
+        self.passed_by_id.push(self.through.clone());
         Ok(())
     }
 }
 
-/// Runs `scene` with `how`, sampled `samples` times; everyone must stay in the scene
-/// (exits with `action = "continue"`) so that runs compare person by person.
-pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
+/// Runs `scene` with `how`, sampled `samples` times; unless `leaving` allows it, everyone must
+/// stay in the scene (exits with `action = "continue"`) so that runs compare person by person.
+pub fn sample(scene: &Scene, how: &How, samples: usize, leaving: Leaving) -> Result<Sampled> {
     ensure!(samples >= 1, "--samples must be ≥ 1");
     let mut scene = scene.clone();
     let interval = scene.time.horizon / samples as f64;
@@ -94,8 +112,11 @@ pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
     let mut sim = Simulation::new(scene)?;
     let mut samples_seen = Samples {
         people: sim.total_people(),
+        leaving,
         states: Vec::new(),
         passed: Vec::new(),
+        passed_by_id: Vec::new(),
+        through: vec![false; sim.total_people()],
         exits: 0,
         stats: RunStats::default(),
     };
@@ -105,6 +126,7 @@ pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
     let Samples {
         states,
         passed,
+        passed_by_id,
         stats,
         ..
     } = samples_seen;
@@ -117,6 +139,7 @@ pub fn sample(scene: &Scene, how: &How, samples: usize) -> Result<Sampled> {
     Ok(Sampled {
         states,
         passed,
+        passed_by_id,
         steps: stats.steps,
         rejected: stats.rejected,
         iterations: stats.iterations,
@@ -140,4 +163,35 @@ pub fn error(reference: &[Vec<f64>], states: &[Vec<f64>]) -> (f64, f64) {
         whole = whole.max(d2.sqrt());
     }
     (whole, person)
+}
+
+/// Error (24) restricted to the people still in the room: at each `t_i`, those who have
+/// passed no exit in either run; with the largest distance of one of them, and the largest
+/// number of people who had passed an exit in one run but not in the other.
+pub fn error_in_room(reference: &Sampled, run: &Sampled) -> (f64, f64, usize) {
+    let (mut whole, mut person, mut mismatch) = (0.0f64, 0.0f64, 0usize);
+    let rows = reference
+        .states
+        .iter()
+        .zip(&run.states)
+        .zip(reference.passed_by_id.iter().zip(&run.passed_by_id))
+        .skip(1);
+    for ((a, b), (pa, pb)) in rows {
+        let mut d2 = 0.0;
+        let mut differ = 0;
+        for id in 0..pa.len() {
+            if pa[id] != pb[id] {
+                differ += 1;
+            }
+            if pa[id] || pb[id] {
+                continue;
+            }
+            let d = (a[2 * id] - b[2 * id]).powi(2) + (a[2 * id + 1] - b[2 * id + 1]).powi(2);
+            d2 += d;
+            person = person.max(d.sqrt());
+        }
+        whole = whole.max(d2.sqrt());
+        mismatch = mismatch.max(differ);
+    }
+    (whole, person, mismatch)
 }

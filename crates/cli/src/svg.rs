@@ -219,9 +219,62 @@ pub fn fit_power(points: &[(f64, f64)]) -> Option<(f64, f64, f64)> {
     Some((p, my - p * mx, r2))
 }
 
+/// The half-width of the 95 % confidence interval of the order fitted by [`fit_power`]
+/// (least squares on `ln y = p ln x + c`: standard error of the slope times Student's t with
+/// `n − 2` degrees of freedom); `None` with fewer than 3 points.
+pub fn order_interval(points: &[(f64, f64)]) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0)
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    let n = pts.len();
+    if n < 3 {
+        return None;
+    }
+    let nf = n as f64;
+    let mx = pts.iter().map(|p| p.0).sum::<f64>() / nf;
+    let my = pts.iter().map(|p| p.1).sum::<f64>() / nf;
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let syy: f64 = pts.iter().map(|p| (p.1 - my).powi(2)).sum();
+    if sxx == 0.0 {
+        return None;
+    }
+    let sse = (syy - sxy * sxy / sxx).max(0.0);
+    let se = (sse / (nf - 2.0) / sxx).sqrt();
+    // Student's t, 97.5 % quantile, 1..=30 degrees of freedom; 1.96 beyond.
+    const T975: [f64; 30] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+        2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+        2.052, 2.048, 2.045, 2.042,
+    ];
+    let t = T975.get(n - 3).copied().unwrap_or(1.96);
+    Some(t * se)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_order_interval_is_zero_on_a_power_law_and_covers_noise() {
+        let exact: Vec<(f64, f64)> = [0.1, 0.2, 0.5, 1.0]
+            .iter()
+            .map(|&h: &f64| (h, 3.0 * h.powf(0.5)))
+            .collect();
+        assert!(order_interval(&exact).unwrap() < 1e-12);
+        // ln y = 0.5 ln h ± 0.1: slope 0.5 within the interval, which is not zero.
+        let noisy: Vec<(f64, f64)> = [0.1, 0.2, 0.5, 1.0, 2.0]
+            .iter()
+            .zip([0.1, -0.1, 0.1, -0.1, 0.1])
+            .map(|(&h, e): (&f64, f64)| (h, (0.5 * h.ln() + e).exp()))
+            .collect();
+        let (p, _, _) = fit_power(&noisy).unwrap();
+        let w = order_interval(&noisy).unwrap();
+        assert!(w > 0.01 && (p - 0.5).abs() <= w, "order {p} ± {w}");
+        assert!(order_interval(&exact[..2]).is_none());
+    }
 
     #[test]
     fn a_power_law_is_fitted_exactly() {

@@ -10,7 +10,7 @@ use moreau_crowd::{Scene, SolverKind};
 use serde::Serialize;
 
 use crate::run::Estimate;
-use crate::study::{self, How, sample};
+use crate::study::{self, How, Leaving, sample};
 use crate::svg::{LogLog, Series};
 
 /// Arguments of `moreau tradeoff`.
@@ -79,6 +79,7 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
         &reference_scene,
         &How::Fixed(args.reference_step),
         args.samples,
+        Leaving::Refused,
     )
     .context("the reference run")?;
 
@@ -90,7 +91,10 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
     let mut tols = args.tols.clone();
     tols.sort_by(|a, b| b.total_cmp(a));
     for &h in &steps {
-        runs.push(("fixed step, APGD".into(), h, scene.clone(), How::Fixed(h)));
+        // The scene's own solver, named as the scene names it (the label said "APGD" whatever
+        // the scene chose).
+        let label = format!("fixed step, {}", scene.solver.kind.as_str());
+        runs.push((label, h, scene.clone(), How::Fixed(h)));
     }
     for &h in &clarabel_steps {
         let mut s = scene.clone();
@@ -121,7 +125,8 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
     }
     let mut points = Vec::new();
     for (method, setting, s, how) in &runs {
-        let r = sample(s, how, args.samples).with_context(|| format!("{method} at {setting}"))?;
+        let r = sample(s, how, args.samples, Leaving::Refused)
+            .with_context(|| format!("{method} at {setting}"))?;
         let (error, _) = study::error(&reference.states, &r.states);
         let evacuation_error = reference
             .passed

@@ -1,0 +1,95 @@
+"""`moreau converge` and `moreau tradeoff` on a small scene, their errors recomputed here from
+run files written by `moreau run` (error (24) of Bernicot & Venel: the largest, over the
+sampling times t_i = iT/K, Euclidean distance of all positions to the reference's)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import ROOT, moreau
+
+SCENE = ROOT / "data" / "scenes" / "room-60.toml"
+T, K = 3.0, 3
+
+
+def variant(tmp_path, name, *, step, eps_kappa=None, kind=None):
+    """room-60 with T, output at T/K, the given step (and κ, solver)."""
+    text = SCENE.read_text()
+    text = re.sub(r"(?m)^horizon = .*$", f"horizon = {T}", text)
+    text = re.sub(r"(?m)^output_interval = .*$", f"output_interval = {T / K}", text)
+    text = re.sub(r"(?m)^step = .*$", f"step = {step}", text)
+    if eps_kappa is not None:
+        text = re.sub(r"(?m)^eps_kappa = .*$", f"eps_kappa = {eps_kappa}", text)
+    if kind is not None:
+        text = re.sub(r'(?m)^kind = .*$', f'kind = "{kind}"', text)
+    scene = tmp_path / f"{name}.toml"
+    scene.write_text(text)
+    out = tmp_path / f"{name}.h5"
+    moreau("run", scene, "-o", out, "--quiet")
+    with h5py.File(out, "r") as f:
+        positions = f["frames/positions"][:]
+        exits = f["exits"][:]
+        times = f["frames/time"][:]
+    assert len(times) == K + 1
+    return positions, exits, times
+
+
+def error_24(ref, run, in_room=False):
+    (pa, ea, ta), (pb, eb, _) = ref, run
+    worst = 0.0
+    for i in range(1, K + 1):
+        keep = np.ones(pa.shape[1], bool)
+        if in_room:
+            keep[ea["id"][ea["t"] <= ta[i] + 1e-9]] = False
+            keep[eb["id"][eb["t"] <= ta[i] + 1e-9]] = False
+        worst = max(worst, float(np.sqrt(np.sum((pa[i, keep] - pb[i, keep]) ** 2))))
+    return worst
+
+
+@pytest.mark.parametrize("count", ["all", "in-room"])
+def test_converge_reports_the_error_its_runs_have(tmp_path, count):
+    out = tmp_path / "converge"
+    moreau("converge", SCENE, "--horizon", T, "--samples", K, "--h-min", 0.01,
+           "--steps", "0.02,0.05,0.1", "--count", count, "-o", out, "--quiet")
+    report = json.loads((out / "converge.json").read_text())
+    assert report["count"] == count and report["people"] == 60
+    ref = variant(tmp_path, "ref", step=0.01)
+    for row in report["rows"]:
+        run = variant(tmp_path, f"h{row['h']}", step=row["h"])
+        assert row["steps"] == round(T / row["h"])
+        expected = error_24(ref, run, in_room=count == "in-room")
+        assert row["error"] == pytest.approx(expected, rel=1e-12, abs=1e-15), row
+    # Some people are through the door by T = 3 s, so the two counts differ.
+    through = len(ref[1])
+    assert through > 0
+    fits = {f["points"]: f for f in report["fits"]}
+    assert fits["all steps"]["order_95"] > 0
+    assert (out / "converge.md").read_text().count("|") > 20
+    assert (out / "converge.svg").read_text().startswith("<svg")
+
+
+def test_tradeoff_reports_the_error_its_runs_have(tmp_path):
+    out = tmp_path / "tradeoff"
+    moreau("tradeoff", SCENE, "--horizon", T, "--samples", K, "--reference-step", 0.01,
+           "--steps", "0.05", "--tols", "0.03", "--clarabel-steps", "0.1", "-o", out)
+    points = json.loads((out / "tradeoff.json").read_text())
+    ref = variant(tmp_path, "ref", step=0.01, eps_kappa=1e-5)
+    by_method = {}
+    for p in points:
+        by_method.setdefault(p["method"], []).append(p)
+    fixed = [p for p in points if p["method"] == "fixed step, auto"]  # room-60's solver
+    assert len(fixed) == 1 and fixed[0]["setting"] == 0.05, points
+    assert fixed[0]["steps"] == round(T / 0.05) and fixed[0]["rejected"] == 0
+    run = variant(tmp_path, "fixed", step=0.05)
+    assert fixed[0]["error"] == pytest.approx(error_24(ref, run), rel=1e-12)
+    clarabel = [p for p in points if p["method"] == "fixed step, Clarabel"]
+    assert len(clarabel) == 1 and clarabel[0]["steps"] == round(T / 0.1)
+    run = variant(tmp_path, "clarabel", step=0.1, kind="clarabel")
+    assert clarabel[0]["error"] == pytest.approx(error_24(ref, run), rel=1e-12)
+    # Fixed and adaptive steps, with the scene's solver and with Clarabel.
+    assert any(m.startswith("adaptive") for m in by_method), by_method.keys()
