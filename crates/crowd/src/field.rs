@@ -6,6 +6,7 @@ use moreau_core::Field;
 use ndarray::Array2;
 
 use crate::people::{PeopleView, Place};
+use crate::scene::DesiredVelocityKind;
 use crate::walls::Walls;
 
 /// The geodesic distance to a goal around walls and obstacles, on a grid of square cells, with
@@ -173,6 +174,8 @@ pub struct DesiredVelocity<'a> {
     pub people: PeopleView<'a>,
     /// Multiplies every desired speed (an input of co-simulation).
     pub speed_factor: f64,
+    /// Classic (jumps at the wall slide and on arrival) or Lipschitz.
+    pub kind: DesiredVelocityKind,
     /// Scratch for the walls near a person.
     pub near: &'a RefCell<Vec<u32>>,
 }
@@ -180,6 +183,8 @@ pub struct DesiredVelocity<'a> {
 impl DesiredVelocity<'_> {
     /// How close to a wall (beyond the radius) the sliding starts.
     pub const WALL_RANGE: f64 = 0.05;
+    /// Over how much distance to its target area a person slows down (Lipschitz kind).
+    pub const ARRIVAL_RANGE: f64 = 1.0;
 
     /// The distance field person `i` descends, if any.
     pub fn goal(&self, i: usize) -> Option<usize> {
@@ -195,7 +200,12 @@ impl DesiredVelocity<'_> {
         let Some(g) = self.goal(i) else {
             return [0.0, 0.0];
         };
+        let lipschitz = self.kind == DesiredVelocityKind::Lipschitz;
         let mut d = self.fields[g].direction(p);
+        let mut slow = 1.0;
+        if lipschitz && matches!(self.people.place[i], Place::ToTarget(_)) {
+            slow = (self.fields[g].distance(p) / Self::ARRIVAL_RANGE).clamp(0.0, 1.0);
+        }
         let r = self.people.radius[i];
         self.walls.near(p, r + Self::WALL_RANGE, near);
         let segments = self.walls.segments();
@@ -209,10 +219,16 @@ impl DesiredVelocity<'_> {
             let n = [ex / dist, ey / dist];
             let into = d[0] * n[0] + d[1] * n[1];
             if into < 0.0 {
-                d = [d[0] - into * n[0], d[1] - into * n[1]];
+                // Classic: all of it at once; Lipschitz: fading in from r + WALL_RANGE to r.
+                let share = if lipschitz {
+                    ((r + Self::WALL_RANGE - dist) / Self::WALL_RANGE).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                d = [d[0] - share * into * n[0], d[1] - share * into * n[1]];
             }
         }
-        let s = self.people.speed[i] * self.speed_factor;
+        let s = self.people.speed[i] * self.speed_factor * slow;
         [s * d[0], s * d[1]]
     }
 }

@@ -34,7 +34,10 @@ pub use field::{DesiredVelocity, DistanceField, ExitGoal};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};
 pub use people::{ExitRecord, People, PeopleView, Place};
-pub use scene::{BroadPhaseChoice, ExitAction, Output, Scene, SolverKind, SolverSettings};
+pub use scene::{
+    BroadPhaseChoice, DesiredVelocityKind, ExitAction, Model, Output, Scene, SolverKind,
+    SolverSettings,
+};
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;
 pub use walls::Walls;

@@ -232,6 +232,37 @@ impl Default for SolverSettings {
     }
 }
 
+/// Which desired velocity people follow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DesiredVelocityKind {
+    /// Speed × the descent direction of the distance to the goal, projected off any wall
+    /// within 5 cm beyond the radius, zero once arrived: it jumps where the wall slide starts
+    /// and on arrival (not Lipschitz).
+    #[default]
+    Classic,
+    /// Lipschitz in the positions (the assumption of seeds/000 (8)) wherever the distance
+    /// field's direction is: the wall slide fades in linearly over the 5 cm beyond the radius,
+    /// and people heading to a target area slow down linearly over its last metre and stop
+    /// on its boundary.
+    Lipschitz,
+}
+
+/// The model's choices that the papers leave open.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    /// The desired velocity (`classic` or `lipschitz`).
+    #[serde(default)]
+    pub desired_velocity: DesiredVelocityKind,
+}
+
+impl Model {
+    fn is_default(&self) -> bool {
+        *self == Model::default()
+    }
+}
+
 /// What a run records beyond positions, exits and step reports: only what the scene asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -268,6 +299,9 @@ pub struct Scene {
     /// Solver settings.
     #[serde(default)]
     pub solver: SolverSettings,
+    /// The model's open choices (absent: the classic desired velocity).
+    #[serde(default, skip_serializing_if = "Model::is_default")]
+    pub model: Model,
     /// What a run records (absent: positions, exits and steps only).
     #[serde(default, skip_serializing_if = "Output::is_default")]
     pub output: Output,

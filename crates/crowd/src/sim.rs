@@ -427,6 +427,7 @@ impl Simulation {
                 walls: &self.walls,
                 people,
                 speed_factor: self.speed_factor,
+                kind: self.scene.model.desired_velocity,
                 near: &self.near,
             },
             contacts: CrowdContacts {
