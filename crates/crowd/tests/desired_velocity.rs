@@ -28,7 +28,9 @@ fn along_the_wall(kind: DesiredVelocityKind, xs: &[f64]) -> Vec<[f64; 2]> {
 #[test]
 fn the_lipschitz_wall_slide_has_no_jump_where_the_classic_one_has() {
     // From 9 cm to 1 mm beyond the radius, in steps of 0.1 mm.
-    let xs: Vec<f64> = (0..=890).map(|k| 6.0 - 0.2 - 0.09 + 1e-4 * k as f64).collect();
+    let xs: Vec<f64> = (0..=890)
+        .map(|k| 6.0 - 0.2 - 0.09 + 1e-4 * k as f64)
+        .collect();
     let largest_jump = |u: &[[f64; 2]]| {
         u.windows(2)
             .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))

@@ -189,3 +189,90 @@ fn b_negative_makes_the_boundary_invariant() {
     // t* = ln((x0 − x*)/(−x*))/(a + 1) with x* = b/(a + 1) = −1/2: ln 3 / 2.
     assert!((t_hit - 3f64.ln() / 2.0).abs() < 0.02, "reached at {t_hit}");
 }
+
+/// The iterates `(t_k, x_k)` of a fixed-step run, with the certified `√ε_k` of each step.
+fn iterates(a: f64, b: f64, x0: f64, h: f64, t_end: f64) -> Vec<(f64, f64, f64)> {
+    let field = FnField::new(1, move |_t, x: &[f64], out: &mut [f64]| {
+        out[0] = -(a + 1.0) * x[0] + b
+    });
+    let mut scheme = Scheme::new(linearized(), EpsPolicy::new(1e-2, 3.0).unwrap());
+    let mut x = [x0];
+    let mut out = vec![(0.0, x0, 0.0)];
+    scheme
+        .run(
+            &field,
+            &mut half_line(),
+            0.0,
+            &mut x,
+            &StepSequence::Fixed { h, t_end },
+            |r, x| out.push((r.t, x[0], r.eps.sqrt())),
+        )
+        .unwrap();
+    out
+}
+
+/// §8.1 (iii): `x(t)² ≤ e^{−(a+1)t} x0² + b²/(a+1)² (1 − e^{−(a+1)t})` (31) and its corollary
+/// `x(t)² ≤ max{x0², b²/(a+1)²}` (32). The iterates keep (32) up to the certified projection
+/// errors (for `(a+1)h ≤ 1` the prediction is a convex combination of `x_k` and `b/(a+1)`, and
+/// projecting onto `C ∋ 0` does not lengthen it), and approach (31) as `h → 0`: its largest
+/// excess over the step times falls at least like `h`.
+#[test]
+fn the_iterates_keep_the_energy_bounds_31_and_32() {
+    for (a, b, x0) in CASES {
+        let k = a + 1.0;
+        let bound_31 = |t: f64| (-k * t).exp() * x0 * x0 + (b / k).powi(2) * (1.0 - (-k * t).exp());
+        let bound_32 = x0.abs().max(b.abs() / k);
+        let mut excess = Vec::new();
+        let hs: Vec<f64> = (0..5).map(|j| 0.1 / 2f64.powi(j)).collect();
+        for &h in &hs {
+            let run = iterates(a, b, x0, h, 4.0);
+            let mut slack = 0.0;
+            let mut worst: f64 = 0.0;
+            for &(t, x, sqrt_eps) in &run {
+                slack += sqrt_eps;
+                assert!(
+                    x.abs() <= bound_32 + slack + 1e-12,
+                    "(32) at t = {t}, h = {h}: |x| = {x} > {bound_32} + {slack}"
+                );
+                worst = worst.max(x * x - bound_31(t));
+            }
+            excess.push(worst.max(0.0));
+        }
+        // (31): the excess vanishes with h (order ≥ 1, or is zero already).
+        for w in excess.windows(2) {
+            assert!(
+                w[1] <= 0.6 * w[0] + 1e-12,
+                "(a, b, x0) = ({a}, {b}, {x0}): excess over (31) {excess:?}"
+            );
+        }
+        assert!(
+            excess[4] <= 0.05 * x0.max(b.abs() / k).max(1e-3).powi(2),
+            "{excess:?}"
+        );
+    }
+}
+
+/// §8.1 (vii): the dynamics contracts, `|x1(t) − x2(t)| ≤ e^{−(a+1)t} |x1(0) − x2(0)|`; the
+/// scheme's iterates from two starting points do too (the prediction scales differences by
+/// `1 − (a+1)h ≤ e^{−(a+1)h}`, the projection does not lengthen them), up to the certified
+/// projection errors of both runs.
+#[test]
+fn iterates_from_two_starts_contract_like_the_dynamics() {
+    for (a, b, x0) in CASES {
+        let k = a + 1.0;
+        let other = x0 + 1.5;
+        for h in [0.1, 0.02] {
+            let (r1, r2) = (iterates(a, b, x0, h, 3.0), iterates(a, b, other, h, 3.0));
+            let mut slack = 0.0;
+            for (&(t, x1, e1), &(_, x2, e2)) in r1.iter().zip(&r2) {
+                slack += e1 + e2;
+                let bound = (-k * t).exp() * (other - x0) + slack + 1e-12;
+                assert!(
+                    (x1 - x2).abs() <= bound,
+                    "(a, b) = ({a}, {b}), h = {h}, t = {t}: |Δx| = {} > {bound}",
+                    (x1 - x2).abs()
+                );
+            }
+        }
+    }
+}
