@@ -93,3 +93,20 @@ def test_tradeoff_reports_the_error_its_runs_have(tmp_path):
     assert clarabel[0]["error"] == pytest.approx(error_24(ref, run), rel=1e-12)
     # Fixed and adaptive steps, with the scene's solver and with Clarabel.
     assert any(m.startswith("adaptive") for m in by_method), by_method.keys()
+
+
+def test_example82_compares_the_two_selections_on_one_work_precision_table(tmp_path):
+    out = tmp_path / "ex82"
+    moreau("example82", "--h", 0.1, "--t-end", 2.0, "-o", out)
+    rows = [r.split("|")[1:-1] for r in (out / "example82.md").read_text().splitlines()
+            if r.startswith("| explicit") or r.startswith("| semi-implicit")]
+    errors = {}
+    for selection, h, steps, error, *_ in rows:
+        errors.setdefault(selection.strip(), []).append((float(h), int(steps), float(error)))
+    assert set(errors) == {"explicit", "semi-implicit"}
+    for runs in errors.values():
+        assert len(runs) == 7
+        assert all(steps == round(2.0 / h) for h, steps, _ in runs)
+        # Both converge: the finest step is at least 20× more accurate than the coarsest.
+        assert runs[-1][2] < runs[0][2] / 20
+    assert (out / "example82.svg").read_text().startswith("<svg")

@@ -63,6 +63,19 @@ enum Command {
         /// The run file (HDF5).
         file: PathBuf,
     },
+    /// Example 8.2 of Cao & Saoud (dry friction in a box): explicit selection against
+    /// semi-implicit prox, error and wall time for halving steps (work–precision table and SVG).
+    Example82 {
+        /// The largest step; the table halves it six times.
+        #[arg(long, default_value_t = 0.1)]
+        h: f64,
+        /// The horizon.
+        #[arg(long, default_value_t = 5.0)]
+        t_end: f64,
+        /// Directory for example82.md and example82.svg.
+        #[arg(short, long, default_value = "out/example82")]
+        out: PathBuf,
+    },
     /// Example 8.1 of Cao & Saoud: x' ∈ −a x + b − A(x) on C = [0, ∞), errors against the
     /// closed form for halving steps and the observed order.
     Example81 {
@@ -145,6 +158,9 @@ fn run() -> Result<ExitCode> {
         Command::Tradeoff(args) => tradeoff::tradeoff(&args).map(|()| ExitCode::SUCCESS),
         Command::View(args) => view::view(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
+        Command::Example82 { h, t_end, out } => {
+            example::example_8_2(h, t_end, &out).map(|()| ExitCode::SUCCESS)
+        }
         Command::Example81 { a, b, x0, h, t_end } => {
             example::example_8_1(a, b, x0, h, t_end).map(|()| ExitCode::SUCCESS)
         }
