@@ -168,10 +168,10 @@ def test_an_adaptive_run_writes_frames_on_output_times(tmp_path):
     assert mu.min() < mu.max(), "the steps should vary"
     assert mu.max() <= 0.1 + 1e-12
     assert mu.sum() == pytest.approx(4.0, abs=1e-9)
-    # ε_k = (θ tol)² μ / μ_max with θ = 0.1, μ_max = 0.1 (velocity-change estimate: the
-    # accepted step is one projection of size μ).
-    np.testing.assert_allclose(run.steps["eps_target"], (0.1 * 0.01) ** 2 * mu / 0.1,
-                               rtol=1e-9)
+    # ε_k = max((θ tol)² (μ / μ_max)³, 2·10⁻⁷ μ²) with θ = 0.1, μ_max = 0.1 (velocity-change
+    # estimate: the accepted step is one projection of size μ).
+    expected = np.maximum((0.1 * 0.01) ** 2 * (mu / 0.1) ** 3, 2e-7 * mu ** 2)
+    np.testing.assert_allclose(run.steps["eps_target"], expected, rtol=1e-9)
     assert np.all(run.steps["eps"] <= run.steps["eps_target"] * (1 + 1e-12))
     assert moreau_run.min_gaps(run).min() >= -run.steps["violation"].max() - 1e-12
     assert run.summary["tol"] == 0.01
