@@ -48,7 +48,9 @@ impl RunFile {
         }
         let file = crate::writer::without_locking()
             .open(path)
-            .at(path, || "opening".into())?;
+            .at(path, || {
+                "opening it as HDF5 (is it an HDF5 file, and whole, not truncated?)".into()
+            })?;
         let me = Self {
             path: path.to_path_buf(),
             file,
