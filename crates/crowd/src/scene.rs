@@ -19,12 +19,16 @@ pub mod limits {
     /// digit of a person's size (and `1e308` overflows to infinity).
     pub const MAX_COORDINATE: f64 = 1e15;
     /// The most cells of one distance field (the area's bounding box in cells of
-    /// `solver.grid_cell`): about 40 bytes a cell while solving, under a gigabyte.
-    pub const MAX_FIELD_CELLS: f64 = 2e7;
+    /// `solver.grid_cell`), e.g. 200 m × 200 m at 0.1 m: some 50 bytes a cell while solving
+    /// and 24 kept, about 100 MB a field.
+    pub const MAX_FIELD_CELLS: f64 = 4e6;
     /// The most steps one run can be asked for (`time.horizon / time.step`).
     pub const MAX_STEPS: f64 = moreau_integrate::MAX_STEPS;
     /// The most output frames one run can be asked for (`time.horizon / time.output_interval`).
     pub const MAX_FRAMES: f64 = 1e8;
+    /// The most people one scene may hold: ten times the largest crowd moreau is built for
+    /// (10⁶), and some 2 GB of state.
+    pub const MAX_PEOPLE: f64 = 1e7;
     /// The densest packing of equal disks in the plane, `π / (2√3)`: a spawn region holds at
     /// most this fraction of its area in disks.
     pub const PACKING: f64 = 0.906_899_682_117_108_9;
@@ -562,6 +566,24 @@ impl Scene {
                 "[]",
                 "the scene has no people",
             ));
+        }
+        let mut people = 0.0;
+        for (g, group) in self.groups.iter().enumerate() {
+            people += match (&group.positions, group.count) {
+                (Some(p), _) => p.len() as f64,
+                (None, Some(n)) => n as f64,
+                _ => 0.0,
+            };
+            if people > limits::MAX_PEOPLE {
+                return Err(CrowdError::invalid(
+                    format!("groups[{g}].count"),
+                    group.count.unwrap_or(0),
+                    format!(
+                        "the scene would hold {people:.3e} people, more than the limit of {:e}",
+                        limits::MAX_PEOPLE
+                    ),
+                ));
+            }
         }
         for (g, group) in self.groups.iter().enumerate() {
             let f = format!("groups[{g}]");

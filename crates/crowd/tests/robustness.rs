@@ -36,7 +36,7 @@ fn assert_mentions(msg: &str, needles: &[&str]) {
 #[test]
 fn a_micrometre_grid_cell_aborted_on_a_200_terabyte_allocation() {
     let msg = refused(&room(&[("grid_cell = 0.1", "grid_cell = 1e-6")]));
-    assert_mentions(&msg, &["solver.grid_cell", "1e-6", "cells", "limit", "2e7"]);
+    assert_mentions(&msg, &["solver.grid_cell", "1e-6", "cells", "limit", "4e6"]);
 }
 
 #[test]
