@@ -10,7 +10,12 @@ use moreau_fmu::runtime::Instance;
 /// An instance of `data/scenes/room-60.toml`, initialized (state Stepping).
 fn stepping() -> Instance {
     let scenes = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data/scenes"));
-    let mut inst = Instance::new("robust".into(), Some(scenes.clone()), false, Box::new(|_, _| {}));
+    let mut inst = Instance::new(
+        "robust".into(),
+        Some(scenes.clone()),
+        false,
+        Box::new(|_, _| {}),
+    );
     inst.settings.scene = scenes.join("room-60.toml").display().to_string();
     inst.enter_initialization().unwrap();
     inst.exit_initialization().unwrap();
@@ -21,7 +26,10 @@ fn stepping() -> Instance {
 fn a_refused_set_real_of_speed_factor_minus_one_was_kept_and_failed_every_step() {
     let mut inst = stepping();
     inst.do_step(0.0, 0.1).unwrap();
-    let err = inst.set_real(vr::SPEED_FACTOR, -1.0).unwrap_err().to_string();
+    let err = inst
+        .set_real(vr::SPEED_FACTOR, -1.0)
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("speed_factor = -1") && err.contains("keeps its value 1"),
         "{err}"
@@ -29,7 +37,10 @@ fn a_refused_set_real_of_speed_factor_minus_one_was_kept_and_failed_every_step()
     assert_eq!(inst.get_real(vr::SPEED_FACTOR).unwrap(), 1.0);
     // The next step runs, with the old value.
     inst.do_step(0.1, 0.1).unwrap();
-    let err = inst.set_real(vr::SPEED_FACTOR, f64::NAN).unwrap_err().to_string();
+    let err = inst
+        .set_real(vr::SPEED_FACTOR, f64::NAN)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("NaN"), "{err}");
     inst.do_step(0.2, 0.1).unwrap();
     // A fine value is taken.

@@ -17,7 +17,10 @@ fn exact_8_1(a: f64, b: f64, x0: f64, t: f64) -> f64 {
 pub fn example_8_1(a: f64, b: f64, x0: f64, h0: f64, t_end: f64) -> Result<()> {
     anyhow::ensure!(a > 0.0, "a must be > 0, got {a}");
     anyhow::ensure!(x0 >= 0.0, "x0 must be in C = [0, ∞), got {x0}");
-    anyhow::ensure!(h0 > 0.0 && h0.is_finite(), "--h must be finite and > 0, got {h0}");
+    anyhow::ensure!(
+        h0 > 0.0 && h0.is_finite(),
+        "--h must be finite and > 0, got {h0}"
+    );
     anyhow::ensure!(
         t_end > 0.0 && t_end.is_finite(),
         "--t-end must be finite and > 0, got {t_end}"

@@ -247,7 +247,10 @@ fn status_of(outcome: &Result<(), moreau_crowd::CrowdError>) -> (String, Option<
     match outcome {
         Ok(()) => ("complete".into(), None),
         Err(moreau_crowd::CrowdError::Observer(e)) if e.downcast_ref::<Interrupted>().is_some() => {
-            ("interrupted".into(), e.downcast_ref::<Interrupted>().copied())
+            (
+                "interrupted".into(),
+                e.downcast_ref::<Interrupted>().copied(),
+            )
         }
         Err(e) => (failed_status(&format!("{e:#}")), None),
     }
@@ -508,7 +511,9 @@ fn write_summary(target: &Path, json: &str) -> Result<()> {
     }
     // Whole or not at all: written beside it, then moved over it (checked before the run:
     // replacing an existing file was allowed with --force).
-    let name = target.file_name().map_or("summary".into(), |n| n.to_string_lossy());
+    let name = target
+        .file_name()
+        .map_or("summary".into(), |n| n.to_string_lossy());
     let temporary = target.with_file_name(format!(".{name}.{}.partial", std::process::id()));
     let written = std::fs::write(&temporary, format!("{json}\n"))
         .and_then(|()| std::fs::rename(&temporary, target));

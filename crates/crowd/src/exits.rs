@@ -75,7 +75,11 @@ impl Exits {
                 value,
                 format!("no walkable cell of the distance grid lies in the {what}"),
             ),
-            other => CrowdError::invalid("solver.grid_cell", moreau_core::Num(cell), other.to_string()),
+            other => CrowdError::invalid(
+                "solver.grid_cell",
+                moreau_core::Num(cell),
+                other.to_string(),
+            ),
         };
         let mut out = Self {
             exits: Vec::new(),
@@ -92,9 +96,8 @@ impl Exits {
                 (None, Some(s)) => s.distance(p) <= 0.75 * cell,
                 _ => false,
             };
-            let f = DistanceField::build(lo, hi, cell, walkable, goal).map_err(|x| {
-                grid_error(x, format!("exits[{e}]"), exit.name.clone(), "exit")
-            })?;
+            let f = DistanceField::build(lo, hi, cell, walkable, goal)
+                .map_err(|x| grid_error(x, format!("exits[{e}]"), exit.name.clone(), "exit"))?;
             out.fields.push(f);
             let field = out.fields.len() - 1;
             let target = match &exit.target {

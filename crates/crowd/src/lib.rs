@@ -34,9 +34,7 @@ pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};
 pub use people::{ExitRecord, People, PeopleView, Place};
-pub use scene::{
-    BroadPhaseChoice, ExitAction, Output, Scene, SolverKind, SolverSettings, limits,
-};
+pub use scene::{BroadPhaseChoice, ExitAction, Output, Scene, SolverKind, SolverSettings, limits};
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;
 pub use walls::Walls;

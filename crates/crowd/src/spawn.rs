@@ -188,7 +188,11 @@ pub(crate) fn place_people(
         for k in first..placed.pos.len() {
             let p = placed.pos[k];
             if goal.reached(p, placed.radius[k]) {
-                let shape = if goal.area.is_some() { "area" } else { "segment" };
+                let shape = if goal.area.is_some() {
+                    "area"
+                } else {
+                    "segment"
+                };
                 return Err(CrowdError::invalid(
                     format!("exits[{exit}].{shape}"),
                     &group.destination,

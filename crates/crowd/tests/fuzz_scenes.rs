@@ -198,7 +198,10 @@ fn check(text: &str) -> Result<(), TestCaseError> {
 }
 
 fn runner() -> TestRunner {
-    let file = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fuzz_scenes.proptest-regressions");
+    let file = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fuzz_scenes.proptest-regressions"
+    );
     TestRunner::new(Config {
         cases: 64,
         failure_persistence: Some(Box::new(FileFailurePersistence::Direct(file))),

@@ -41,7 +41,10 @@ fn a_micrometre_grid_cell_aborted_on_a_200_terabyte_allocation() {
 
 #[test]
 fn a_100_km_room_aborted_on_its_distance_grid() {
-    let msg = refused(&room(&[("[12.0, 6.0], [6.2, 6.0]", "[1e5, 1e5], [6.2, 6.0]")]));
+    let msg = refused(&room(&[(
+        "[12.0, 6.0], [6.2, 6.0]",
+        "[1e5, 1e5], [6.2, 6.0]",
+    )]));
     assert_mentions(&msg, &["solver.grid_cell", "cells", "limit"]);
 }
 
@@ -63,7 +66,10 @@ fn distance_field_build_allocated_whatever_grid_it_was_asked_for() {
 
 #[test]
 fn coordinates_of_1e300_panicked_inside_ndarray() {
-    let msg = refused(&room(&[("[12.0, 6.0], [6.2, 6.0]", "[1e300, 6.0], [6.2, 6.0]")]));
+    let msg = refused(&room(&[(
+        "[12.0, 6.0], [6.2, 6.0]",
+        "[1e300, 6.0], [6.2, 6.0]",
+    )]));
     assert_mentions(&msg, &["area.outer[", "1e300", "within ±1e15"]);
 }
 
@@ -111,7 +117,10 @@ fn a_horizon_of_1e7_with_millisecond_steps_allocated_160_gb() {
 
 #[test]
 fn an_output_interval_of_5e_324_was_blamed_on_fps() {
-    let msg = refused(&room(&[("output_interval = 0.1", "output_interval = 5e-324")]));
+    let msg = refused(&room(&[(
+        "output_interval = 0.1",
+        "output_interval = 5e-324",
+    )]));
     assert_mentions(&msg, &["time.output_interval", "5e-324", "frames", "limit"]);
     assert!(!msg.contains("fps"), "{msg}");
 }
@@ -132,9 +141,15 @@ fn ten_million_people_in_36_m2_took_hours_of_random_placement() {
 
 #[test]
 fn a_thousand_threads_were_accepted_and_never_finished() {
-    let msg = refused(&room(&[("grid_cell = 0.1", "grid_cell = 0.1\nthreads = 1024")]));
+    let msg = refused(&room(&[(
+        "grid_cell = 0.1",
+        "grid_cell = 0.1\nthreads = 1024",
+    )]));
     let most = limits::max_threads();
-    assert_mentions(&msg, &["solver.threads", "1024", &format!("at most {most}")]);
+    assert_mentions(
+        &msg,
+        &["solver.threads", "1024", &format!("at most {most}")],
+    );
     // Every core (0) and up to the limit are fine.
     for threads in [0, most] {
         let ok = room(&[(

@@ -46,11 +46,9 @@ impl RunFile {
                 what: "not a regular file".into(),
             });
         }
-        let file = crate::writer::without_locking()
-            .open(path)
-            .at(path, || {
-                "opening it as HDF5 (is it an HDF5 file, and whole, not truncated?)".into()
-            })?;
+        let file = crate::writer::without_locking().open(path).at(path, || {
+            "opening it as HDF5 (is it an HDF5 file, and whole, not truncated?)".into()
+        })?;
         let me = Self {
             path: path.to_path_buf(),
             file,

@@ -266,9 +266,9 @@ impl RunWriter {
 
     fn injected(&self, frame: usize, dataset: &str) -> hdf5::Result<()> {
         match &self.fail {
-            Some(f) if f.frame == frame && f.dataset == dataset => Err(hdf5::Error::from(
-                format!("injected failure writing '{dataset}': No space left on device"),
-            )),
+            Some(f) if f.frame == frame && f.dataset == dataset => Err(hdf5::Error::from(format!(
+                "injected failure writing '{dataset}': No space left on device"
+            ))),
             _ => Ok(()),
         }
     }
@@ -278,7 +278,12 @@ impl RunWriter {
         &self.partial
     }
 
-    fn layout(path: &Path, partial: &Path, file: File, header: &RunHeader) -> Result<Self, IoError> {
+    fn layout(
+        path: &Path,
+        partial: &Path,
+        file: File,
+        header: &RunHeader,
+    ) -> Result<Self, IoError> {
         let n = header.radii.len();
         let at = |what: &str| {
             let what = what.to_string();
@@ -545,20 +550,28 @@ impl RunWriter {
         t: f64,
         count: usize,
     ) -> Result<(), (&'static str, hdf5::Error)> {
-        fn named<T>(name: &'static str, r: hdf5::Result<T>) -> Result<T, (&'static str, hdf5::Error)> {
+        fn named<T>(
+            name: &'static str,
+            r: hdf5::Result<T>,
+        ) -> Result<T, (&'static str, hdf5::Error)> {
             r.map_err(|e| (name, e))
         }
         let mut trajectory_rows = self.trajectory_rows;
         named(TRAJECTORY, self.injected(frame, TRAJECTORY))?;
-        named(TRAJECTORY, append(&self.trajectory, &mut trajectory_rows, &self.rows))?;
+        named(
+            TRAJECTORY,
+            append(&self.trajectory, &mut trajectory_rows, &self.rows),
+        )?;
         named(FRAME_POSITIONS, self.injected(frame, FRAME_POSITIONS))?;
         named(
             FRAME_POSITIONS,
-            self.positions.resize((frame + 1, self.people, 2)).and_then(|_| {
-                let view = ArrayView2::from_shape((self.people, 2), &self.dense)
-                    .expect("2 coordinates a person");
-                self.positions.write_slice(view, (frame, .., ..))
-            }),
+            self.positions
+                .resize((frame + 1, self.people, 2))
+                .and_then(|_| {
+                    let view = ArrayView2::from_shape((self.people, 2), &self.dense)
+                        .expect("2 coordinates a person");
+                    self.positions.write_slice(view, (frame, .., ..))
+                }),
         )?;
         named(FRAME_TIME, self.injected(frame, FRAME_TIME))?;
         named(FRAME_TIME, append(&self.frame_time, &mut { frame }, &[t]))?;
@@ -570,7 +583,10 @@ impl RunWriter {
         let mut contact_rows = self.contact_rows;
         if let Some((rows, pressure)) = &self.contacts {
             named(CONTACTS, self.injected(frame, CONTACTS))?;
-            named(CONTACTS, append(rows, &mut contact_rows, &self.pending_contacts))?;
+            named(
+                CONTACTS,
+                append(rows, &mut contact_rows, &self.pending_contacts),
+            )?;
             named(FRAME_PRESSURE, self.injected(frame, FRAME_PRESSURE))?;
             named(
                 FRAME_PRESSURE,
@@ -581,10 +597,16 @@ impl RunWriter {
         }
         let mut step_rows = self.step_rows;
         named(STEPS, self.injected(frame, STEPS))?;
-        named(STEPS, append(&self.steps, &mut step_rows, &self.pending_steps))?;
+        named(
+            STEPS,
+            append(&self.steps, &mut step_rows, &self.pending_steps),
+        )?;
         let mut exit_rows = self.exit_rows;
         named(EXITS, self.injected(frame, EXITS))?;
-        named(EXITS, append(&self.exits, &mut exit_rows, &self.pending_exits))?;
+        named(
+            EXITS,
+            append(&self.exits, &mut exit_rows, &self.pending_exits),
+        )?;
         named("flush", self.injected(frame, "flush"))?;
         named("flush", self.file.flush())?;
         self.trajectory_rows = trajectory_rows;

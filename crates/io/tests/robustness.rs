@@ -53,7 +53,9 @@ fn write_frame(w: &mut RunWriter, k: usize, n: usize) -> Result<(), IoError> {
         w.exit(0, 0.1 * k as f64)?;
     }
     let ids: Vec<u32> = (0..n as u32).collect();
-    let q: Vec<f64> = (0..2 * n).map(|i| 1.0 + i as f64 + 0.01 * k as f64).collect();
+    let q: Vec<f64> = (0..2 * n)
+        .map(|i| 1.0 + i as f64 + 0.01 * k as f64)
+        .collect();
     if w.records_contacts() {
         let row = ContactRow {
             frame: 0,
@@ -80,10 +82,16 @@ fn assert_whole_frames(path: &Path, frames: usize, n: usize, contacts: bool) {
         assert!(r.x >= 1.0, "a zero row (never written): {r:?}");
     }
     assert!(f.positions(frames - 1).is_ok());
-    assert!(f.positions(frames).is_err(), "a frames/positions row too many");
+    assert!(
+        f.positions(frames).is_err(),
+        "a frames/positions row too many"
+    );
     if contacts {
         assert_eq!(f.contacts().unwrap().len(), frames, "contacts rows");
-        assert!(f.pressure(frames).is_err(), "a frames/pressure row too many");
+        assert!(
+            f.pressure(frames).is_err(),
+            "a frames/pressure row too many"
+        );
     }
     // The steps and exits of the whole frames (the ones pending at the failure follow them
     // when the run is finished: they happened).
@@ -160,7 +168,10 @@ fn two_writers_of_one_path_both_succeeded_and_one_file_was_lost() {
     for overwrite in [Overwrite::Allowed, Overwrite::Never] {
         let second = RunWriter::create(&path, &header(2, false), overwrite).unwrap_err();
         assert!(matches!(second, IoError::Busy { .. }), "{second}");
-        assert!(second.to_string().contains("another run is writing"), "{second}");
+        assert!(
+            second.to_string().contains("another run is writing"),
+            "{second}"
+        );
     }
     first.finish("complete", "{}").unwrap();
     // Once the first has ended, the path is free again (with --force, as it exists now).
