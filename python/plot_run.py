@@ -196,6 +196,22 @@ def animate(run, out: pathlib.Path, color: str = "speed", fps: float | None = No
     return len(frames)
 
 
+def load_or_explain(path: pathlib.Path):
+    """The run file at `path`, or an exit with a message that says what is wrong with it:
+    not HDF5 or truncated, not a moreau run file, or a run with nothing to plot yet."""
+    try:
+        run = moreau_run.load(path)
+    except OSError as e:
+        sys.exit(f"plot_run.py: {path}: cannot be read as HDF5 (not an HDF5 file, or a truncated "
+                 f"one): {e}")
+    except (KeyError, ValueError) as e:
+        sys.exit(f"plot_run.py: {path}: not a moreau run file (missing or unreadable {e})")
+    if len(run.steps) == 0 or len(run.time) < 2:
+        sys.exit(f"plot_run.py: {path}: the run has {len(run.steps)} steps and {len(run.time)} "
+                 f"frames (status {run.status}): nothing to plot yet")
+    return run
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=pathlib.Path, help="the run file (HDF5)")
@@ -210,17 +226,18 @@ def main(argv=None) -> int:
     parser.add_argument("--max-frames", type=int,
                         help="at most this many frames in the animation (every k-th frame)")
     args = parser.parse_args(argv)
+    if args.run.is_dir():
+        parser.error(f"{args.run} is a directory, not a run file")
     if not args.run.is_file():
         parser.error(f"no such run file: {args.run}")
+    run = load_or_explain(args.run)
     if args.animate:
-        n = animate(moreau_run.load(args.run), args.animate, args.color, args.fps,
-                    args.max_frames)
+        n = animate(run, args.animate, args.color, args.fps, args.max_frames)
         print(f"wrote {args.animate} ({n} frames)")
         return 0
     out = args.out or args.run.with_name(args.run.stem + "-plots")
     out.mkdir(parents=True, exist_ok=True)
 
-    run = moreau_run.load(args.run)
     traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=args.run)
     walkable = pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=args.run)
     line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene))

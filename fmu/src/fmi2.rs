@@ -3,7 +3,7 @@
 //! log line; the work is the runtime's.
 
 use std::ffi::{c_char, c_int, c_uint, c_void};
-use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::panic::AssertUnwindSafe;
 use std::sync::LazyLock;
 
 use crate::FmuError;
@@ -83,7 +83,7 @@ pub unsafe extern "C" fn fmi2Instantiate(
     _visible: c_int,
     logging_on: c_int,
 ) -> *mut c_void {
-    let made = catch_unwind(AssertUnwindSafe(|| {
+    let made = crate::glue::quiet_catch(AssertUnwindSafe(|| {
         if functions.is_null() {
             return None;
         }
@@ -164,7 +164,7 @@ pub unsafe extern "C" fn fmi2FreeInstance(c: *mut c_void) {
     if c.is_null() {
         return;
     }
-    let _ = catch_unwind(AssertUnwindSafe(|| {
+    let _ = crate::glue::quiet_catch(AssertUnwindSafe(|| {
         // SAFETY: see above; ownership returns to Rust and is dropped.
         drop(unsafe { Box::from_raw(c as *mut Component) });
     }));

@@ -3,7 +3,7 @@
 //! states checked, panics caught, errors become `fmi3Error` and a log line.
 
 use std::ffi::{c_char, c_void};
-use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::panic::AssertUnwindSafe;
 use std::sync::LazyLock;
 
 use crate::FmuError;
@@ -35,7 +35,7 @@ fn instantiate(
     log_message: LogMessage,
     kind: &str,
 ) -> *mut c_void {
-    let made = catch_unwind(AssertUnwindSafe(|| {
+    let made = crate::glue::quiet_catch(AssertUnwindSafe(|| {
         // SAFETY: the host's string (or null).
         let instance_name = unsafe { text(name, "instanceName") }
             .unwrap_or("?")
@@ -193,7 +193,7 @@ pub unsafe extern "C" fn fmi3FreeInstance(c: *mut c_void) {
     if c.is_null() {
         return;
     }
-    let _ = catch_unwind(AssertUnwindSafe(|| {
+    let _ = crate::glue::quiet_catch(AssertUnwindSafe(|| {
         // SAFETY: see above.
         drop(unsafe { Box::from_raw(c as *mut Component) });
     }));

@@ -3,8 +3,10 @@
 //! the pointer and the state, catches panics and turns errors into a status and a log line,
 //! and the FMU-state entry points (get, set, free, serialize) over opaque pointers.
 
+use std::cell::{Cell, RefCell};
 use std::ffi::{CStr, CString, c_char, c_int, c_uint, c_void};
-use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::panic::{AssertUnwindSafe, UnwindSafe, catch_unwind};
+use std::sync::Once;
 
 use crate::FmuError;
 use crate::runtime::{Instance, State};
@@ -18,6 +20,51 @@ pub const OK: Status = 0;
 pub const ERROR: Status = 3;
 /// Fatal.
 pub const FATAL: Status = 4;
+
+thread_local! {
+    /// Whether this thread is inside an FMI call (its panics are the FMU's to report).
+    static INSIDE: Cell<bool> = const { Cell::new(false) };
+    /// The message of the last panic caught inside an FMI call on this thread.
+    static PANIC: RefCell<Option<String>> = const { RefCell::new(None) };
+}
+
+/// `catch_unwind` for the FMI entry points, without Rust's "thread panicked at" on the host's
+/// standard error: a panic inside an FMI call is recorded (its message goes to the FMI logger,
+/// through [`panic_message`]); panics anywhere else in the host process still reach the hook
+/// that was there before.
+pub(crate) fn quiet_catch<R>(f: impl FnOnce() -> R + UnwindSafe) -> std::thread::Result<R> {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        let before = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if INSIDE.with(Cell::get) {
+                let message = info
+                    .payload()
+                    .downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| info.payload().downcast_ref::<&str>().copied())
+                    .unwrap_or("(no message)");
+                let at = info
+                    .location()
+                    .map_or(String::new(), |l| format!(" at {}:{}", l.file(), l.line()));
+                PANIC.with(|p| *p.borrow_mut() = Some(format!("{message}{at}")));
+            } else {
+                before(info);
+            }
+        }));
+    });
+    let outer = INSIDE.with(|i| i.replace(true));
+    let result = catch_unwind(f);
+    INSIDE.with(|i| i.set(outer));
+    result
+}
+
+/// The message of the last panic [`quiet_catch`] caught on this thread.
+pub(crate) fn panic_message() -> String {
+    PANIC
+        .with(|p| p.borrow_mut().take())
+        .unwrap_or_else(|| "no message".into())
+}
 
 /// What an `fmi2Component` points to.
 pub(crate) struct Component {
@@ -98,7 +145,7 @@ pub(crate) fn with(
     // SAFETY: a non-null fmi2Component is a pointer fmi2Instantiate returned and
     // fmi2FreeInstance has not freed (the standard's contract with the host).
     let component = unsafe { &mut *(c as *mut Component) };
-    let outcome = catch_unwind(AssertUnwindSafe(|| {
+    let outcome = quiet_catch(AssertUnwindSafe(|| {
         component.instance.expect(function, allowed(function))?;
         f(component)
     }));
@@ -119,7 +166,8 @@ pub(crate) fn with(
         Err(_) => {
             component.instance.state = State::Error;
             component.instance.error(&format!(
-                "{function}: internal error (panic); the instance is unusable"
+                "{function}: internal error (panic: {}); the instance is unusable",
+                panic_message()
             ));
             FATAL
         }
@@ -753,6 +801,71 @@ mod tests {
         assert!(
             e.contains("n_people cannot be set in state Initialization"),
             "{e}"
+        );
+    }
+}
+
+#[cfg(test)]
+mod quiet_panics {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+
+    use super::*;
+
+    /// Issue 20: a panic caught at an FMI entry still printed Rust's "thread '…' panicked at"
+    /// on the host's standard error. Run in a child process (this test binary again), whose
+    /// standard error is read whole.
+    #[test]
+    fn a_caught_panic_printed_panicked_at_on_the_hosts_stderr() {
+        if std::env::var_os("MOREAU_FMU_PANIC_CHILD").is_some() {
+            let lines = Rc::new(RefCell::new(Vec::new()));
+            let sink = lines.clone();
+            let mut comp = Component {
+                instance: Instance::new(
+                    "panics".into(),
+                    None,
+                    false,
+                    Box::new(move |_, m: &str| sink.borrow_mut().push(m.to_string())),
+                ),
+                strings: Vec::new(),
+            };
+            let c = &mut comp as *mut Component as *mut c_void;
+            let status = with(c, "fmi2SetupExperiment", |_| panic!("boom in the model"));
+            assert_eq!(status, FATAL);
+            println!("LOG: {}", lines.borrow().last().unwrap());
+            // Panics outside an FMI call still reach the hook that was there before.
+            let outside = std::panic::catch_unwind(|| panic!("outside the FMU"));
+            assert!(outside.is_err());
+            return;
+        }
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "glue::quiet_panics::a_caught_panic_printed_panicked_at_on_the_hosts_stderr",
+                "--nocapture",
+                "--test-threads=1",
+            ])
+            .env("MOREAU_FMU_PANIC_CHILD", "1")
+            .output()
+            .unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+        );
+        assert!(out.status.success(), "{stdout}\n{stderr}");
+        assert!(
+            stdout.contains(
+                "LOG: fmi2SetupExperiment: internal error (panic: boom in the model at fmu/src/glue.rs"
+            ),
+            "the panic's message goes to the FMI logger: {stdout}"
+        );
+        assert!(
+            !stderr.contains("boom in the model"),
+            "the host's stderr saw the FMU's panic: {stderr}"
+        );
+        assert!(
+            stderr.contains("outside the FMU"),
+            "panics outside the FMU keep the default hook: {stderr}"
         );
     }
 }

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use moreau_core::StepReport;
+use moreau_core::{Num, StepReport};
 use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation};
 use serde::{Deserialize, Serialize};
 
@@ -254,6 +254,10 @@ pub struct ModelState {
     pub min_gap: Option<f64>,
 }
 
+/// The most internal steps one communication step may take (about a minute of work for a
+/// small scene); a longer one is refused before it starts.
+pub const MAX_INTERNAL_STEPS: f64 = 1e6;
+
 /// Keeps the certified ε of the last step.
 struct LastEps<'a>(&'a mut f64);
 
@@ -288,7 +292,8 @@ impl CrowdModel {
                 Ok(())
             } else {
                 Err(FmuError::Setting(format!(
-                    "{name} = {x}: must be finite and > 0"
+                    "{name} = {}: must be finite and > 0",
+                    Num(x)
                 )))
             }
         };
@@ -297,7 +302,7 @@ impl CrowdModel {
         if !(settings.desired_speed_factor >= 0.0 && settings.desired_speed_factor.is_finite()) {
             return Err(FmuError::Setting(format!(
                 "desired_speed_factor = {}: must be finite and ≥ 0",
-                settings.desired_speed_factor
+                Num(settings.desired_speed_factor)
             )));
         }
         let sim = Simulation::new(scene)?;
@@ -355,7 +360,7 @@ impl CrowdModel {
         if !state.time.is_finite() {
             return Err(FmuError::Setting(format!(
                 "state.time = {}: not a finite number",
-                state.time
+                Num(state.time)
             )));
         }
         self.sim.restore(&state.sim)?;
@@ -372,7 +377,7 @@ impl CrowdModel {
         if !(factor >= 0.0 && factor.is_finite()) {
             return Err(FmuError::Setting(format!(
                 "speed_factor = {}: the desired-speed factor must be finite and ≥ 0",
-                settings.speed_factor
+                Num(settings.speed_factor)
             )));
         }
         self.sim.set_speed_factor(factor);
@@ -390,8 +395,26 @@ impl CrowdModel {
     pub fn do_step(&mut self, t: f64, h: f64) -> Result<(), FmuError> {
         if (t - self.time).abs() > 1e-9 * t.abs().max(1.0) {
             return Err(FmuError::Setting(format!(
-                "currentCommunicationPoint = {t}, but the model is at t = {}",
-                self.time
+                "currentCommunicationPoint = {}, but the model is at t = {}",
+                Num(t),
+                Num(self.time)
+            )));
+        }
+        // Bounded work: a communication step the scene's steps cannot cover in reasonable
+        // work is refused before any step is taken (the host would wait forever).
+        let time = self.sim.scene().time;
+        let largest = match time.tol {
+            None => time.step.min(time.output_interval),
+            Some(_) => time.output_interval.min(0.5),
+        };
+        let steps = h / largest;
+        if !(steps <= MAX_INTERNAL_STEPS) {
+            return Err(FmuError::Setting(format!(
+                "communicationStepSize = {}: it takes {steps:.3e} internal steps of at most {} s, \
+                 more than the limit of {MAX_INTERNAL_STEPS:e} a communication step (use \
+                 shorter communication steps)",
+                Num(h),
+                Num(largest)
             )));
         }
         self.before.resize(2 * self.people, 0.0);

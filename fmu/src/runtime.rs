@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use moreau_core::Num;
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
@@ -164,20 +165,42 @@ impl Instance {
     /// Sets a Real.
     pub fn set_real(&mut self, vr: u32, value: f64) -> Result<(), FmuError> {
         let causality = self.settable(vr, Kind::Real)?;
+        let name = variable(vr).map_or("?", |v| v.name);
+        let old = *self.real_slot(vr).ok_or(FmuError::UnknownReference(vr))?;
         if !value.is_finite() {
-            let name = variable(vr).map_or("?", |v| v.name);
             return Err(FmuError::Setting(format!(
-                "{name} = {value}: not a finite number"
+                "{name} = {}: not a finite number (it keeps its value {})",
+                Num(value),
+                Num(old)
             )));
         }
-        match vr {
-            vr::STEP => self.settings.step = value,
-            vr::EPS_KAPPA => self.settings.eps_kappa = value,
-            vr::DESIRED_SPEED_FACTOR => self.settings.desired_speed_factor = value,
-            vr::SPEED_FACTOR => self.settings.speed_factor = value,
-            _ => return Err(FmuError::UnknownReference(vr)),
+        // Every settable Real is ≥ 0 (a step or ε factor of 0: the scene's own).
+        if value < 0.0 {
+            return Err(FmuError::Setting(format!(
+                "{name} = {}: must be ≥ 0 (it keeps its value {})",
+                Num(value),
+                Num(old)
+            )));
         }
-        self.changed(causality)
+        *self.real_slot(vr).expect("checked above") = value;
+        // A value the model refuses is not kept either: the next step runs with the old one.
+        if let Err(e) = self.changed(causality) {
+            *self.real_slot(vr).expect("checked above") = old;
+            let _ = self.changed(causality);
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// The settable Real `vr`.
+    fn real_slot(&mut self, vr: u32) -> Option<&mut f64> {
+        Some(match vr {
+            vr::STEP => &mut self.settings.step,
+            vr::EPS_KAPPA => &mut self.settings.eps_kappa,
+            vr::DESIRED_SPEED_FACTOR => &mut self.settings.desired_speed_factor,
+            vr::SPEED_FACTOR => &mut self.settings.speed_factor,
+            _ => return None,
+        })
     }
 
     /// Sets a Boolean.
@@ -336,12 +359,14 @@ impl Instance {
         self.expect("DoStep", &[State::Stepping])?;
         if !(h > 0.0 && h.is_finite()) {
             return Err(FmuError::Setting(format!(
-                "communicationStepSize = {h}: must be finite and > 0"
+                "communicationStepSize = {}: must be finite and > 0",
+                Num(h)
             )));
         }
         if !t.is_finite() {
             return Err(FmuError::Setting(format!(
-                "currentCommunicationPoint = {t}: not a finite number"
+                "currentCommunicationPoint = {}: not a finite number",
+                Num(t)
             )));
         }
         let settings = self.settings.clone();

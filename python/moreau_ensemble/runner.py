@@ -58,6 +58,8 @@ def run_sweep(sweep: Sweep, out, client=None, *, moreau: str | None = None,
     futures = {}
     for v in variants:
         run_dir = runs / v.name
+        if run_dir.resolve().parent != runs.resolve():
+            raise ValueError(f"variant {v.name!r}: its directory would not be in {runs}")
         done = _done(run_dir)
         if done is not None and (done.get("status") == "complete" or not retry_failed):
             rows[v.name] = {**done, "reused": True}

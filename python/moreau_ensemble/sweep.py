@@ -43,16 +43,47 @@ class Sweep:
                 for key, value in {**self.fixed, **values}.items():
                     apply(scene, key, value)
                 scene["seed"] = int(base.get("seed", 0)) + seed
-                parts = [f"{k}={_label(v)}" for k, v in values.items()] + [f"seed={seed}"]
+                parts = [f"{_label(k, key=True)}={_label(v)}" for k, v in values.items()]
+                parts.append(f"seed={seed}")
                 name = "_".join(parts)
                 scene["name"] = f"{base.get('name', 'scene')}-{name}"
                 out.append(Variant(name=name, values=values, seed=seed, scene=to_toml(scene)))
         return out
 
 
-def _label(value) -> str:
-    text = str(value)
-    return re.sub(r"[^A-Za-z0-9.+-]", "-", text)
+def _label(value, key: bool = False) -> str:
+    """`value` as part of a directory name: letters, digits and `.+-` only (and `_` in a key),
+    so no `/`, and no name is `.` or `..`; at most 60 characters."""
+    allowed = r"[^A-Za-z0-9._+-]" if key else r"[^A-Za-z0-9.+-]"
+    text = re.sub(allowed, "-", str(value))[:60]
+    return "-" if set(text) <= {"."} else text
+
+
+def _check(path: pathlib.Path, sweep: Sweep) -> None:
+    """Applies every `set` and `vary` value to the base scene, as the runs will, so that a bad
+    key or value is an error naming it before any run starts; and checks that the variants'
+    directory names are distinct."""
+    try:
+        base = tomllib.loads(sweep.base.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise ValueError(f"{path}: base = {str(sweep.base)!r}: not a scene file (TOML): {e}") from e
+    entries = [("set", k, v) for k, v in sweep.fixed.items()]
+    entries += [("vary", k, v) for k, values in sweep.vary.items() for v in values]
+    for table, key, value in entries:
+        scene = copy.deepcopy(base)
+        try:
+            apply(scene, key, value)
+            to_toml(scene)
+        except (KeyError, IndexError, ValueError, TypeError, AttributeError) as e:
+            kind = type(e).__name__
+            raise ValueError(f"{path}: {table}.{key!s} = {value!r} does not apply to the base "
+                             f"scene: {kind}: {e}") from e
+    names: dict[str, dict] = {}
+    for variant in sweep.variants():
+        if variant.name in names:
+            raise ValueError(f"{path}: the variants {names[variant.name]} and {variant.values} "
+                             f"get the same directory name {variant.name!r}")
+        names[variant.name] = variant.values
 
 
 def load_sweep(path) -> Sweep:
@@ -75,7 +106,12 @@ def load_sweep(path) -> Sweep:
     for key, values in vary.items():
         if not isinstance(values, list) or not values:
             raise ValueError(f"{path}: vary.{key} must be a non-empty list, got {values!r}")
-    return Sweep(path=path, base=base, seeds=seeds, fixed=spec.get("set", {}), vary=vary)
+    fixed = spec.get("set", {})
+    if not isinstance(fixed, dict) or not isinstance(vary, dict):
+        raise ValueError(f"{path}: 'set' and 'vary' must be tables")
+    sweep = Sweep(path=path, base=base, seeds=seeds, fixed=fixed, vary=vary)
+    _check(path, sweep)
+    return sweep
 
 
 def apply(scene: dict, key: str, value) -> None:
@@ -86,21 +122,36 @@ def apply(scene: dict, key: str, value) -> None:
         return
     node = scene
     parts = key.split(".")
+    if any(not p for p in parts):
+        raise ValueError(f"{key!r}: an empty part in the dotted key")
+
+    def index(node: list, part: str) -> int:
+        if not part.isdigit() or int(part) >= len(node):
+            raise IndexError(f"{part!r} is not an index of a list of {len(node)}")
+        return int(part)
+
     for part in parts[:-1]:
-        node = node[int(part)] if isinstance(node, list) else node.setdefault(part, {})
+        if isinstance(node, list):
+            node = node[index(node, part)]
+        elif isinstance(node, dict):
+            node = node.setdefault(part, {})
+        else:
+            raise TypeError(f"{part!r}: {node!r} has no parts")
     last = parts[-1]
     if isinstance(node, list):
-        node[int(last)] = value
-    else:
+        node[index(node, last)] = value
+    elif isinstance(node, dict):
         node[last] = value
+    else:
+        raise TypeError(f"{last!r}: {node!r} has no parts")
 
 
 def set_door_width(scene: dict, width: float) -> None:
     """Resizes the first exit, an axis-aligned rectangle in a gap of the walls: along its
     longer side, every coordinate equal to the door's ends (in the exit's area and in the
     walkable outline) moves to `centre ± width/2`."""
-    if not width > 0:
-        raise ValueError(f"door_width = {width}: must be > 0")
+    if not width > 0 or width != width or width == float("inf"):
+        raise ValueError(f"door_width = {width}: must be finite and > 0")
     area = scene["exits"][0].get("area")
     if not area:
         raise ValueError("door_width needs the first exit to be an area")

@@ -56,7 +56,11 @@ def test_a_bad_scene_is_refused_before_any_output(tmp_path):
 
 
 def test_a_run_killed_mid_way_leaves_a_readable_file(tmp_path):
+    """SIGKILL: the run's frames are in its partial file (.NAME.partial, status running),
+    which h5py (with HDF5's default file locking), PedPy and `inspect` open; NAME itself is
+    never made, and a new run to NAME refuses to replace the partial file without --force."""
     out = tmp_path / "killed.h5"
+    partial = tmp_path / ".killed.h5.partial"
     proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
@@ -66,7 +70,7 @@ def test_a_run_killed_mid_way_leaves_a_readable_file(tmp_path):
             assert proc.poll() is None, "the run ended before it could be killed"
             time.sleep(0.2)
             try:
-                with h5py.File(out, "r", locking=False) as f:
+                with h5py.File(partial, "r") as f:
                     frames = f["frames/time"].shape[0]
             except (OSError, KeyError):
                 pass  # not created yet, or caught between two writes
@@ -75,19 +79,26 @@ def test_a_run_killed_mid_way_leaves_a_readable_file(tmp_path):
         proc.wait()
     assert proc.returncode == -signal.SIGKILL
     assert frames >= 5, "no frames written in time"
+    assert not out.exists()
 
-    run = moreau_run.load(out)
+    run = moreau_run.load(partial)
     assert run.status == "running"
     assert len(run.time) >= 5
     per_frame = np.bincount(run.trajectory["frame"], minlength=len(run.time))
     np.testing.assert_array_equal(per_frame, run.count)
     assert len(run.steps) >= 2 * (len(run.time) - 1)  # 2 steps per frame (0.05 s, 10 fps)
     assert not np.isnan(run.positions[-1][: run.count[-1]]).all()
-    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=out)
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=partial)
     assert traj.data["frame"].max() == len(run.time) - 1
-    pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=out)
-    # inspect reads it too, and says the run did not finish.
-    assert "status: running" in moreau("inspect", out).stdout
+    pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=partial)
+    # inspect reads it too, and says the run did not finish; on NAME it points to it.
+    assert "status: running" in moreau("inspect", partial).stdout
+    proc = moreau("inspect", out, check=False)
+    assert proc.returncode == 2 and ".killed.h5.partial" in proc.stderr
+    # A new run to NAME keeps the killed run's frames unless told (--force) to replace them.
+    proc = moreau("run", DENSE, "-o", out, "--quiet", check=False)
+    assert proc.returncode == 2 and "killed" in proc.stderr and "--force" in proc.stderr
+    assert moreau_run.load(partial).status == "running"
 
 
 def test_inspect_describes_a_file(room_run):
@@ -126,18 +137,20 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
     rng = np.random.default_rng(7)
     for k in range(6):
         out = tmp_path / f"kill-{k}.h5"
+        partial = tmp_path / f".kill-{k}.h5.partial"
         proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 300
         try:
-            while not out.exists() and time.monotonic() < deadline:
+            while not partial.exists() and time.monotonic() < deadline:
                 time.sleep(0.01)
-            time.sleep(float(rng.uniform(0.0, 1.5)))
+            time.sleep(0.05 + float(rng.uniform(0.0, 1.5)))  # past the layout
         finally:
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
-        run = moreau_run.load(out)
+        assert not out.exists()
+        run = moreau_run.load(partial)
         assert run.status == "running"
         per_frame = np.bincount(run.trajectory["frame"], minlength=len(run.time))
         np.testing.assert_array_equal(per_frame, run.count)

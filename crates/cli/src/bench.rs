@@ -38,7 +38,7 @@ pub struct BenchArgs {
     #[arg(long, value_enum, default_value_t = BenchScene::Hall)]
     scene: BenchScene,
     /// People per m² (default: 2.6 in a hall, 5 in a crush).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::positive)]
     density: Option<f64>,
     /// Steps before measuring: 100 steps (5 s) let the queues form, so the measured steps
     /// are jammed ones (10 gives the easy early phase, 0 measures from the start).

@@ -44,7 +44,7 @@ pub struct ConvergeArgs {
     #[arg(long, default_value_t = 10)]
     samples: usize,
     /// Override the horizon T of the scene (s).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::positive)]
     horizon: Option<f64>,
     /// Override κ in ε_k = κ μ³ (default: the scene's).
     #[arg(long)]

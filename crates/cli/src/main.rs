@@ -19,11 +19,18 @@ use clap::{Parser, Subcommand};
 
 const EXIT_CODES: &str = "\
 Exit codes:
-  0  the run reached its horizon (or the command succeeded)
-  1  the run failed: it stopped before its horizon (a step failed, or writing the output
-     failed; the output keeps every frame written so far and its attribute `status` says
-     why), or its summary could not be written
-  2  bad input: command line, scene file, or output path; nothing was written";
+  0    the run reached its horizon (or the command succeeded)
+  1    the run failed: it stopped before its horizon (a step failed, or writing the output
+       failed; the output keeps every whole frame written so far and its attribute `status`
+       says why, e.g. `failed: disk full: ...`), or its summary could not be written
+  2    bad input: command line, scene file, or output path; nothing was written
+  130  interrupted by SIGINT (Ctrl-C), 143 by SIGTERM: the run stopped after its step and
+       the output holds it so far, with status `interrupted` (a second signal ends at once)
+
+The output is written as .NAME.partial beside NAME and moved to NAME when the run ends (or is
+interrupted): an older NAME stays whole until then. A run killed outright (SIGKILL, power
+loss) leaves its frames in .NAME.partial (status `running`), which `moreau inspect`, h5py and
+PedPy open; a later run to NAME refuses to replace it without --force.";
 
 /// moreau: Moreau's catching-up scheme for first-order nonsmooth dynamics, with crowds of
 /// rigid disks that never overlap.
@@ -99,6 +106,10 @@ enum Command {
 
 fn inspect(path: &std::path::Path) -> Result<()> {
     let f = moreau_io::RunFile::open(path)?;
+    let partial = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.starts_with('.') && n.ends_with(".partial"));
     let h = f.header()?;
     let times = f.frame_times()?;
     let counts = f.frame_counts()?;
@@ -108,7 +119,15 @@ fn inspect(path: &std::path::Path) -> Result<()> {
         "  scene {:?}, seed {}, written by moreau {}",
         h.scene_name, h.seed, h.version
     );
-    println!("  status: {}", f.status()?);
+    let status = f.status()?;
+    println!(
+        "  status: {status}{}",
+        if partial && status == "running" {
+            " (a partial file: its run is still going, or was killed)"
+        } else {
+            ""
+        }
+    );
     println!(
         "  {} people; {} frames at {} fps{}; {} steps; {} passed an exit",
         h.radii.len(),
@@ -167,11 +186,57 @@ fn run() -> Result<ExitCode> {
     }
 }
 
+/// A command-line number that must be finite and > 0 (clap names the flag and the value).
+pub fn positive(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() => Ok(x),
+        Ok(_) => Err("must be finite and > 0".into()),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
+}
+
+/// An error with its causes, each said once (a cause whose text its parent already quotes,
+/// as the OS's and HDF5's often are, is not repeated).
+pub fn error_text(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
+/// A closed standard output (`moreau inspect F | head -1`) ends the program quietly, as it
+/// does `cat`: Rust's `println!` panics on a broken pipe; this hook turns that one panic into
+/// a silent exit 0 and leaves every other panic to the default hook.
+fn quiet_broken_pipes() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        default(info);
+    }));
+}
+
 fn main() -> ExitCode {
+    quiet_broken_pipes();
     match run() {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("moreau: error: {e:#}");
+            eprintln!("moreau: error: {}", error_text(&e));
             ExitCode::from(2)
         }
     }

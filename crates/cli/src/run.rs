@@ -3,6 +3,8 @@
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -25,13 +27,16 @@ pub struct RunArgs {
     /// The HDF5 run file to write. Without it the run only prints its summary.
     #[arg(short, long, value_name = "OUT.h5")]
     output: Option<PathBuf>,
-    /// Replace the output file if it exists (without this, an existing file is an error).
+    /// Replace the output file (and the --summary-json file) if it exists (without this, an
+    /// existing file is an error). The old file stays whole until the new run ends.
     #[arg(long)]
     force: bool,
     /// No progress bar and no summary line (errors still go to stderr).
     #[arg(short, long)]
     quiet: bool,
-    /// Write a JSON summary of the run to this file ('-' for stdout).
+    /// Write a JSON summary of the run to this file ('-' for stdout). Checked before the run:
+    /// its directory must exist, it is replaced only with --force, and it may not name the
+    /// scene, the --from file or the output.
     #[arg(long, value_name = "FILE")]
     summary_json: Option<PathBuf>,
     /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
@@ -124,18 +129,152 @@ fn command_line() -> String {
     std::env::args().collect::<Vec<_>>().join(" ")
 }
 
+/// Whether two paths name the same file; for a path that does not exist yet, whether its
+/// directory and name are the other's.
+fn same_file(a: &Path, b: &Path) -> bool {
+    fn resolved(p: &Path) -> Option<PathBuf> {
+        if let Ok(c) = p.canonicalize() {
+            return Some(c);
+        }
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(parent.canonicalize().ok()?.join(p.file_name()?))
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// Checks the output and the summary paths before anything is read or written: an output or
+/// a summary never replaces an input (the scene, the --from file) or each other, and a summary
+/// obeys the same rules as the output (its directory exists, --force to replace it).
+fn check_paths(args: &RunArgs, overwrite: Overwrite) -> Result<()> {
+    let inputs: Vec<(&str, &PathBuf)> = [("the scene file", &args.scene), ("--from", &args.from)]
+        .into_iter()
+        .filter_map(|(what, p)| p.as_ref().map(|p| (what, p)))
+        .collect();
+    if let Some(path) = &args.output {
+        // Before the (possibly long) set-up: a bad path fails at once.
+        moreau_io::check_output(path, overwrite)?;
+        if let Some((what, _)) = inputs.iter().find(|(_, i)| same_file(path, i)) {
+            bail!(
+                "--output '{}' is {what}: a run never writes over its input",
+                path.display()
+            );
+        }
+    }
+    if let Some(summary) = &args.summary_json
+        && summary.as_os_str() != "-"
+    {
+        if let Some((what, _)) = inputs.iter().find(|(_, i)| same_file(summary, i)) {
+            bail!(
+                "--summary-json '{}' is {what}: a run never writes over its input",
+                summary.display()
+            );
+        }
+        if let Some(out) = &args.output
+            && same_file(summary, out)
+        {
+            bail!(
+                "--summary-json '{}' is the --output file: give the summary its own file",
+                summary.display()
+            );
+        }
+        moreau_io::check_output(summary, overwrite).map_err(|e| match e {
+            moreau_io::IoError::Exists { path } => anyhow::anyhow!(
+                "--summary-json file '{}' already exists; pass --force to overwrite it",
+                path.display()
+            ),
+            other => anyhow::Error::from(other).context("--summary-json"),
+        })?;
+    }
+    Ok(())
+}
+
+/// SIGINT and SIGTERM, caught for the run: the first one stops the run after its step, and the
+/// run file is finished with status `interrupted`; a second one ends the process at once.
+struct Signals {
+    int: Arc<AtomicBool>,
+    term: Arc<AtomicBool>,
+}
+
+impl Signals {
+    fn install() -> Result<Self> {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        use signal_hook::flag::{register, register_conditional_shutdown};
+        let me = Self {
+            int: Arc::new(AtomicBool::new(false)),
+            term: Arc::new(AtomicBool::new(false)),
+        };
+        // The shutdown hooks see the flag before the flag hooks set it: only the second
+        // signal ends the process.
+        register_conditional_shutdown(SIGINT, 130, Arc::clone(&me.int))?;
+        register_conditional_shutdown(SIGTERM, 143, Arc::clone(&me.term))?;
+        register(SIGINT, Arc::clone(&me.int))?;
+        register(SIGTERM, Arc::clone(&me.term))?;
+        Ok(me)
+    }
+
+    /// The signal that arrived, if any.
+    fn caught(&self) -> Option<Interrupted> {
+        if self.int.load(Ordering::Relaxed) {
+            Some(Interrupted("SIGINT"))
+        } else if self.term.load(Ordering::Relaxed) {
+            Some(Interrupted("SIGTERM"))
+        } else {
+            None
+        }
+    }
+}
+
+/// The error that stops a run on a signal.
+#[derive(Debug, Clone, Copy)]
+struct Interrupted(&'static str);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted by {}", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// The status a run file ends with for a run that ended with `outcome`.
+fn status_of(outcome: &Result<(), moreau_crowd::CrowdError>) -> (String, Option<Interrupted>) {
+    match outcome {
+        Ok(()) => ("complete".into(), None),
+        Err(moreau_crowd::CrowdError::Observer(e)) if e.downcast_ref::<Interrupted>().is_some() => {
+            (
+                "interrupted".into(),
+                e.downcast_ref::<Interrupted>().copied(),
+            )
+        }
+        Err(e) => (failed_status(&format!("{e:#}")), None),
+    }
+}
+
+/// `failed: …`, and `failed: disk full: …` when the system said so.
+fn failed_status(error: &str) -> String {
+    if error.contains("No space left on device") || error.contains("errno = 28") {
+        format!("failed: disk full: {error}")
+    } else {
+        format!("failed: {error}")
+    }
+}
+
 /// Runs `moreau run`. Errors before the run starts are returned (exit 2, nothing written);
-/// a failure during the run is reported, recorded in the file, and gives exit code 1.
+/// a failure during the run is reported, recorded in the file, and gives exit code 1; a run
+/// stopped by SIGINT or SIGTERM is finished with status `interrupted` (exit 130, 143).
 pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let overwrite = if args.force {
         Overwrite::Allowed
     } else {
         Overwrite::Never
     };
-    if let Some(path) = &args.output {
-        // Before the (possibly long) set-up: a bad path fails at once.
-        moreau_io::check_output(path, overwrite)?;
-    }
+    check_paths(args, overwrite)?;
     let (mut scene, origin) = load_scene(args)?;
     if let Some(tol) = args.tol {
         scene = adaptive(&scene, tol, args.estimate);
@@ -176,6 +315,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         None => None,
     };
+    let signals = Signals::install()?;
 
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()
@@ -202,16 +342,14 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         exits: 0,
         people,
         pressure: Vec::new(),
+        signals: &signals,
     };
     let outcome = sim.run(&mut record);
     let (stats, frames) = (record.stats, record.frames);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 
-    let status = match &outcome {
-        Ok(()) => "complete".to_string(),
-        Err(e) => format!("failed: {e:#}"),
-    };
+    let (status, interrupted) = status_of(&outcome);
     let summary = Summary {
         scene: origin,
         output: args.output.as_ref().map(|p| p.display().to_string()),
@@ -239,7 +377,10 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             .collect(),
     };
     let json = serde_json::to_string_pretty(&summary).expect("plain data");
-    let mut failed: Option<anyhow::Error> = outcome.err().map(anyhow::Error::from);
+    let mut failed: Option<anyhow::Error> = match interrupted {
+        Some(_) => None,
+        None => outcome.err().map(anyhow::Error::from),
+    };
     if let Some(w) = writer
         && let Err(e) = w.finish(&status, &json)
     {
@@ -268,11 +409,26 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
                 .map_or(String::new(), |p| format!("; wrote {}", p.display())),
         );
     }
+    if let Some(signal) = interrupted {
+        eprintln!(
+            "moreau: {signal} at simulated time {} s{}",
+            sim.time(),
+            args.output.as_ref().map_or(String::new(), |p| format!(
+                "; '{}' holds the run so far (status interrupted)",
+                p.display()
+            ))
+        );
+        if let Some(e) = &failed {
+            eprintln!("moreau: error: {}", crate::error_text(e));
+        }
+        return Ok(ExitCode::from(if signal.0 == "SIGINT" { 130 } else { 143 }));
+    }
     match failed {
         None => Ok(ExitCode::SUCCESS),
         Some(e) => {
             eprintln!(
-                "moreau: error: {e:#} (simulated time reached: {} s)",
+                "moreau: error: {} (simulated time reached: {} s)",
+                crate::error_text(&e),
                 sim.time()
             );
             Ok(ExitCode::from(1))
@@ -290,10 +446,14 @@ struct Record<'a> {
     exits: usize,
     people: usize,
     pressure: Vec<f64>,
+    signals: &'a Signals,
 }
 
 impl Observer for Record<'_> {
     fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        if let Some(signal) = self.signals.caught() {
+            return Err(Box::new(signal));
+        }
         self.stats.add(report);
         if let Some(w) = self.writer.as_deref_mut() {
             w.step(report);
@@ -349,6 +509,16 @@ fn write_summary(target: &Path, json: &str) -> Result<()> {
         writeln!(out, "{json}")?;
         return Ok(());
     }
-    std::fs::write(target, format!("{json}\n"))
-        .with_context(|| format!("writing the summary to '{}'", target.display()))
+    // Whole or not at all: written beside it, then moved over it (checked before the run:
+    // replacing an existing file was allowed with --force).
+    let name = target
+        .file_name()
+        .map_or("summary".into(), |n| n.to_string_lossy());
+    let temporary = target.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+    let written = std::fs::write(&temporary, format!("{json}\n"))
+        .and_then(|()| std::fs::rename(&temporary, target));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&temporary);
+    }
+    written.with_context(|| format!("writing the summary to '{}'", target.display()))
 }

@@ -10,6 +10,7 @@
 //! box and a crowd.
 
 mod error;
+mod num;
 mod parallel;
 mod report;
 mod rows;
@@ -17,6 +18,7 @@ mod sets;
 mod traits;
 
 pub use error::CoreError;
+pub use num::Num;
 pub use parallel::Parallelism;
 pub use report::{RunStats, SolveStatus, StageTimings, StepReport};
 pub use rows::{ConstraintKey, ConstraintRows};

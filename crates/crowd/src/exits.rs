@@ -2,7 +2,7 @@
 //! and the distance fields that lead to them; built once from the scene.
 
 use crate::error::CrowdError;
-use crate::field::{DistanceField, ExitGoal};
+use crate::field::{DistanceField, ExitGoal, FieldError};
 use crate::geometry::{Polygon, Segment};
 use crate::scene::{ExitAction, Scene};
 
@@ -69,6 +69,18 @@ impl Exits {
         let (lo, hi) = outer.bounds();
         let cell = scene.solver.grid_cell;
         let walkable = |p: [f64; 2]| scene.walkable(p);
+        let grid_error = |e: FieldError, field: String, value: String, what: &str| match e {
+            FieldError::NoGoal => CrowdError::invalid(
+                field,
+                value,
+                format!("no walkable cell of the distance grid lies in the {what}"),
+            ),
+            other => CrowdError::invalid(
+                "solver.grid_cell",
+                moreau_core::Num(cell),
+                other.to_string(),
+            ),
+        };
         let mut out = Self {
             exits: Vec::new(),
             goals: Vec::new(),
@@ -84,13 +96,8 @@ impl Exits {
                 (None, Some(s)) => s.distance(p) <= 0.75 * cell,
                 _ => false,
             };
-            let f = DistanceField::build(lo, hi, cell, walkable, goal).ok_or_else(|| {
-                CrowdError::invalid(
-                    format!("exits[{e}]"),
-                    &exit.name,
-                    "no walkable cell of the distance grid lies in the exit",
-                )
-            })?;
+            let f = DistanceField::build(lo, hi, cell, walkable, goal)
+                .map_err(|x| grid_error(x, format!("exits[{e}]"), exit.name.clone(), "exit"))?;
             out.fields.push(f);
             let field = out.fields.len() - 1;
             let target = match &exit.target {
@@ -99,12 +106,8 @@ impl Exits {
                         vertices: t.clone(),
                     };
                     let f = DistanceField::build(lo, hi, cell, walkable, |p| poly.contains(p))
-                        .ok_or_else(|| {
-                            CrowdError::invalid(
-                                format!("exits[{e}].target"),
-                                format!("{t:?}"),
-                                "no walkable cell of the distance grid lies in the target",
-                            )
+                        .map_err(|x| {
+                            grid_error(x, format!("exits[{e}].target"), format!("{t:?}"), "target")
                         })?;
                     out.fields.push(f);
                     Some((poly, out.fields.len() - 1))

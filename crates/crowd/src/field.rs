@@ -9,6 +9,42 @@ use crate::people::{PeopleView, Place};
 use crate::scene::DesiredVelocityKind;
 use crate::walls::Walls;
 
+/// Why a distance field could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FieldError {
+    /// The grid would have more cells than [`limits::MAX_FIELD_CELLS`](crate::limits::MAX_FIELD_CELLS)
+    /// (checked before anything is allocated).
+    #[error(
+        "the distance grid over {width} m × {height} m with cells of {cell} m would have \
+         {cells:.3e} cells, more than the limit of {limit:e}"
+    )]
+    TooManyCells {
+        /// Width of the box (m).
+        width: f64,
+        /// Height of the box (m).
+        height: f64,
+        /// The cell size (m).
+        cell: f64,
+        /// The cells it would take.
+        cells: f64,
+        /// The limit.
+        limit: f64,
+    },
+    /// The cell size is not finite and > 0, or the box is not finite.
+    #[error("cell {cell} m over [{lo:?}, {hi:?}]: needs a finite box and a finite cell > 0")]
+    Invalid {
+        /// Lower corner.
+        lo: [f64; 2],
+        /// Upper corner.
+        hi: [f64; 2],
+        /// The cell size.
+        cell: f64,
+    },
+    /// No walkable cell's centre is in the goal.
+    #[error("no walkable cell of the distance grid lies in the goal")]
+    NoGoal,
+}
+
 /// The geodesic distance to a goal around walls and obstacles, on a grid of square cells, with
 /// the unit descent direction at every cell centre.
 #[derive(Debug, Clone)]
@@ -24,14 +60,31 @@ pub struct DistanceField {
 impl DistanceField {
     /// Solves the eikonal equation `|∇D| = 1` on the cells of `[lo, hi]` whose centres are
     /// `walkable`, with `D = 0` on the walkable cells whose centres satisfy `goal`.
-    /// Returns `None` when no walkable cell is in the goal.
+    /// Fails, before allocating anything, when the grid would have more than
+    /// [`limits::MAX_FIELD_CELLS`](crate::limits::MAX_FIELD_CELLS) cells; and when no walkable
+    /// cell is in the goal.
     pub fn build(
         lo: [f64; 2],
         hi: [f64; 2],
         cell: f64,
         walkable: impl Fn([f64; 2]) -> bool,
         goal: impl Fn([f64; 2]) -> bool,
-    ) -> Option<Self> {
+    ) -> Result<Self, FieldError> {
+        let finite = lo.iter().chain(&hi).all(|x| x.is_finite());
+        if !(finite && cell > 0.0 && cell.is_finite() && hi[0] >= lo[0] && hi[1] >= lo[1]) {
+            return Err(FieldError::Invalid { lo, hi, cell });
+        }
+        let cells = crate::scene::grid_cells(lo, hi, cell);
+        let limit = crate::limits::MAX_FIELD_CELLS;
+        if !(cells <= limit) {
+            return Err(FieldError::TooManyCells {
+                width: hi[0] - lo[0],
+                height: hi[1] - lo[1],
+                cell,
+                cells,
+                limit,
+            });
+        }
         let nx = ((hi[0] - lo[0]) / cell).ceil().max(1.0) as usize;
         let ny = ((hi[1] - lo[1]) / cell).ceil().max(1.0) as usize;
         let center = |ix: usize, iy: usize| {
@@ -54,10 +107,10 @@ impl DistanceField {
             }
         }
         if sources.is_empty() {
-            return None;
+            return Err(FieldError::NoGoal);
         }
         let cost = eikonal::CostField::with_obstacles(&blocked);
-        let solved = eikonal::solve_multi(&cost, &sources).ok()?;
+        let solved = eikonal::solve_multi(&cost, &sources).map_err(|_| FieldError::NoGoal)?;
         let d = solved.distance();
         let dist: Vec<f64> = (0..ny * nx).map(|k| d[[k / nx, k % nx]] * cell).collect();
         let at = |ix: i64, iy: i64| -> f64 {
@@ -92,7 +145,7 @@ impl DistanceField {
                 }
             }
         }
-        Some(Self {
+        Ok(Self {
             origin: lo,
             cell,
             nx,

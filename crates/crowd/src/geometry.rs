@@ -70,21 +70,81 @@ impl Polygon {
 
     /// Point in polygon (even–odd rule).
     pub fn contains(&self, p: [f64; 2]) -> bool {
-        let v = &self.vertices;
-        let mut inside = false;
-        let mut j = v.len() - 1;
-        for i in 0..v.len() {
-            let (a, b) = (v[i], v[j]);
-            if (a[1] > p[1]) != (b[1] > p[1])
-                && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
-            {
-                inside = !inside;
-            }
-            j = i;
-        }
-        inside
+        ring_contains(&self.vertices, p)
     }
 
+    /// Two edges that cross (not neighbours sharing their common vertex), if any: a polygon
+    /// whose boundary crosses itself has no clear inside (`(i, j)`: edges `v_i → v_{i+1}` and
+    /// `v_j → v_{j+1}`). Repeated consecutive vertices are ignored.
+    pub fn self_intersection(&self) -> Option<(usize, usize)> {
+        let v = &self.vertices;
+        let n = v.len();
+        let orient = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+            let d = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            if d > 0.0 {
+                1
+            } else if d < 0.0 {
+                -1
+            } else {
+                0
+            }
+        };
+        let on = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+            c[0] >= a[0].min(b[0])
+                && c[0] <= a[0].max(b[0])
+                && c[1] >= a[1].min(b[1])
+                && c[1] <= a[1].max(b[1])
+        };
+        let cross = |p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]| {
+            let (o1, o2) = (orient(p1, p2, q1), orient(p1, p2, q2));
+            let (o3, o4) = (orient(q1, q2, p1), orient(q1, q2, p2));
+            (o1 != o2 && o3 != o4)
+                || (o1 == 0 && on(p1, p2, q1))
+                || (o2 == 0 && on(p1, p2, q2))
+                || (o3 == 0 && on(q1, q2, p1))
+                || (o4 == 0 && on(q1, q2, p2))
+        };
+        let edge = |i: usize| (v[i], v[(i + 1) % n]);
+        for i in 0..n {
+            let (a, b) = edge(i);
+            if a == b {
+                continue;
+            }
+            for j in i + 1..n {
+                // Neighbours share a vertex: skip them (the first and the last edge too).
+                if j == i + 1 || (i == 0 && j == n - 1) {
+                    continue;
+                }
+                let (c, d) = edge(j);
+                if c == d {
+                    continue;
+                }
+                if cross(a, b, c, d) {
+                    return Some((i, j));
+                }
+            }
+        }
+        None
+    }
+}
+
+/// Point in the polygon with vertices `v` (even–odd rule), without building a [`Polygon`].
+pub fn ring_contains(v: &[[f64; 2]], p: [f64; 2]) -> bool {
+    let mut inside = false;
+    let mut j = v.len() - 1;
+    for i in 0..v.len() {
+        let (a, b) = (v[i], v[j]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
+        {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+impl Polygon {
     /// The edges `v_i → v_{i+1}`.
     pub fn edges(&self) -> impl Iterator<Item = Segment> + '_ {
         let v = &self.vertices;

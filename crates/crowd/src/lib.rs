@@ -30,13 +30,13 @@ pub use contacts::{
     PersonWalls,
 };
 pub use error::CrowdError;
-pub use field::{DesiredVelocity, DistanceField, ExitGoal};
+pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{
     BroadPhaseChoice, DesiredVelocityKind, ExitAction, Model, Output, Scene, SolverKind,
-    SolverSettings,
+    SolverSettings, limits,
 };
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;

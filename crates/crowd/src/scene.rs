@@ -4,11 +4,48 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use moreau_core::Num;
 use moreau_integrate::{AdaptiveSettings, ErrorEstimate, Stepping};
 pub use moreau_solve::SolverKind;
 
 use crate::error::CrowdError;
-use crate::geometry::{Polygon, Segment};
+use crate::geometry::{Polygon, Segment, ring_contains};
+
+/// The bounds a scene must keep so that building and running it cannot exhaust the machine:
+/// each is checked before anything is allocated, and an error names the field, its value and
+/// the limit.
+pub mod limits {
+    /// The largest coordinate magnitude (m): beyond it areas, distances and grids lose every
+    /// digit of a person's size (and `1e308` overflows to infinity).
+    pub const MAX_COORDINATE: f64 = 1e15;
+    /// The most cells of one distance field (the area's bounding box in cells of
+    /// `solver.grid_cell`), e.g. 200 m × 200 m at 0.1 m: some 50 bytes a cell while solving
+    /// and 24 kept, about 100 MB a field.
+    pub const MAX_FIELD_CELLS: f64 = 4e6;
+    /// The most steps one run can be asked for (`time.horizon / time.step`).
+    pub const MAX_STEPS: f64 = moreau_integrate::MAX_STEPS;
+    /// The most output frames one run can be asked for (`time.horizon / time.output_interval`).
+    pub const MAX_FRAMES: f64 = 1e8;
+    /// The most people one scene may hold: ten times the largest crowd moreau is built for
+    /// (10⁶), and some 2 GB of state.
+    pub const MAX_PEOPLE: f64 = 1e7;
+    /// The densest packing of equal disks in the plane, `π / (2√3)`: a spawn region holds at
+    /// most this fraction of its area in disks.
+    pub const PACKING: f64 = 0.906_899_682_117_108_9;
+    /// Projection threads a scene may ask for on this machine: twice its cores (0 means every
+    /// core). More only makes the threads wait for each other.
+    pub fn max_threads() -> usize {
+        2 * std::thread::available_parallelism().map_or(1, |n| n.get())
+    }
+}
+
+/// Cells of the distance grid over the box `[lo, hi]` with cells of `cell`, as a float (it
+/// may be far beyond `usize`).
+pub(crate) fn grid_cells(lo: [f64; 2], hi: [f64; 2], cell: f64) -> f64 {
+    let nx = ((hi[0] - lo[0]) / cell).ceil().max(1.0);
+    let ny = ((hi[1] - lo[1]) / cell).ceil().max(1.0);
+    nx * ny
+}
 
 /// A number, or a uniform distribution `{ min, max }` to draw it from.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -34,12 +71,12 @@ impl Quantity {
             "must be finite and ≥ 0"
         };
         match *self {
-            Quantity::Fixed(x) if !ok(x) => Err(CrowdError::invalid(field, x, need)),
+            Quantity::Fixed(x) if !ok(x) => Err(CrowdError::invalid(field, Num(x), need)),
             Quantity::Uniform { min, .. } if !ok(min) => {
-                Err(CrowdError::invalid(format!("{field}.min"), min, need))
+                Err(CrowdError::invalid(format!("{field}.min"), Num(min), need))
             }
             Quantity::Uniform { max, .. } if !ok(max) => {
-                Err(CrowdError::invalid(format!("{field}.max"), max, need))
+                Err(CrowdError::invalid(format!("{field}.max"), Num(max), need))
             }
             Quantity::Uniform { min, max } if min > max => Err(CrowdError::invalid(
                 format!("{field}.min"),
@@ -164,7 +201,7 @@ impl Time {
         settings.mu_min = settings.mu_min.min(settings.mu_first);
         settings.estimate = self.estimate.unwrap_or(ErrorEstimate::VelocityChange);
         Stepping::adaptive(settings)
-            .map_err(|e| CrowdError::invalid("time.tol", tol, e.to_string()))
+            .map_err(|e| CrowdError::invalid("time.tol", Num(tol), e.to_string()))
     }
 }
 
@@ -315,16 +352,8 @@ fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
             "a polygon needs at least 3 vertices",
         ));
     }
-    if let Some((i, p)) = v
-        .iter()
-        .enumerate()
-        .find(|(_, p)| !p[0].is_finite() || !p[1].is_finite())
-    {
-        return Err(CrowdError::invalid(
-            format!("{field}[{i}]"),
-            format!("{p:?}"),
-            "coordinates must be finite",
-        ));
+    for (i, p) in v.iter().enumerate() {
+        check_point(&format!("{field}[{i}]"), *p)?;
     }
     let poly = Polygon {
         vertices: v.to_vec(),
@@ -336,7 +365,44 @@ fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
             "polygon has zero area",
         ));
     }
+    if let Some((i, j)) = poly.self_intersection() {
+        let n = v.len();
+        return Err(CrowdError::invalid(
+            field,
+            format!("{v:?}"),
+            format!(
+                "the boundary crosses itself: edge {:?} → {:?} meets edge {:?} → {:?} \
+                 (a polygon must be simple: list its vertices in order around it)",
+                v[i],
+                v[(i + 1) % n],
+                v[j],
+                v[(j + 1) % n]
+            ),
+        ));
+    }
     Ok(poly)
+}
+
+/// A point: finite, and within [`limits::MAX_COORDINATE`] of the origin on both axes.
+fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
+    if !p[0].is_finite() || !p[1].is_finite() {
+        return Err(CrowdError::invalid(
+            field,
+            format!("{p:?}"),
+            "coordinates must be finite",
+        ));
+    }
+    if p[0].abs() > limits::MAX_COORDINATE || p[1].abs() > limits::MAX_COORDINATE {
+        return Err(CrowdError::invalid(
+            field,
+            format!("{p:?}"),
+            format!(
+                "coordinates must be within ±{:e} m (the limit of a scene)",
+                limits::MAX_COORDINATE
+            ),
+        ));
+    }
+    Ok(())
 }
 
 impl Scene {
@@ -385,7 +451,7 @@ impl Scene {
             ("time.output_interval", t.output_interval),
         ] {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
+                return Err(CrowdError::invalid(f, Num(v), "must be finite and > 0"));
             }
         }
         if let Some(tol) = t.tol
@@ -393,8 +459,44 @@ impl Scene {
         {
             return Err(CrowdError::invalid(
                 "time.tol",
-                tol,
+                Num(tol),
                 "must be finite and > 0",
+            ));
+        }
+        // Fixed steps take horizon / step steps; adaptive ones at least horizon / their
+        // largest step (0.5 s, the output interval, the horizon).
+        let (steps, field, value) = match t.tol {
+            None => (t.horizon / t.step, "time.step", Num(t.step)),
+            Some(_) => (
+                t.horizon / t.output_interval.min(0.5).min(t.horizon),
+                "time.horizon",
+                Num(t.horizon),
+            ),
+        };
+        if !(steps <= limits::MAX_STEPS) {
+            return Err(CrowdError::invalid(
+                field,
+                value,
+                format!(
+                    "the run would take {steps:.3e} steps (time.horizon = {}, time.step = {}), \
+                     more than the limit of {:e} steps a run",
+                    Num(t.horizon),
+                    Num(t.step),
+                    limits::MAX_STEPS
+                ),
+            ));
+        }
+        let frames = t.horizon / t.output_interval;
+        if !(frames <= limits::MAX_FRAMES) {
+            return Err(CrowdError::invalid(
+                "time.output_interval",
+                Num(t.output_interval),
+                format!(
+                    "time.horizon / time.output_interval = {frames:.3e} frames, more than the \
+                     limit of {:e} frames a run (time.horizon = {})",
+                    limits::MAX_FRAMES,
+                    Num(t.horizon)
+                ),
             ));
         }
         let s = &self.solver;
@@ -404,7 +506,7 @@ impl Scene {
             ("solver.grid_cell", s.grid_cell),
         ] {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(CrowdError::invalid(f, v, "must be finite and > 0"));
+                return Err(CrowdError::invalid(f, Num(v), "must be finite and > 0"));
             }
         }
         if s.threads > 1024 {
@@ -412,6 +514,23 @@ impl Scene {
                 "solver.threads",
                 s.threads,
                 "at most 1024 (0: every core)",
+            ));
+        }
+        let (lo, hi) = outer.bounds();
+        let cells = grid_cells(lo, hi, s.grid_cell);
+        if !(cells <= limits::MAX_FIELD_CELLS) {
+            return Err(CrowdError::invalid(
+                "solver.grid_cell",
+                Num(s.grid_cell),
+                format!(
+                    "the distance grid over the area's {} m × {} m bounding box would have \
+                     {cells:.3e} cells, more than the limit of {:e}: use a grid_cell of at \
+                     least {:.3e} m",
+                    hi[0] - lo[0],
+                    hi[1] - lo[1],
+                    limits::MAX_FIELD_CELLS,
+                    ((hi[0] - lo[0]) * (hi[1] - lo[1]) / limits::MAX_FIELD_CELLS).sqrt() * 1.01
+                ),
             ));
         }
         if self.exits.is_empty() {
@@ -435,7 +554,10 @@ impl Scene {
                     check_polygon(&format!("{f}.area"), a)?;
                 }
                 (None, Some(s)) => {
-                    if s.iter().flatten().any(|x| !x.is_finite()) || s[0] == s[1] {
+                    for (k, p) in s.iter().enumerate() {
+                        check_point(&format!("{f}.segment[{k}]"), *p)?;
+                    }
+                    if s[0] == s[1] {
                         return Err(CrowdError::invalid(
                             format!("{f}.segment"),
                             format!("{s:?}"),
@@ -479,6 +601,24 @@ impl Scene {
                 "the scene has no people",
             ));
         }
+        let mut people = 0.0;
+        for (g, group) in self.groups.iter().enumerate() {
+            people += match (&group.positions, group.count) {
+                (Some(p), _) => p.len() as f64,
+                (None, Some(n)) => n as f64,
+                _ => 0.0,
+            };
+            if people > limits::MAX_PEOPLE {
+                return Err(CrowdError::invalid(
+                    format!("groups[{g}].count"),
+                    group.count.unwrap_or(0),
+                    format!(
+                        "the scene would hold {people:.3e} people, more than the limit of {:e}",
+                        limits::MAX_PEOPLE
+                    ),
+                ));
+            }
+        }
         for (g, group) in self.groups.iter().enumerate() {
             let f = format!("groups[{g}]");
             group.radius.check(&format!("{f}.radius"), true)?;
@@ -499,16 +639,8 @@ impl Scene {
                             "a group needs at least one person",
                         ));
                     }
-                    if let Some((i, q)) = p
-                        .iter()
-                        .enumerate()
-                        .find(|(_, q)| !q[0].is_finite() || !q[1].is_finite())
-                    {
-                        return Err(CrowdError::invalid(
-                            format!("{f}.positions[{i}]"),
-                            format!("{q:?}"),
-                            "coordinates must be finite",
-                        ));
+                    for (i, q) in p.iter().enumerate() {
+                        check_point(&format!("{f}.positions[{i}]"), *q)?;
                     }
                 }
                 (None, Some(n), Some(region)) => {
@@ -577,16 +709,7 @@ impl Scene {
 
     /// True when `p` is inside the walkable area.
     pub fn walkable(&self, p: [f64; 2]) -> bool {
-        Polygon {
-            vertices: self.area.outer.clone(),
-        }
-        .contains(p)
-            && !self.area.holes.iter().any(|h| {
-                Polygon {
-                    vertices: h.clone(),
-                }
-                .contains(p)
-            })
+        ring_contains(&self.area.outer, p) && !self.area.holes.iter().any(|h| ring_contains(h, p))
     }
 
     /// The smallest radius any person can have.

@@ -198,6 +198,19 @@ impl Simulation {
     /// scene field at fault.
     pub fn new(scene: Scene) -> Result<Self, CrowdError> {
         scene.validate()?;
+        let threads = scene.solver.threads;
+        let most = crate::limits::max_threads();
+        if threads > most {
+            return Err(CrowdError::invalid(
+                "solver.threads",
+                threads,
+                format!(
+                    "more than this machine runs usefully: at most {most} (twice its {} cores; \
+                     0: every core)",
+                    most / 2
+                ),
+            ));
+        }
         let walls = Walls::new(scene.walls());
         let exits = Exits::build(&scene)?;
         let people = place_people(&scene, &walls, &exits)?;

@@ -123,11 +123,33 @@ pub(crate) fn place_people(
                     vertices: region.clone(),
                 };
                 let (rlo, rhi) = region.bounds();
+                // The area bound first: n disks of at least the smallest radius cover more than
+                // the densest packing of the region can hold, so no number of tries places them.
+                let r_min = group.radius.min();
+                let need = n as f64 * std::f64::consts::PI * r_min * r_min;
+                let room = crate::limits::PACKING * region.area();
+                if need > room {
+                    return Err(CrowdError::invalid(
+                        format!("groups[{g}].count"),
+                        n,
+                        format!(
+                            "{n} disks of radius ≥ {r_min} m cover {need:.4e} m², more than the \
+                             spawn region ({:.4e} m²) holds at the densest packing ({:.1} %: \
+                             {room:.4e} m²); at most {} people fit in the spawn region",
+                            region.area(),
+                            100.0 * crate::limits::PACKING,
+                            (room / (std::f64::consts::PI * r_min * r_min)).floor()
+                        ),
+                    ));
+                }
+                // Then a bounded number of tries: in all, and in a row without a place found.
                 let budget = 2000 * n + 10_000;
-                let (mut made, mut tries) = (0, 0);
+                const STALL: usize = 1_000_000;
+                let (mut made, mut tries, mut missed) = (0, 0, 0);
                 let mut r = draw(&group.radius, &mut rng);
-                while made < n && tries < budget {
+                while made < n && tries < budget && missed < STALL {
                     tries += 1;
+                    missed += 1;
                     let p = [
                         rng.random_range(rlo[0]..=rhi[0]),
                         rng.random_range(rlo[1]..=rhi[1]),
@@ -139,6 +161,7 @@ pub(crate) fn place_people(
                     {
                         placed.insert(p, r);
                         made += 1;
+                        missed = 0;
                         r = draw(&group.radius, &mut rng);
                     }
                 }
@@ -147,16 +170,40 @@ pub(crate) fn place_people(
                         format!("groups[{g}].count"),
                         n,
                         format!(
-                            "only {made} people fit in the spawn region ({:.2} m²) after {tries} random tries",
-                            region.area()
+                            "only {made} people fit in the spawn region ({:.2} m²) after {tries} \
+                             random tries{}",
+                            region.area(),
+                            if missed >= STALL {
+                                format!(" ({STALL} in a row found no place)")
+                            } else {
+                                String::new()
+                            }
                         ),
                     ));
                 }
             }
             _ => unreachable!("validated"),
         }
+        let goal = &exits.exits[exit];
         for k in first..placed.pos.len() {
             let p = placed.pos[k];
+            if goal.reached(p, placed.radius[k]) {
+                let shape = if goal.area.is_some() {
+                    "area"
+                } else {
+                    "segment"
+                };
+                return Err(CrowdError::invalid(
+                    format!("exits[{exit}].{shape}"),
+                    &group.destination,
+                    format!(
+                        "person {} of groups[{g}] starts at {p:?}, where the exit already counts \
+                         them out: everyone there would pass it at the first step (does the \
+                         exit cover where people start?)",
+                        k - first
+                    ),
+                ));
+            }
             if !exits.fields[exits.goals[exit].exit].distance(p).is_finite() {
                 return Err(CrowdError::invalid(
                     format!("groups[{g}].destination"),

@@ -277,6 +277,14 @@ impl<C: Correction> Scheme<C> {
                         reason: "must be finite and ≥ t0",
                     });
                 }
+                let steps = (t_end - t0) / h;
+                if !(steps <= crate::MAX_STEPS) {
+                    return Err(IntegrateError::InvalidSetting {
+                        field: "t_end",
+                        value: format!("{t_end} with steps h = {h} ({steps:.3e} steps)"),
+                        reason: "more than the 10⁹ steps a run may take",
+                    });
+                }
             }
             StepSequence::Given(v) => v.iter().try_for_each(|&mu| check_step(mu))?,
         }

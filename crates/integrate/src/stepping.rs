@@ -9,6 +9,11 @@ use crate::correction::Correction;
 use crate::error::IntegrateError;
 use crate::scheme::Scheme;
 
+/// The most steps one run may be asked for (a span over a step): 10⁹, hours of work even for
+/// the smallest problems. Runs are stepped one step at a time (nothing is allocated per step
+/// up front), so this bounds the time a run can take, not its memory.
+pub const MAX_STEPS: f64 = 1e9;
+
 /// The next of equal steps `h` that cover `remaining` with the last one shortened: `h` while
 /// more than one step is left, then what is left (taken as `h` when within `10⁻⁹ h` of it:
 /// rounding in the sum of the steps, so that spans that are multiples of `h` are covered by steps of exactly

@@ -11,6 +11,31 @@ pub enum IoError {
         /// The output path.
         path: PathBuf,
     },
+    /// Another run is writing the same output (it holds the output's lock file).
+    #[error(
+        "another run is writing '{}' (it holds '{}'); wait for it to end, or write elsewhere",
+        path.display(),
+        lock.display()
+    )]
+    Busy {
+        /// The output path.
+        path: PathBuf,
+        /// Its lock file.
+        lock: PathBuf,
+    },
+    /// A run writing the output was killed and left its partial file.
+    #[error(
+        "a run writing '{}' was killed and left its partial output '{}' (readable: moreau \
+         inspect it); move it away, or pass --force to replace it",
+        path.display(),
+        partial.display()
+    )]
+    Stale {
+        /// The output path.
+        path: PathBuf,
+        /// The partial file.
+        partial: PathBuf,
+    },
     /// The output cannot be created where asked (no such directory, not writable, a directory).
     #[error("cannot create output file '{}': {reason}", path.display())]
     Create {

@@ -18,11 +18,17 @@
 //!
 //! Root attributes: `wkt_geometry` (the walkable area, WKT), `format`, `moreau_version`,
 //! `scene` (the whole scene, TOML), `scene_name`, `seed`, `solver` (the settings in force),
-//! `command`, `status` (`running`, then `complete` or `failed: …`) and `summary` (JSON).
+//! `command`, `status` (`running`, then `complete`, `interrupted` or `failed: …`) and
+//! `summary` (JSON).
 //!
 //! Crash safety: rows are buffered between output frames and every frame is written and
-//! flushed in one go, so a run killed at any point leaves a file that reads back up to its
-//! last flushed frame (`status` then still says `running`).
+//! flushed in one go (a frame whose writing fails, as on a full disk, is taken back from every
+//! dataset), so a run killed at any point leaves a file that reads back up to its last flushed
+//! frame. The file is written under the temporary name [`partial_path`] (`.NAME.partial`
+//! beside it) and moved to its name when the run ends: a killed run leaves its frames there
+//! (`status` still `running`) and never touches an older file of the same name. One writer a
+//! path ([`lock_path`]); files are opened without HDF5's file locking, so a run in progress
+//! can be read.
 
 mod error;
 mod layout;
@@ -32,4 +38,4 @@ mod writer;
 pub use error::IoError;
 pub use layout::{ContactRow, ExitRow, FORMAT, FORMATS_READ, RunHeader, StepRow, TrajectoryRow};
 pub use reader::RunFile;
-pub use writer::{Overwrite, RunWriter, check_output};
+pub use writer::{FailPoint, Overwrite, RunWriter, check_output, lock_path, partial_path};

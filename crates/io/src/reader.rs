@@ -19,13 +19,36 @@ pub struct RunFile {
 impl RunFile {
     /// Opens `path`; fails unless it is a moreau run file.
     pub fn open(path: &Path) -> Result<Self, IoError> {
+        if path.is_dir() {
+            return Err(IoError::Layout {
+                path: path.to_path_buf(),
+                what: "is a directory, not a run file".into(),
+            });
+        }
+        if !path.exists() {
+            let partial = crate::partial_path(path);
+            return Err(IoError::Layout {
+                path: path.to_path_buf(),
+                what: if partial.is_file() {
+                    format!(
+                        "no such file (yet): a run writing it keeps its frames in '{}' until \
+                         it ends, and a killed run leaves them there",
+                        partial.display()
+                    )
+                } else {
+                    "no such file".into()
+                },
+            });
+        }
         if !path.is_file() {
             return Err(IoError::Layout {
                 path: path.to_path_buf(),
-                what: "no such file".into(),
+                what: "not a regular file".into(),
             });
         }
-        let file = File::open(path).at(path, || "opening".into())?;
+        let file = crate::writer::without_locking().open(path).at(path, || {
+            "opening it as HDF5 (is it an HDF5 file, and whole, not truncated?)".into()
+        })?;
         let me = Self {
             path: path.to_path_buf(),
             file,

@@ -1,5 +1,7 @@
-//! Writing a run file as the run goes: buffered between output frames, flushed at each.
+//! Writing a run file as the run goes: buffered between output frames, flushed at each;
+//! under a temporary name until the run ends, and only then moved to its name.
 
+use std::fs::OpenOptions;
 use std::path::{Path, PathBuf};
 
 use hdf5::types::VarLenUnicode;
@@ -19,12 +21,109 @@ pub enum Overwrite {
     Allowed,
 }
 
+/// The temporary name a run file is written under until its run ends: `.NAME.partial` in the
+/// output's directory. A run killed by SIGKILL (or a power cut) leaves its frames there, with
+/// `status = running`; `moreau inspect`, h5py and PedPy open it.
+pub fn partial_path(path: &Path) -> PathBuf {
+    hidden_sibling(path, "partial")
+}
+
+/// The lock file of an output: `.NAME.lock`, held (`flock`) by the one writer of `path`.
+pub fn lock_path(path: &Path) -> PathBuf {
+    hidden_sibling(path, "lock")
+}
+
+fn hidden_sibling(path: &Path, suffix: &str) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or("run".into(), |n| n.to_string_lossy());
+    path.with_file_name(format!(".{name}.{suffix}"))
+}
+
+/// The exclusive right to write one output path, held for the life of its writer: the second
+/// writer of a path is refused ([`IoError::Busy`]) instead of silently replacing the first's
+/// file. An advisory `flock` on `.NAME.lock`, released by the system when the process dies
+/// however it dies; the file itself is removed when the writer ends.
+#[derive(Debug)]
+struct OutputLock {
+    path: PathBuf,
+    file: std::fs::File,
+}
+
+impl OutputLock {
+    fn acquire(output: &Path) -> Result<Self, IoError> {
+        use std::os::unix::fs::MetadataExt;
+        let path = lock_path(output);
+        let failed = |e: std::io::Error| IoError::Create {
+            path: output.to_path_buf(),
+            reason: format!("cannot take its lock file '{}': {e}", path.display()),
+        };
+        // A holder removes the lock file before releasing it: a lock taken on a file that is
+        // no longer at `path` locks nothing, so take it again.
+        for _ in 0..16 {
+            let file = OpenOptions::new()
+                .create(true)
+                .truncate(false)
+                .write(true)
+                .open(&path)
+                .map_err(failed)?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(IoError::Busy {
+                        path: output.to_path_buf(),
+                        lock: path,
+                    });
+                }
+                Err(std::fs::TryLockError::Error(e)) => return Err(failed(e)),
+            }
+            let same = match (file.metadata(), std::fs::metadata(&path)) {
+                (Ok(a), Ok(b)) => a.ino() == b.ino() && a.dev() == b.dev(),
+                _ => false,
+            };
+            if same {
+                return Ok(Self { path, file });
+            }
+        }
+        Err(IoError::Busy {
+            path: output.to_path_buf(),
+            lock: path,
+        })
+    }
+}
+
+impl Drop for OutputLock {
+    fn drop(&mut self) {
+        // Removed while held, then released (closing the file releases the lock).
+        let _ = std::fs::remove_file(&self.path);
+        let _ = self.file.unlock();
+    }
+}
+
+/// Where writing a run file fails on purpose, for tests of what a failure leaves (a full disk
+/// in the middle of a frame): the `dataset` of frame `frame` (`trajectory`, `frames/positions`,
+/// `frames/time`, `frames/count`, `contacts`, `frames/pressure`, `steps`, `exits`, `flush`).
+#[doc(hidden)]
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FailPoint {
+    /// The frame (from 0).
+    pub frame: usize,
+    /// The dataset, or `flush`.
+    pub dataset: String,
+}
+
 /// Writes one run file. Rows given between two frames are held in memory and written with
 /// the next frame, then the file is flushed: on disk the file is always a whole number of
-/// frames, whatever moment the process dies.
+/// frames, whatever moment the process dies, and a frame whose writing fails (a full disk) is
+/// taken back from every dataset. The file is written under a temporary name
+/// ([`partial_path`]) and moved to its name by [`finish`](Self::finish) only.
 #[derive(Debug)]
 pub struct RunWriter {
     path: PathBuf,
+    partial: PathBuf,
+    overwrite: Overwrite,
+    lock: Option<OutputLock>,
+    fail: Option<FailPoint>,
     file: File,
     trajectory: Dataset,
     frame_time: Dataset,
@@ -64,6 +163,15 @@ fn set_text(loc: &hdf5::Location, name: &str, value: &str) -> hdf5::Result<()> {
         .write_scalar(&text(value))
 }
 
+/// Opens an HDF5 file without HDF5's own file locking: readers (`moreau inspect`, h5py) open a
+/// run file while its run writes it (every frame is flushed whole), and writers exclude each
+/// other through [`OutputLock`].
+pub(crate) fn without_locking() -> hdf5::FileBuilder {
+    let mut b = File::with_options();
+    b.with_fapl(|p| p.file_locking(false));
+    b
+}
+
 /// Checks that `path` can be created, before anything is made: the parent is a directory
 /// that exists, the path is not a directory, and an existing file is replaced only if asked.
 pub fn check_output(path: &Path, overwrite: Overwrite) -> Result<(), IoError> {
@@ -101,11 +209,13 @@ pub fn check_output(path: &Path, overwrite: Overwrite) -> Result<(), IoError> {
 }
 
 impl RunWriter {
-    /// Creates the file, its datasets and its attributes, and flushes it (status `running`).
-    /// The file is laid out under a temporary name in the same directory and moved to `path`
-    /// only when complete, so `path` never holds a half-made file, and with
-    /// [`Overwrite::Allowed`] the old file stays whole until the new one replaces it.
-    /// Nothing is left behind when this fails.
+    /// Creates the file, its datasets and its attributes, and flushes it (status `running`),
+    /// under the temporary name [`partial_path`] in the output's directory: `path` itself is
+    /// not touched until [`finish`](Self::finish) moves the file there, so an existing file
+    /// (with [`Overwrite::Allowed`]) stays whole until the new run ends. A second writer of
+    /// the same path is refused ([`IoError::Busy`]); a partial file left by a killed run is
+    /// replaced only with [`Overwrite::Allowed`] ([`IoError::Stale`]). Nothing is left behind
+    /// when this fails.
     pub fn create(path: &Path, header: &RunHeader, overwrite: Overwrite) -> Result<Self, IoError> {
         check_output(path, overwrite)?;
         if !(header.fps > 0.0 && header.fps.is_finite()) {
@@ -114,27 +224,66 @@ impl RunWriter {
                 what: format!("fps must be > 0 and finite, got {}", header.fps),
             });
         }
-        let name = path
-            .file_name()
-            .map_or("run".into(), |n| n.to_string_lossy());
-        let partial = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
-        let created = File::create_excl(&partial)
+        let lock = OutputLock::acquire(path)?;
+        let partial = partial_path(path);
+        if partial.exists() {
+            if overwrite == Overwrite::Never {
+                return Err(IoError::Stale {
+                    path: path.to_path_buf(),
+                    partial,
+                });
+            }
+            std::fs::remove_file(&partial).map_err(|e| IoError::Create {
+                path: path.to_path_buf(),
+                reason: format!("cannot remove '{}': {e}", partial.display()),
+            })?;
+        }
+        let created = without_locking()
+            .create_excl(&partial)
             .map_err(|e| IoError::Create {
                 path: path.to_path_buf(),
                 reason: e.to_string(),
             })
-            .and_then(|file| Self::layout(path, file, header))
-            .and_then(|writer| {
-                publish(&partial, path, overwrite)?;
+            .and_then(|file| Self::layout(path, &partial, file, header));
+        match created {
+            Ok(mut writer) => {
+                writer.overwrite = overwrite;
+                writer.lock = Some(lock);
                 Ok(writer)
-            });
-        if created.is_err() {
-            let _ = std::fs::remove_file(&partial);
+            }
+            Err(e) => {
+                let _ = std::fs::remove_file(&partial);
+                Err(e)
+            }
         }
-        created
     }
 
-    fn layout(path: &Path, file: File, header: &RunHeader) -> Result<Self, IoError> {
+    /// Makes the write of `dataset` at frame `frame` fail as a full disk would (tests only).
+    #[doc(hidden)]
+    pub fn fail_at(&mut self, point: FailPoint) {
+        self.fail = Some(point);
+    }
+
+    fn injected(&self, frame: usize, dataset: &str) -> hdf5::Result<()> {
+        match &self.fail {
+            Some(f) if f.frame == frame && f.dataset == dataset => Err(hdf5::Error::from(format!(
+                "injected failure writing '{dataset}': No space left on device"
+            ))),
+            _ => Ok(()),
+        }
+    }
+
+    /// The temporary name the file is written under until [`finish`](Self::finish).
+    pub fn partial(&self) -> &Path {
+        &self.partial
+    }
+
+    fn layout(
+        path: &Path,
+        partial: &Path,
+        file: File,
+        header: &RunHeader,
+    ) -> Result<Self, IoError> {
         let n = header.radii.len();
         let at = |what: &str| {
             let what = what.to_string();
@@ -237,6 +386,10 @@ impl RunWriter {
         file.flush().at(path, at("flushing"))?;
         Ok(Self {
             path: path.to_path_buf(),
+            partial: partial.to_path_buf(),
+            overwrite: Overwrite::Never,
+            lock: None,
+            fail: None,
             file,
             trajectory,
             frame_time,
@@ -357,53 +510,152 @@ impl RunWriter {
             self.dense[2 * i] = x;
             self.dense[2 * i + 1] = y;
         }
-        let path = self.path.clone();
-        let what = |w: &str| {
-            let w = format!("frame {frame} (t = {t}): {w}");
-            move || w
-        };
-        append(&self.trajectory, &mut self.trajectory_rows, &self.rows)
-            .at(&path, what("appending to 'trajectory'"))?;
-        self.positions
-            .resize((frame + 1, self.people, 2))
-            .and_then(|_| {
-                let view = ArrayView2::from_shape((self.people, 2), &self.dense)
-                    .expect("2 coordinates a person");
-                self.positions.write_slice(view, (frame, .., ..))
-            })
-            .at(&path, what("writing 'frames/positions'"))?;
-        let mut n_frames = frame;
-        append(&self.frame_time, &mut n_frames, &[t]).at(&path, what("writing 'frames/time'"))?;
-        let mut n_frames = frame;
-        append(&self.frame_count, &mut n_frames, &[ids.len() as i64])
-            .at(&path, what("writing 'frames/count'"))?;
-        if let Some((rows, pressure)) = &self.contacts {
-            append(rows, &mut self.contact_rows, &self.pending_contacts)
-                .at(&path, what("appending to 'contacts'"))?;
-            if self.pending_pressure.len() != self.people {
-                self.pending_pressure.clear();
-                self.pending_pressure.resize(self.people, f64::NAN);
-            }
-            pressure
-                .resize((frame + 1, self.people))
-                .and_then(|_| pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..)))
-                .at(&path, what("writing 'frames/pressure'"))?;
-            self.pending_contacts.clear();
+        if self.pending_pressure.len() != self.people {
             self.pending_pressure.clear();
+            self.pending_pressure.resize(self.people, f64::NAN);
         }
-        self.flush_rows()
-            .at(&path, what("writing 'steps' and 'exits'"))?;
-        self.file.flush().at(&path, what("flushing"))?;
+        // Every dataset of the frame is extended and written before any count moves; if one
+        // fails, every extent goes back to the last whole frame, so no reader sees a row of a
+        // frame that was not written whole (HDF5 fills a chunk it could not write with zeros).
+        let written = self.write_frame(frame, t, ids.len());
+        if let Err((dataset, source)) = written {
+            let rolled_back = self.roll_back();
+            let _ = self.file.flush();
+            return Err(IoError::Hdf5 {
+                path: self.path.clone(),
+                what: format!(
+                    "frame {frame} (t = {t}): writing '{dataset}' (the file keeps its {frame} \
+                     whole frames{})",
+                    match rolled_back {
+                        Ok(()) => String::new(),
+                        Err(e) => format!("; taking the frame back failed too: {e}"),
+                    }
+                ),
+                source,
+            });
+        }
+        self.pending_contacts.clear();
+        self.pending_pressure.clear();
+        self.pending_steps.clear();
+        self.pending_exits.clear();
         self.frames += 1;
         Ok(())
     }
 
-    fn flush_rows(&mut self) -> hdf5::Result<()> {
-        append(&self.steps, &mut self.step_rows, &self.pending_steps)?;
-        self.pending_steps.clear();
-        append(&self.exits, &mut self.exit_rows, &self.pending_exits)?;
-        self.pending_exits.clear();
+    /// Writes frame `frame`, committing the row counts only when every dataset and the flush
+    /// succeeded; on failure, names the dataset.
+    fn write_frame(
+        &mut self,
+        frame: usize,
+        t: f64,
+        count: usize,
+    ) -> Result<(), (&'static str, hdf5::Error)> {
+        fn named<T>(
+            name: &'static str,
+            r: hdf5::Result<T>,
+        ) -> Result<T, (&'static str, hdf5::Error)> {
+            r.map_err(|e| (name, e))
+        }
+        let mut trajectory_rows = self.trajectory_rows;
+        named(TRAJECTORY, self.injected(frame, TRAJECTORY))?;
+        named(
+            TRAJECTORY,
+            append(&self.trajectory, &mut trajectory_rows, &self.rows),
+        )?;
+        named(FRAME_POSITIONS, self.injected(frame, FRAME_POSITIONS))?;
+        named(
+            FRAME_POSITIONS,
+            self.positions
+                .resize((frame + 1, self.people, 2))
+                .and_then(|_| {
+                    let view = ArrayView2::from_shape((self.people, 2), &self.dense)
+                        .expect("2 coordinates a person");
+                    self.positions.write_slice(view, (frame, .., ..))
+                }),
+        )?;
+        named(FRAME_TIME, self.injected(frame, FRAME_TIME))?;
+        named(FRAME_TIME, append(&self.frame_time, &mut { frame }, &[t]))?;
+        named(FRAME_COUNT, self.injected(frame, FRAME_COUNT))?;
+        named(
+            FRAME_COUNT,
+            append(&self.frame_count, &mut { frame }, &[count as i64]),
+        )?;
+        let mut contact_rows = self.contact_rows;
+        if let Some((rows, pressure)) = &self.contacts {
+            named(CONTACTS, self.injected(frame, CONTACTS))?;
+            named(
+                CONTACTS,
+                append(rows, &mut contact_rows, &self.pending_contacts),
+            )?;
+            named(FRAME_PRESSURE, self.injected(frame, FRAME_PRESSURE))?;
+            named(
+                FRAME_PRESSURE,
+                pressure.resize((frame + 1, self.people)).and_then(|_| {
+                    pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..))
+                }),
+            )?;
+        }
+        let mut step_rows = self.step_rows;
+        named(STEPS, self.injected(frame, STEPS))?;
+        named(
+            STEPS,
+            append(&self.steps, &mut step_rows, &self.pending_steps),
+        )?;
+        let mut exit_rows = self.exit_rows;
+        named(EXITS, self.injected(frame, EXITS))?;
+        named(
+            EXITS,
+            append(&self.exits, &mut exit_rows, &self.pending_exits),
+        )?;
+        named("flush", self.injected(frame, "flush"))?;
+        named("flush", self.file.flush())?;
+        self.trajectory_rows = trajectory_rows;
+        self.contact_rows = contact_rows;
+        self.step_rows = step_rows;
+        self.exit_rows = exit_rows;
         Ok(())
+    }
+
+    /// Sets every dataset's extent back to the rows of the whole frames written.
+    fn roll_back(&self) -> hdf5::Result<()> {
+        let frames = self.frames;
+        let mut first: hdf5::Result<()> = Ok(());
+        let mut keep = |r: hdf5::Result<()>| {
+            if first.is_ok() {
+                first = r;
+            }
+        };
+        keep(self.trajectory.resize(self.trajectory_rows));
+        keep(self.positions.resize((frames, self.people, 2)));
+        keep(self.frame_time.resize(frames));
+        keep(self.frame_count.resize(frames));
+        if let Some((rows, pressure)) = &self.contacts {
+            keep(rows.resize(self.contact_rows));
+            keep(pressure.resize((frames, self.people)));
+        }
+        keep(self.steps.resize(self.step_rows));
+        keep(self.exits.resize(self.exit_rows));
+        first
+    }
+
+    /// Writes the pending steps and exits (at the end of a run), all or none.
+    fn flush_rows(&mut self) -> hdf5::Result<()> {
+        let (mut steps, mut exits) = (self.step_rows, self.exit_rows);
+        let written = append(&self.steps, &mut steps, &self.pending_steps)
+            .and_then(|_| append(&self.exits, &mut exits, &self.pending_exits));
+        match written {
+            Ok(()) => {
+                (self.step_rows, self.exit_rows) = (steps, exits);
+                self.pending_steps.clear();
+                self.pending_exits.clear();
+                Ok(())
+            }
+            Err(e) => {
+                let _ = self.steps.resize(self.step_rows);
+                let _ = self.exits.resize(self.exit_rows);
+                Err(e)
+            }
+        }
     }
 
     fn layout_error(&self, what: String) -> IoError {
@@ -413,22 +665,46 @@ impl RunWriter {
         }
     }
 
-    /// Ends the run: writes what is pending, `people/exit_time`, `status` (`complete`, or
-    /// `failed: …`) and `summary` (JSON), and closes the file.
+    /// Ends the run: writes what is pending, `people/exit_time`, `status` (`complete`,
+    /// `interrupted` or `failed: …`) and `summary` (JSON), closes the file and moves it from
+    /// its temporary name to its name (over an old file only with [`Overwrite::Allowed`]).
+    /// Each part is tried even when one before it failed (a full disk may still take the
+    /// status); the first error is returned. The file is moved to its name in every case but
+    /// one: when `path` appeared meanwhile and may not be replaced, it stays at its temporary
+    /// name, which the error gives.
     pub fn finish(mut self, status: &str, summary: &str) -> Result<(), IoError> {
         let path = self.path.clone();
-        self.flush_rows()
-            .at(&path, || "writing 'steps' and 'exits'".into())?;
-        self.file
-            .new_dataset_builder()
-            .with_data(&self.exit_times)
-            .create(PEOPLE_EXIT_TIME)
-            .at(&path, || "writing 'people/exit_time'".into())?;
-        set_text(&self.file, "status", status).at(&path, || "writing attribute 'status'".into())?;
-        set_text(&self.file, "summary", summary)
-            .at(&path, || "writing attribute 'summary'".into())?;
-        self.file.flush().at(&path, || "flushing".into())?;
+        let mut first: Option<IoError> = None;
+        let mut keep = |r: Result<(), IoError>| {
+            if let Err(e) = r {
+                first.get_or_insert(e);
+            }
+        };
+        keep(
+            self.flush_rows()
+                .at(&path, || "writing 'steps' and 'exits'".into()),
+        );
+        keep(
+            self.file
+                .new_dataset_builder()
+                .with_data(&self.exit_times)
+                .create(PEOPLE_EXIT_TIME)
+                .map(|_| ())
+                .at(&path, || "writing 'people/exit_time'".into()),
+        );
+        keep(
+            set_text(&self.file, "status", status)
+                .at(&path, || "writing attribute 'status'".into()),
+        );
+        keep(
+            set_text(&self.file, "summary", summary)
+                .at(&path, || "writing attribute 'summary'".into()),
+        );
+        keep(self.file.flush().at(&path, || "flushing".into()));
         let RunWriter {
+            partial,
+            overwrite,
+            lock,
             file,
             trajectory,
             frame_time,
@@ -448,7 +724,20 @@ impl RunWriter {
             steps,
             contacts,
         ));
-        file.close().at(&path, || "closing".into())
+        keep(file.close().at(&path, || "closing".into()));
+        keep(publish(&partial, &path, overwrite).map_err(|e| match e {
+            IoError::Exists { .. } => IoError::Create {
+                path: path.clone(),
+                reason: format!(
+                    "it appeared while the run went on and --force was not given; the run is \
+                     in '{}'",
+                    partial.display()
+                ),
+            },
+            other => other,
+        }));
+        drop(lock);
+        first.map_or(Ok(()), Err)
     }
 }
 

@@ -1,0 +1,270 @@
+//! A fuzzer of scene files (proptest): mutated scenes go through the parser, validation and
+//! `Simulation::new`, which must answer every one with a value or an error, never a panic
+//! or an abort, and quickly. The seeds are `tests/fuzz-corpus/*.toml` (valid scenes and every
+//! input that once crashed); the mutations set numbers to extremes (0, −1, NaN, ±∞, 1e±308,
+//! 5e-324, …), drop and retype keys, move polygon vertices, and cut or splice the text.
+//! Failing cases are kept in `fuzz_scenes.proptest-regressions` (replayed first).
+//!
+//! CI runs it for `MOREAU_FUZZ_SECONDS` (default 30 s); the README's testing section gives the
+//! 10-minute command. Sizes are capped (≤ 3,000 people, grids within the library's limit) so
+//! that each accepted scene builds in well under a second.
+
+use std::time::{Duration, Instant};
+
+use moreau_crowd::{Scene, Simulation};
+use proptest::prelude::*;
+use proptest::test_runner::{Config, FileFailurePersistence, TestCaseError, TestRunner};
+use toml::Value;
+
+fn corpus() -> Vec<(String, String)> {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../tests/fuzz-corpus");
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read_to_string(&p).unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// One edit of a scene.
+#[derive(Debug, Clone)]
+enum Mutation {
+    /// Sets the number at path `which` (of [`PATHS`]) to `value`.
+    Number(usize, f64),
+    /// Sets the integer at path `which` to `value`.
+    Integer(usize, i64),
+    /// Removes the key at path `which`.
+    Remove(usize),
+    /// Puts a string where the value at path `which` is.
+    Retype(usize),
+    /// Moves vertex `k` of polygon `which` (of [`POLYGONS`]) to `(x, y)`.
+    Vertex(usize, usize, f64, f64),
+    /// Drops vertex `k` of polygon `which`.
+    DropVertex(usize, usize),
+}
+
+const PATHS: &[&str] = &[
+    "time.horizon",
+    "time.step",
+    "time.output_interval",
+    "time.tol",
+    "solver.eps_kappa",
+    "solver.max_violation",
+    "solver.grid_cell",
+    "solver.threads",
+    "groups.0.count",
+    "groups.0.radius",
+    "groups.0.speed",
+    "seed",
+    "exits.0.name",
+    "groups.0.destination",
+];
+
+const POLYGONS: &[&str] = &[
+    "area.outer",
+    "exits.0.area",
+    "exits.0.target",
+    "groups.0.spawn",
+];
+
+fn extreme() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        3 => prop::sample::select(vec![
+            0.0, -0.0, -1.0, 1e-300, 5e-324, 1e308, -1e308, 1e300, f64::NAN, f64::INFINITY,
+            f64::NEG_INFINITY, 1e15, 1e16, -1e15, 1e-6, 1e-3, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0,
+            10.0, 1e3, 1e7, f64::MIN_POSITIVE, f64::EPSILON,
+        ]),
+        1 => -1e3..1e3f64,
+        1 => any::<f64>(),
+    ]
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    let path = 0..PATHS.len();
+    let poly = 0..POLYGONS.len();
+    prop_oneof![
+        4 => (path.clone(), extreme()).prop_map(|(p, v)| Mutation::Number(p, v)),
+        2 => (path.clone(), prop::sample::select(vec![
+            0i64, -1, 1, 2, 5, 100, 3000, 1 << 31, i64::MAX, i64::MIN, 1 << 40,
+        ])).prop_map(|(p, v)| Mutation::Integer(p, v)),
+        1 => path.clone().prop_map(Mutation::Remove),
+        1 => path.prop_map(Mutation::Retype),
+        3 => (poly.clone(), 0..16usize, extreme(), extreme())
+            .prop_map(|(p, k, x, y)| Mutation::Vertex(p, k, x, y)),
+        1 => (poly, 0..16usize).prop_map(|(p, k)| Mutation::DropVertex(p, k)),
+    ]
+}
+
+/// The value at a dotted path (list indices as numbers), if there.
+fn at<'a>(root: &'a mut Value, path: &str) -> Option<&'a mut Value> {
+    let mut node = root;
+    for part in path.split('.') {
+        node = match node {
+            Value::Table(t) => t.get_mut(part)?,
+            Value::Array(a) => a.get_mut(part.parse::<usize>().ok()?)?,
+            _ => return None,
+        };
+    }
+    Some(node)
+}
+
+fn set(root: &mut Value, path: &str, value: Value) {
+    let (parent, last) = path.rsplit_once('.').unwrap_or(("", path));
+    let node = if parent.is_empty() {
+        Some(root)
+    } else {
+        at(root, parent)
+    };
+    match node {
+        Some(Value::Table(t)) => {
+            t.insert(last.to_string(), value);
+        }
+        Some(Value::Array(a)) => {
+            if let Some(slot) = last.parse::<usize>().ok().and_then(|i| a.get_mut(i)) {
+                *slot = value;
+            }
+        }
+        _ => {}
+    }
+}
+
+fn apply(root: &mut Value, m: &Mutation) {
+    match *m {
+        Mutation::Number(p, v) => set(root, PATHS[p], Value::Float(v)),
+        Mutation::Integer(p, v) => {
+            // Sizes capped so that an accepted scene builds fast (see the module's doc).
+            let v = if PATHS[p] == "groups.0.count" {
+                v.min(3000)
+            } else {
+                v
+            };
+            set(root, PATHS[p], Value::Integer(v))
+        }
+        Mutation::Remove(p) => {
+            let (parent, last) = PATHS[p].rsplit_once('.').unwrap_or(("", PATHS[p]));
+            let node = if parent.is_empty() {
+                Some(&mut *root)
+            } else {
+                at(root, parent)
+            };
+            if let Some(Value::Table(t)) = node {
+                t.remove(last);
+            }
+        }
+        Mutation::Retype(p) => set(root, PATHS[p], Value::String("x".into())),
+        Mutation::Vertex(p, k, x, y) => {
+            if let Some(Value::Array(v)) = at(root, POLYGONS[p])
+                && !v.is_empty()
+            {
+                let k = k % v.len();
+                v[k] = Value::Array(vec![Value::Float(x), Value::Float(y)]);
+            }
+        }
+        Mutation::DropVertex(p, k) => {
+            if let Some(Value::Array(v)) = at(root, POLYGONS[p])
+                && !v.is_empty()
+            {
+                let k = k % v.len();
+                v.remove(k);
+            }
+        }
+    }
+}
+
+/// A valid scene's text → whatever it becomes: a clean error, or a simulation that must be
+/// able to report its first frame.
+fn check(text: &str) -> Result<(), TestCaseError> {
+    let Ok(scene) = Scene::from_toml(text, "<fuzz>") else {
+        return Ok(());
+    };
+    // Too big to build quickly, though valid (the fuzzer's cap, not the library's).
+    if scene.groups.iter().any(|g| g.count.unwrap_or(0) > 3000) {
+        return Ok(());
+    }
+    if let Ok(sim) = Simulation::new(scene) {
+        let frame = sim.frame();
+        prop_assert!(frame.positions.iter().all(|x| x.is_finite()));
+    }
+    Ok(())
+}
+
+fn runner() -> TestRunner {
+    let file = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fuzz_scenes.proptest-regressions"
+    );
+    TestRunner::new(Config {
+        cases: 64,
+        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(file))),
+        source_file: Some(file),
+        ..Config::default()
+    })
+}
+
+#[test]
+fn the_corpus_gives_values_or_errors() {
+    for (name, text) in corpus() {
+        let outcome = std::panic::catch_unwind(|| check(&text));
+        assert!(
+            matches!(outcome, Ok(Ok(()))),
+            "{name}: {:?}",
+            outcome.map_err(|_| "panicked")
+        );
+    }
+}
+
+#[test]
+fn mutated_scenes_give_values_or_errors_never_panics() {
+    let seconds: u64 = std::env::var("MOREAU_FUZZ_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(30);
+    let corpus = corpus();
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    let strategy = (
+        0..corpus.len(),
+        prop::collection::vec(mutation(), 1..5),
+        prop_oneof![4 => Just(None), 1 => (0.0..1.0f64, any::<u8>()).prop_map(Some)],
+    );
+    let mut runner = runner();
+    let mut cases = 0u64;
+    // Batches of 64 cases until the time is up (one runner: its random stream goes on).
+    while cases == 0 || Instant::now() < deadline {
+        let outcome = runner.run(&strategy, |(seed, mutations, splice)| {
+            let (_, text) = &corpus[seed];
+            let mut text = match toml::from_str::<Value>(text) {
+                Ok(mut root) => {
+                    for m in &mutations {
+                        apply(&mut root, m);
+                    }
+                    toml::to_string(&root).unwrap_or_default()
+                }
+                Err(_) => text.clone(),
+            };
+            // Sometimes cut the text at a character and put a byte there.
+            if let Some((at, byte)) = splice {
+                let mut cut = (at * text.len() as f64) as usize;
+                while !text.is_char_boundary(cut) {
+                    cut -= 1;
+                }
+                text.truncate(cut);
+                text.push(char::from(byte));
+            }
+            check(&text)
+        });
+        if let Err(e) = outcome {
+            panic!("{e}");
+        }
+        cases += 64;
+    }
+    println!("{cases} mutated scenes in {seconds} s");
+}

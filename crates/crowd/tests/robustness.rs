@@ -1,0 +1,183 @@
+//! Issue 20, item by item: every input that exhausted the machine (memory, time) or panicked
+//! is refused before anything is allocated, with an error that names the field, the value and
+//! the limit; misleading messages say what is wrong. Each test is named after what broke.
+
+use moreau_crowd::{DistanceField, FieldError, Scene, Simulation, limits};
+
+/// The small room (`data/scenes/room-60.toml`: 6 m × 6 m, 60 people, a door to a target area),
+/// with each `(from, to)` replaced in its text.
+fn room(edits: &[(&str, &str)]) -> String {
+    let path = format!(
+        "{}/../../data/scenes/room-60.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let mut text = std::fs::read_to_string(path).unwrap();
+    for (from, to) in edits {
+        assert!(text.contains(from), "room-60.toml has no {from:?}");
+        text = text.replace(from, to);
+    }
+    text
+}
+
+/// The error of reading, validating and building `text`, which must fail.
+fn refused(text: &str) -> String {
+    match Scene::from_toml(text, "<test>").and_then(Simulation::new) {
+        Ok(_) => panic!("the scene was accepted"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn assert_mentions(msg: &str, needles: &[&str]) {
+    for n in needles {
+        assert!(msg.contains(n), "the error does not mention {n:?}: {msg}");
+    }
+}
+
+#[test]
+fn a_micrometre_grid_cell_aborted_on_a_200_terabyte_allocation() {
+    let msg = refused(&room(&[("grid_cell = 0.1", "grid_cell = 1e-6")]));
+    assert_mentions(&msg, &["solver.grid_cell", "1e-6", "cells", "limit", "4e6"]);
+}
+
+#[test]
+fn a_100_km_room_aborted_on_its_distance_grid() {
+    let msg = refused(&room(&[(
+        "[12.0, 6.0], [6.2, 6.0]",
+        "[1e5, 1e5], [6.2, 6.0]",
+    )]));
+    assert_mentions(&msg, &["solver.grid_cell", "cells", "limit"]);
+}
+
+#[test]
+fn distance_field_build_allocated_whatever_grid_it_was_asked_for() {
+    // The library call itself (the FMU and `run --from` build through it too).
+    let huge = DistanceField::build([0.0, 0.0], [1e5, 1e5], 1e-3, |_| true, |_| true);
+    assert!(
+        matches!(huge, Err(FieldError::TooManyCells { .. })),
+        "{huge:?}"
+    );
+    let text = huge.unwrap_err().to_string();
+    assert_mentions(&text, &["1.000e16 cells", "limit"]);
+    let nan = DistanceField::build([0.0, 0.0], [f64::INFINITY, 1.0], 0.1, |_| true, |_| true);
+    assert!(matches!(nan, Err(FieldError::Invalid { .. })), "{nan:?}");
+    // Within the limit it builds.
+    assert!(DistanceField::build([0.0, 0.0], [10.0, 10.0], 0.1, |_| true, |p| p[0] > 9.9).is_ok());
+}
+
+#[test]
+fn coordinates_of_1e300_panicked_inside_ndarray() {
+    let msg = refused(&room(&[(
+        "[12.0, 6.0], [6.2, 6.0]",
+        "[1e300, 6.0], [6.2, 6.0]",
+    )]));
+    assert_mentions(&msg, &["area.outer[", "1e300", "within ±1e15"]);
+}
+
+#[test]
+fn a_spawn_polygon_at_1e308_panicked_on_an_unwrap() {
+    let msg = refused(&room(&[(
+        "spawn = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]",
+        "spawn = [[-1e308, -1e308], [1e308, -1e308], [1e308, 1e308], [-1e308, 1e308]]",
+    )]));
+    assert_mentions(&msg, &["groups[0].spawn[0]", "1e308", "within ±1e15"]);
+    let msg = refused(&room(&[(
+        "count = 60\nspawn = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]",
+        "positions = [[1e16, 1.0]]",
+    )]));
+    assert_mentions(&msg, &["groups[0].positions[0]", "1e16"]);
+}
+
+#[test]
+fn a_step_of_1e_300_overflowed_the_step_schedule() {
+    let msg = refused(&room(&[("step = 0.05", "step = 1e-300")]));
+    assert_mentions(&msg, &["time.step", "1e-300", "steps", "limit of 1e9"]);
+}
+
+#[test]
+fn a_horizon_of_1e308_overflowed_the_step_schedule() {
+    let msg = refused(&room(&[("horizon = 15.0", "horizon = 1e308")]));
+    assert_mentions(&msg, &["time.", "1e308", "limit"]);
+}
+
+#[test]
+fn a_horizon_of_1e7_with_millisecond_steps_allocated_160_gb() {
+    let msg = refused(&room(&[
+        ("horizon = 15.0", "horizon = 1e7"),
+        ("step = 0.05", "step = 1e-3"),
+        ("output_interval = 0.1", "output_interval = 10.0"),
+    ]));
+    assert_mentions(&msg, &["time.step", "1.000e10 steps", "limit of 1e9"]);
+    // With adaptive steps, the bound is on their largest step.
+    let msg = refused(&room(&[
+        ("horizon = 15.0", "horizon = 1e12"),
+        ("output_interval = 0.1", "output_interval = 1e5\ntol = 0.01"),
+    ]));
+    assert_mentions(&msg, &["time.horizon", "1000000000000", "limit of 1e9"]);
+}
+
+#[test]
+fn an_output_interval_of_5e_324_was_blamed_on_fps() {
+    let msg = refused(&room(&[(
+        "output_interval = 0.1",
+        "output_interval = 5e-324",
+    )]));
+    assert_mentions(&msg, &["time.output_interval", "5e-324", "frames", "limit"]);
+    assert!(!msg.contains("fps"), "{msg}");
+}
+
+#[test]
+fn ten_million_people_in_36_m2_took_hours_of_random_placement() {
+    let msg = refused(&room(&[("count = 60", "count = 10000000")]));
+    assert_mentions(
+        &msg,
+        &[
+            "groups[0].count",
+            "10000000",
+            "densest packing",
+            "people fit in the spawn region",
+        ],
+    );
+}
+
+#[test]
+fn a_thousand_threads_were_accepted_and_never_finished() {
+    let msg = refused(&room(&[(
+        "grid_cell = 0.1",
+        "grid_cell = 0.1\nthreads = 1024",
+    )]));
+    let most = limits::max_threads();
+    assert_mentions(
+        &msg,
+        &["solver.threads", "1024", &format!("at most {most}")],
+    );
+    // Every core (0) and up to the limit are fine.
+    for threads in [0, most] {
+        let ok = room(&[(
+            "grid_cell = 0.1",
+            &format!("grid_cell = 0.1\nthreads = {threads}"),
+        )]);
+        Simulation::new(Scene::from_toml(&ok, "<test>").unwrap()).unwrap();
+    }
+}
+
+#[test]
+fn a_self_intersecting_area_was_reported_as_an_unreachable_destination() {
+    // A bow tie: the last two vertices swapped.
+    let text = room(&[(
+        "[12.0, 6.0], [6.2, 6.0], [6.2, 3.5], [6.0, 3.5], [6.0, 6.0], [0.0, 6.0],",
+        "[12.0, 6.0], [6.2, 6.0], [6.2, 3.5], [6.0, 3.5], [0.0, 6.0], [6.0, 6.0],",
+    )]);
+    let msg = refused(&text);
+    assert_mentions(&msg, &["area.outer", "crosses itself"]);
+    assert!(!msg.contains("unreachable"), "{msg}");
+}
+
+#[test]
+fn an_exit_covering_the_whole_room_evacuated_everyone_at_the_first_step() {
+    let text = room(&[(
+        "area = [[6.0, 2.5], [6.2, 2.5], [6.2, 3.5], [6.0, 3.5]]",
+        "area = [[-1.0, -1.0], [13.0, -1.0], [13.0, 7.0], [-1.0, 7.0]]",
+    )]);
+    let msg = refused(&text);
+    assert_mentions(&msg, &["exits[0].area", "door", "starts at", "first step"]);
+}

@@ -1,0 +1,205 @@
+//! Issue 20, the run file: a frame is written whole or not at all (a full disk left phantom
+//! rows), an old file stays whole until the new run ends (`--force` replaced it at the start),
+//! the second writer of a path is refused (two runs silently lost one file), and a file being
+//! written opens for reading.
+
+use std::path::{Path, PathBuf};
+
+use moreau_core::{SolveStatus, StepReport};
+use moreau_io::{
+    ContactRow, FailPoint, IoError, Overwrite, RunFile, RunHeader, RunWriter, partial_path,
+};
+
+/// `name` in a directory of its own (tests run in parallel).
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("moreau-io-rb-{}-{name}.d", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn header(n: usize, contacts: bool) -> RunHeader {
+    RunHeader {
+        version: "0.1.0".into(),
+        scene_name: "unit".into(),
+        scene: "name = \"unit\"".into(),
+        seed: 1,
+        solver: "kind = \"apgd\"".into(),
+        command: "moreau run unit.toml".into(),
+        wkt_geometry: "POLYGON ((0 0, 9 0, 9 9, 0 9, 0 0))".into(),
+        fps: 10.0,
+        radii: vec![0.2; n],
+        walls: vec![[0.0, 0.0, 9.0, 0.0]],
+        contacts,
+    }
+}
+
+fn report(step: usize) -> StepReport {
+    StepReport {
+        step,
+        t: 0.05 * (step + 1) as f64,
+        mu: 0.05,
+        status: SolveStatus::Converged,
+        solver: "apgd",
+        ..Default::default()
+    }
+}
+
+/// Frame `k` of `n` people (everyone present), with two steps and, from frame 1 on, a contact.
+fn write_frame(w: &mut RunWriter, k: usize, n: usize) -> Result<(), IoError> {
+    if k > 0 {
+        w.step(&report(2 * k - 2));
+        w.step(&report(2 * k - 1));
+        w.exit(0, 0.1 * k as f64)?;
+    }
+    let ids: Vec<u32> = (0..n as u32).collect();
+    let q: Vec<f64> = (0..2 * n)
+        .map(|i| 1.0 + i as f64 + 0.01 * k as f64)
+        .collect();
+    if w.records_contacts() {
+        let row = ContactRow {
+            frame: 0,
+            kind: ContactRow::PERSON_PERSON,
+            a: 0,
+            b: 1,
+            lambda: 0.5,
+        };
+        w.contacts([row], &vec![0.5; n])?;
+    }
+    w.frame(0.1 * k as f64, &ids, &q)
+}
+
+/// Every dataset of a failed file holds exactly `frames` whole frames of `n` people.
+fn assert_whole_frames(path: &Path, frames: usize, n: usize, contacts: bool) {
+    let f = RunFile::open(path).unwrap();
+    assert_eq!(f.frame_times().unwrap().len(), frames, "frames/time");
+    assert_eq!(f.frame_counts().unwrap().len(), frames, "frames/count");
+    let traj = f.trajectory().unwrap();
+    assert_eq!(traj.len(), frames * n, "trajectory rows");
+    // No phantom row: every row is a person of a written frame at its written position.
+    for r in &traj {
+        assert!((r.frame as usize) < frames, "{r:?}");
+        assert!(r.x >= 1.0, "a zero row (never written): {r:?}");
+    }
+    assert!(f.positions(frames - 1).is_ok());
+    assert!(
+        f.positions(frames).is_err(),
+        "a frames/positions row too many"
+    );
+    if contacts {
+        assert_eq!(f.contacts().unwrap().len(), frames, "contacts rows");
+        assert!(
+            f.pressure(frames).is_err(),
+            "a frames/pressure row too many"
+        );
+    }
+    // The steps and exits of the whole frames (the ones pending at the failure follow them
+    // when the run is finished: they happened).
+    assert!(f.steps().unwrap().len() >= 2 * (frames - 1));
+    assert!(f.status().unwrap().starts_with("failed"));
+}
+
+#[test]
+fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
+    let n = 150;
+    for contacts in [false, true] {
+        for dataset in [
+            "trajectory",
+            "frames/positions",
+            "frames/time",
+            "frames/count",
+            "contacts",
+            "frames/pressure",
+            "steps",
+            "exits",
+            "flush",
+        ] {
+            if !contacts && (dataset == "contacts" || dataset == "frames/pressure") {
+                continue;
+            }
+            let path = scratch(&format!("full-{contacts}-{}.h5", dataset.replace('/', "-")));
+            let mut w = RunWriter::create(&path, &header(n, contacts), Overwrite::Never).unwrap();
+            w.fail_at(FailPoint {
+                frame: 3,
+                dataset: dataset.into(),
+            });
+            for k in 0..3 {
+                write_frame(&mut w, k, n).unwrap();
+            }
+            let err = write_frame(&mut w, 3, n).unwrap_err().to_string();
+            assert!(
+                err.contains("No space left on device")
+                    && err.contains(dataset)
+                    && err.contains("keeps its 3 whole frames"),
+                "{dataset}: {err}"
+            );
+            assert_eq!(w.frames(), 3);
+            w.finish("failed: disk full", "{}").unwrap();
+            assert_whole_frames(&path, 3, n, contacts);
+        }
+    }
+}
+
+#[test]
+fn force_replaced_the_old_file_when_the_run_started() {
+    let path = scratch("old.h5");
+    std::fs::write(&path, b"a complete earlier run").unwrap();
+    let mut w = RunWriter::create(&path, &header(2, false), Overwrite::Allowed).unwrap();
+    write_frame(&mut w, 0, 2).unwrap();
+    // While the run goes (and if it is killed now), the old file is whole, and the new one is
+    // at its temporary name.
+    assert_eq!(std::fs::read(&path).unwrap(), b"a complete earlier run");
+    assert_eq!(w.partial(), partial_path(&path));
+    assert!(w.partial().is_file());
+    assert_eq!(
+        RunFile::open(w.partial()).unwrap().status().unwrap(),
+        "running"
+    );
+    w.finish("complete", "{}").unwrap();
+    assert_eq!(RunFile::open(&path).unwrap().status().unwrap(), "complete");
+    assert!(!partial_path(&path).exists());
+    assert!(!moreau_io::lock_path(&path).exists());
+}
+
+#[test]
+fn two_writers_of_one_path_both_succeeded_and_one_file_was_lost() {
+    let path = scratch("twice.h5");
+    let first = RunWriter::create(&path, &header(2, false), Overwrite::Allowed).unwrap();
+    for overwrite in [Overwrite::Allowed, Overwrite::Never] {
+        let second = RunWriter::create(&path, &header(2, false), overwrite).unwrap_err();
+        assert!(matches!(second, IoError::Busy { .. }), "{second}");
+        assert!(
+            second.to_string().contains("another run is writing"),
+            "{second}"
+        );
+    }
+    first.finish("complete", "{}").unwrap();
+    // Once the first has ended, the path is free again (with --force, as it exists now).
+    let again = RunWriter::create(&path, &header(2, false), Overwrite::Allowed).unwrap();
+    again.finish("complete", "{}").unwrap();
+}
+
+#[test]
+fn a_partial_file_left_by_a_killed_run_is_replaced_only_with_force() {
+    let path = scratch("killed.h5");
+    let partial = partial_path(&path);
+    std::fs::write(&partial, b"frames of a killed run").unwrap();
+    let err = RunWriter::create(&path, &header(2, false), Overwrite::Never).unwrap_err();
+    assert!(matches!(err, IoError::Stale { .. }), "{err}");
+    assert!(err.to_string().contains("--force"), "{err}");
+    assert_eq!(std::fs::read(&partial).unwrap(), b"frames of a killed run");
+    let w = RunWriter::create(&path, &header(2, false), Overwrite::Allowed).unwrap();
+    w.finish("complete", "{}").unwrap();
+    assert!(!partial.exists());
+}
+
+#[test]
+fn inspect_on_a_directory_said_no_such_file() {
+    let dir = scratch("dir.h5");
+    std::fs::create_dir_all(&dir).unwrap();
+    let err = RunFile::open(&dir).unwrap_err().to_string();
+    assert!(err.contains("is a directory"), "{err}");
+    let missing = scratch("missing.h5");
+    let err = RunFile::open(&missing).unwrap_err().to_string();
+    assert!(err.contains("no such file"), "{err}");
+}

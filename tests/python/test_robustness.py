@@ -1,0 +1,285 @@
+"""Issue 20 from a user's side: nothing typed loses a file (a typo with --force, a summary
+path, a second run, a killed rerun), signals finish the file as `interrupted`, a live run can
+be read, broken pipes end quietly, sweeps are checked before the cluster starts, and
+plot_run.py explains a file it cannot plot. Each test is named after what broke."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import pytest
+
+import moreau_run
+from conftest import DENSE, MOREAU, ROOM, ROOT, moreau
+
+
+def short_room(tmp_path, horizon=0.5):
+    scene = tmp_path / "short.toml"
+    scene.write_text(ROOM.read_text().replace("horizon = 20.0", f"horizon = {horizon}"))
+    return scene
+
+
+def start(*args):
+    return subprocess.Popen([str(MOREAU), *map(str, args)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_frames(path, frames, proc, timeout=300):
+    """Waits until the file at `path` (a run's partial file) holds `frames` frames; h5py opens
+    it with HDF5's default file locking while the run writes it."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, f"the run ended first: {proc.stderr.read()}"
+        try:
+            with h5py.File(path, "r") as f:
+                if f["frames/time"].shape[0] >= frames:
+                    return
+        except (OSError, KeyError):
+            pass
+        time.sleep(0.1)
+    pytest.fail(f"{path}: fewer than {frames} frames in {timeout} s")
+
+
+def test_force_with_a_typo_left_an_empty_running_file(tmp_path):
+    out = tmp_path / "run.h5"
+    moreau("run", short_room(tmp_path), "-o", out, "--quiet")
+    before = out.read_bytes()
+    proc = moreau("run", short_room(tmp_path), "-o", out, "--quiet", "--force", "--tol=-1",
+                  check=False)
+    assert proc.returncode == 2 and "time.tol = -1" in proc.stderr
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.h5", "short.toml"]
+
+
+def test_killing_a_force_rerun_lost_the_earlier_complete_file(tmp_path):
+    out = tmp_path / "run.h5"
+    moreau("run", short_room(tmp_path), "-o", out, "--quiet")
+    proc = start("run", DENSE, "-o", out, "--quiet", "--force")
+    try:
+        wait_for_frames(tmp_path / ".run.h5.partial", 2, proc)
+        assert moreau_run.load(out).status == "complete"
+    finally:
+        proc.kill()
+        proc.wait()
+    assert moreau_run.load(out).status == "complete"
+    assert moreau_run.load(out).scene["name"] == "room-150"
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_ctrl_c_and_sigterm_left_status_running(tmp_path, sig, code):
+    out = tmp_path / "stopped.h5"
+    proc = start("run", DENSE, "-o", out, "--quiet", "--summary-json", tmp_path / "s.json")
+    try:
+        wait_for_frames(tmp_path / ".stopped.h5.partial", 2, proc)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == code, err
+    assert "interrupted" in err and "panicked" not in err
+    run = moreau_run.load(out)
+    assert run.status == "interrupted"
+    assert len(run.time) >= 2
+    assert not (tmp_path / ".stopped.h5.partial").exists()
+    assert not (tmp_path / ".stopped.h5.lock").exists()
+    assert '"status": "interrupted"' in (tmp_path / "s.json").read_text()
+    assert "status: interrupted" in moreau("inspect", out).stdout
+
+
+def test_two_concurrent_force_runs_both_exited_0_and_one_file_was_lost(tmp_path):
+    out = tmp_path / "shared.h5"
+    first = start("run", DENSE, "-o", out, "--quiet", "--force")
+    try:
+        wait_for_frames(tmp_path / ".shared.h5.partial", 1, first)
+        second = moreau("run", short_room(tmp_path), "-o", out, "--quiet", "--force",
+                        check=False)
+        assert second.returncode == 2
+        assert "another run is writing" in second.stderr
+    finally:
+        first.kill()
+        first.wait()
+
+
+def test_a_run_in_progress_could_not_be_opened_by_inspect_or_h5py(tmp_path):
+    out = tmp_path / "live.h5"
+    partial = tmp_path / ".live.h5.partial"
+    proc = start("run", DENSE, "-o", out, "--quiet")
+    try:
+        wait_for_frames(partial, 2, proc)  # h5py, default locking
+        text = moreau("inspect", partial).stdout
+        assert "status: running" in text and "still going" in text
+        hint = moreau("inspect", out, check=False)
+        assert hint.returncode == 2 and ".live.h5.partial" in hint.stderr
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_summary_json_overwrote_the_scene_and_the_run_file(tmp_path):
+    scene = short_room(tmp_path)
+    text = scene.read_text()
+    out = tmp_path / "run.h5"
+    moreau("run", scene, "-o", out, "--quiet")
+    run = out.read_bytes()
+    for target, flags, needle in [
+        (scene, [], "scene file"),
+        (scene, ["-o", out, "--force"], "scene file"),
+        (out, ["-o", out, "--force"], "--output file"),
+    ]:
+        proc = moreau("run", scene, "--quiet", "--summary-json", target, *flags, check=False)
+        assert proc.returncode == 2 and needle in proc.stderr, proc.stderr
+    keep = tmp_path / "keep.toml"
+    keep.write_text("precious")
+    proc = moreau("run", scene, "--quiet", "--summary-json", keep, check=False)
+    assert proc.returncode == 2 and "already exists" in proc.stderr and "--force" in proc.stderr
+    assert keep.read_text() == "precious"
+    assert scene.read_text() == text and out.read_bytes() == run
+    # With --force a summary file is replaced (whole).
+    moreau("run", scene, "--quiet", "--summary-json", keep, "--force")
+    assert '"status": "complete"' in keep.read_text()
+    # An output may not name an input either.
+    proc = moreau("run", scene, "-o", scene, "--force", "--quiet", check=False)
+    assert proc.returncode == 2 and scene.read_text() == text
+
+
+def test_a_summary_in_a_missing_directory_was_found_only_after_the_run(tmp_path):
+    out = tmp_path / "run.h5"
+    started = time.monotonic()
+    proc = moreau("run", DENSE, "-o", out, "--quiet", "--summary-json",
+                  tmp_path / "no" / "s.json", check=False)
+    assert proc.returncode == 2 and "does not exist" in proc.stderr
+    assert not out.exists() and not list(tmp_path.glob(".*"))
+    assert time.monotonic() - started < 60  # refused, not run: the run takes minutes
+
+
+def closed_stdout(*args):
+    """Runs moreau with its standard output a pipe closed before it writes (as `| head` does
+    once it has its line)."""
+    proc = subprocess.Popen([str(MOREAU), *map(str, args)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=120)
+    return proc.returncode, err
+
+
+def test_inspect_and_example81_panicked_on_a_broken_pipe(room_run):
+    for args in [("inspect", room_run), ("example81",)]:
+        code, err = closed_stdout(*args)
+        assert code == 0, (args, err)
+        assert "panicked" not in err and "Broken pipe" not in err, (args, err)
+
+
+def test_example81_with_t_end_1e9_ran_for_hours():
+    proc = moreau("example81", "--t-end", "1e9", check=False, timeout=60)
+    assert proc.returncode == 2
+    assert "--t-end" in proc.stderr and "limit" in proc.stderr
+
+
+def test_os_and_hdf5_error_text_was_printed_twice(tmp_path):
+    proc = moreau("run", tmp_path / "missing.toml", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.count("No such file or directory") == 1, proc.stderr
+    garbage = tmp_path / "garbage.h5"
+    garbage.write_bytes(b"not hdf5 at all" * 100)
+    proc = moreau("inspect", garbage, check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.count("file signature not found") <= 1, proc.stderr
+
+
+def test_inspect_on_a_directory_said_no_such_file(tmp_path):
+    proc = moreau("inspect", tmp_path, check=False)
+    assert proc.returncode == 2 and "is a directory" in proc.stderr
+
+
+def test_converge_horizon_minus_one_and_bench_density_0_gave_unrelated_errors(tmp_path):
+    proc = moreau("converge", ROOM, "--horizon=-1", "--out", tmp_path, check=False, timeout=120)
+    assert proc.returncode == 2 and "--horizon" in proc.stderr and "-1" in proc.stderr, proc.stderr
+    proc = moreau("bench", "--density", "0", check=False, timeout=120)
+    assert proc.returncode == 2 and "--density" in proc.stderr and "0" in proc.stderr, proc.stderr
+
+
+# Python: sweeps and plot_run.py.
+
+def sweep(tmp_path, body, base=ROOM):
+    spec = tmp_path / "sweep.toml"
+    spec.write_text(f'base = "{base}"\nseeds = 1\n{body}')
+    return spec
+
+
+def ensemble(*args):
+    return subprocess.run([sys.executable, "-m", "moreau_ensemble", *map(str, args)],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL,
+                          cwd=ROOT / "python")
+
+
+@pytest.mark.parametrize("body,needles", [
+    ('[vary]\n"groups.5.count" = [10, 20]\n', ["vary.groups.5.count = 10", "IndexError"]),
+    ("[vary]\ndoor_width = [0]\n", ["vary.door_width = 0", "must be finite and > 0"]),
+    ('[set]\n"time.horizon.x" = 1\n', ["set.time.horizon.x = 1", "has no parts"]),
+])
+def test_a_bad_sweep_variant_gave_a_traceback_after_the_cluster_started(tmp_path, body,
+                                                                          needles):
+    proc = ensemble(sweep(tmp_path, body), "--out", tmp_path / "out")
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for n in needles:
+        assert n in proc.stderr, (n, proc.stderr)
+    assert not (tmp_path / "out").exists(), "nothing made before the sweep was checked"
+
+
+def test_a_garbage_base_file_gave_a_traceback(tmp_path):
+    base = tmp_path / "garbage.toml"
+    base.write_bytes(b"\x00\xff not [toml")
+    proc = ensemble(sweep(tmp_path, "", base=base), "--out", tmp_path / "out")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "base" in proc.stderr and "not a scene file" in proc.stderr
+
+
+def test_a_sweep_key_with_dot_dot_slash_made_directories_outside_out(tmp_path):
+    from moreau_ensemble import load_sweep
+
+    spec = sweep(tmp_path, '[vary]\n"name" = ["../../escaped", "/abs", ".."]\n')
+    variants = load_sweep(spec).variants()
+    for v in variants:
+        assert "/" not in v.name and v.name not in (".", ".."), v.name
+        runs = tmp_path / "out" / "runs"
+        assert (runs / v.name).resolve().parent == runs.resolve()
+    spec = sweep(tmp_path, '[vary]\n"../x" = [1]\n')
+    with pytest.raises(ValueError):
+        load_sweep(spec)  # and were it accepted, its directory name has no '/'
+
+
+def plot(*args):
+    return subprocess.run([sys.executable, str(ROOT / "python" / "plot_run.py"), *map(str, args)],
+                          capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+
+
+def test_plot_run_gave_a_traceback_on_a_non_hdf5_or_truncated_file(tmp_path, room_run):
+    garbage = tmp_path / "garbage.h5"
+    garbage.write_text("this is not HDF5")
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(room_run.read_bytes()[:4096])
+    for path in (garbage, truncated):
+        proc = plot(path, "-o", tmp_path / "plots")
+        assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+        assert "cannot be read as HDF5" in proc.stderr, proc.stderr
+
+
+def test_plot_run_failed_on_a_run_with_no_steps(tmp_path):
+    # A run killed after its first frame: one frame, no step (made from a short run's file).
+    out = tmp_path / "nothing.h5"
+    moreau("run", short_room(tmp_path), "-o", out, "--quiet")
+    with h5py.File(out, "r+") as f:
+        f["steps"].resize((0,))
+        for name in ("frames/time", "frames/count"):
+            f[name].resize((1,))
+        f.attrs["status"] = "running"
+    proc = plot(out, "-o", tmp_path / "plots")
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "nothing to plot" in proc.stderr, proc.stderr
