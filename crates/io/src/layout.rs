@@ -24,6 +24,9 @@ pub(crate) const FRAME_PRESSURE: &str = "frames/pressure";
 
 /// Rows per chunk of the appended tables (32 bytes a trajectory row: 256 KiB chunks).
 pub(crate) const ROWS_PER_CHUNK: usize = 8192;
+/// Rows per chunk of the small appended tables (steps, exits, frame times and counts: 152 bytes
+/// a step row, 152 KiB chunks).
+pub(crate) const SMALL_ROWS_PER_CHUNK: usize = 1024;
 /// People per chunk of `frames/positions` (one frame, 16 bytes a person: 512 KiB chunks).
 pub(crate) const PEOPLE_PER_CHUNK: usize = 32768;
 /// Deflate level: shuffled float64 gain little above this and cost much more time.

@@ -312,27 +312,33 @@ impl RunWriter {
             .and_then(|_| file.create_group("people"))
             .at(path, at("creating groups"))?;
 
-        fn table<T: H5Type>(file: &File, name: &str) -> hdf5::Result<Dataset> {
-            file.new_dataset::<T>()
-                .chunk(ROWS_PER_CHUNK)
-                .shuffle()
-                .deflate(DEFLATE)
-                .shape(0..)
-                .create(name)
+        // Appended tables are not compressed: every frame rewrites their last chunk, and a
+        // compressed chunk that grows moves to new space while the index on disk (from the last
+        // flush) still points to the old one, whose space HDF5 may hand to the next write. A
+        // SIGKILL in between left a chunk that no longer inflates ("filter returned failure
+        // during read" on /steps, seen in CI). An uncompressed chunk keeps its address, so a
+        // killed run's file reads back whole up to its last flush. (frames/positions and
+        // frames/pressure write each chunk once and stay compressed.)
+        // Small tables get small chunks: an uncompressed chunk takes its whole size on disk.
+        fn table<T: H5Type>(file: &File, name: &str, rows: usize) -> hdf5::Result<Dataset> {
+            file.new_dataset::<T>().chunk(rows).shape(0..).create(name)
         }
-        let trajectory =
-            table::<TrajectoryRow>(&file, TRAJECTORY).at(path, at("creating 'trajectory'"))?;
+        let trajectory = table::<TrajectoryRow>(&file, TRAJECTORY, ROWS_PER_CHUNK)
+            .at(path, at("creating 'trajectory'"))?;
         trajectory
             .new_attr::<f64>()
             .shape(())
             .create("fps")
             .and_then(|a| a.write_scalar(&header.fps))
             .at(path, at("writing attribute 'trajectory.fps'"))?;
-        let exits = table::<ExitRow>(&file, EXITS).at(path, at("creating 'exits'"))?;
-        let steps = table::<StepRow>(&file, STEPS).at(path, at("creating 'steps'"))?;
-        let frame_time = table::<f64>(&file, FRAME_TIME).at(path, at("creating 'frames/time'"))?;
-        let frame_count =
-            table::<i64>(&file, FRAME_COUNT).at(path, at("creating 'frames/count'"))?;
+        let exits = table::<ExitRow>(&file, EXITS, SMALL_ROWS_PER_CHUNK)
+            .at(path, at("creating 'exits'"))?;
+        let steps = table::<StepRow>(&file, STEPS, SMALL_ROWS_PER_CHUNK)
+            .at(path, at("creating 'steps'"))?;
+        let frame_time = table::<f64>(&file, FRAME_TIME, SMALL_ROWS_PER_CHUNK)
+            .at(path, at("creating 'frames/time'"))?;
+        let frame_count = table::<i64>(&file, FRAME_COUNT, SMALL_ROWS_PER_CHUNK)
+            .at(path, at("creating 'frames/count'"))?;
         let positions = file
             .new_dataset::<f64>()
             .chunk((1, n.clamp(1, PEOPLE_PER_CHUNK), 2))
@@ -351,7 +357,8 @@ impl RunWriter {
             .create(WALLS)
             .at(path, at("writing 'walls'"))?;
         let contacts = if header.contacts {
-            let rows = table::<ContactRow>(&file, CONTACTS).at(path, at("creating 'contacts'"))?;
+            let rows = table::<ContactRow>(&file, CONTACTS, ROWS_PER_CHUNK)
+                .at(path, at("creating 'contacts'"))?;
             rows.new_attr::<VarLenUnicode>()
                 .shape(())
                 .create("units")
