@@ -25,8 +25,10 @@ if ! command -v cargo >/dev/null 2>&1; then
   exit 1
 fi
 
-# The Rust build (the binary ends up in target/release/moreau).
-cargo build --release --workspace --locked
+# The Rust build (the binary ends up in target/release/moreau). The Python module is built by
+# maturin below (with the venv's interpreter: a plain cargo build of it would make the two
+# rebuild pyo3 in turn).
+cargo build --release --workspace --locked --exclude moreau-py
 
 # The Python venv (h5py, PedPy, matplotlib, pytest, selenium), reinstalled when the requirements change.
 if [ ! -x .venv/bin/python ]; then

@@ -48,11 +48,16 @@ class StepReport(TypedDict):
     status: str
     timings: Timings
 
-class Contacts(TypedDict):
-    kind: npt.NDArray[np.uint8]
-    a: npt.NDArray[np.uint32]
-    b: npt.NDArray[np.uint32]
-    # "lambda" is a keyword: read it as contacts["lambda"].
+# "lambda" is a keyword, hence the functional form.
+Contacts = TypedDict(
+    "Contacts",
+    {
+        "kind": npt.NDArray[np.uint8],
+        "a": npt.NDArray[np.uint32],
+        "b": npt.NDArray[np.uint32],
+        "lambda": npt.NDArray[np.float64],
+    },
+)
 
 class Scene:
     """A validated crowd scene (the TOML of ``data/scenes/``). Immutable."""
@@ -115,7 +120,7 @@ class Simulation:
     def speed_factor(self) -> float: ...
     def exit_records(self) -> list[tuple[int, int, float]]:
         """``(id, exit index, t)`` of everyone who passed an exit, in order."""
-    def contacts(self) -> dict[str, npt.NDArray[Any]]:
+    def contacts(self) -> Contacts:
         """The last step's contact forces: ``kind`` (0 person–person, 1 person–wall), ``a``,
         ``b`` (ids; for a wall its row in the run file's ``/walls``), ``lambda`` (m/s)."""
     def desired_velocities(self) -> npt.NDArray[np.float64]: ...
