@@ -428,3 +428,20 @@ def test_the_readme_example_runs(tmp_path):
     assert (tmp_path / "room.png").stat().st_size > 10_000
     with h5py.File(tmp_path / "out" / "room-150-py.h5") as f:
         assert f.attrs["status"] == "complete" and f["frames/positions"].shape == (201, 150, 2)
+
+
+def test_an_error_in_the_progress_callback_stops_the_run_and_keeps_the_file(tmp_path):
+    calls = []
+
+    def progress(t, steps, left):
+        calls.append((t, steps, left))
+        raise KeyError("stop here")
+
+    out = tmp_path / "stopped.h5"
+    with pytest.raises(KeyError, match="stop here"):
+        moreau._moreau.run_to_file(ROOM, out, progress=progress)
+    (t, steps, left), = calls
+    assert 0 < t < 20.0 and steps > 0 and 0 < left <= 150
+    with h5py.File(out) as f:
+        assert f.attrs["status"].startswith("failed: stopped from Python")
+        assert 0 < f["frames/time"][-1] <= t and f["steps"].shape[0] == steps

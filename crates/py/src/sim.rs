@@ -7,9 +7,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use moreau_core::StepReport;
-use moreau_crowd::{
-    ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation,
-};
+use moreau_crowd::{ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation};
 use moreau_io::{IoError, Overwrite, RunWriter};
 use moreau_record::{Record, Summary};
 use numpy::{PyArray1, PyArrayMethods};
@@ -111,8 +109,8 @@ impl Inner {
         for (k, &id) in people.ids().iter().enumerate() {
             if let Ok(i) = last.ids.binary_search(&id) {
                 for d in 0..2 {
-                    v[2 * k + d] =
-                        (people.positions()[2 * k + d] - last.positions[2 * i + d]) / last.report.mu;
+                    v[2 * k + d] = (people.positions()[2 * k + d] - last.positions[2 * i + d])
+                        / last.report.mu;
                 }
             }
         }
@@ -192,7 +190,10 @@ pub fn scene_of(obj: &Bound<'_, PyAny>) -> PyResult<PyScene> {
     let path: PathBuf = obj.extract().map_err(|_| {
         pyo3::exceptions::PyTypeError::new_err(format!(
             "expected a moreau.Scene or a path to a scene file, got {}",
-            obj.get_type().name().map(|n| n.to_string()).unwrap_or_default()
+            obj.get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default()
         ))
     })?;
     moreau_crowd::Scene::from_file(&path)
@@ -406,7 +407,7 @@ impl PySimulation {
     #[getter]
     fn speed_factor(&self) -> PyResult<f64> {
         let inner = self.lock()?;
-        Ok(SimState::clone(&inner.sim.state()).speed_factor)
+        Ok(inner.sim.state().speed_factor)
     }
 
     /// Sets the factor on every desired speed, from the next step on. NaN, infinite and
@@ -572,6 +573,7 @@ pub fn run_to_file(
     let header = moreau_record::header(&sim, command);
     let mut writer = RunWriter::create(&output, &header, overwrite).map_err(io_err)?;
     let people = sim.total_people();
+    let mut interrupted: Option<PyErr> = None;
     let (outcome, json, finished) = py.detach(|| {
         let start = Instant::now();
         let mut polled = Instant::now();
@@ -587,7 +589,11 @@ pub fn run_to_file(
                 }
                 Ok(())
             })
-            .map_err(|e| -> ObserverError { e.to_string().into() })
+            .map_err(|e| -> ObserverError {
+                let message = e.to_string();
+                interrupted = Some(e);
+                format!("stopped from Python: {message}").into()
+            })
         };
         let mut record = Record::new(Some(&mut writer), people).with_progress(&mut tell);
         let outcome = sim.run(&mut record);
@@ -609,8 +615,14 @@ pub fn run_to_file(
         let finished = writer.finish(&status, &json);
         (outcome, json, finished)
     });
+    if let Some(e) = interrupted {
+        return Err(e);
+    }
     if let Some(p) = &progress {
-        p.call1(py, (sim.time(), sim.steps(), people - sim.exit_records().len()))?;
+        p.call1(
+            py,
+            (sim.time(), sim.steps(), people - sim.exit_records().len()),
+        )?;
     }
     outcome.map_err(|e| to_py(py, e))?;
     finished.map_err(|e| PyOSError::new_err(e.to_string()))?;

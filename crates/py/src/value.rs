@@ -46,7 +46,9 @@ pub fn to_toml(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<toml::Value> {
     }
     if obj.is_instance_of::<PyInt>() {
         return Ok(toml::Value::Integer(obj.extract().map_err(|_| {
-            SceneError::new_err(format!("scene error at {path} = {obj}: not a 64-bit integer"))
+            SceneError::new_err(format!(
+                "scene error at {path} = {obj}: not a 64-bit integer"
+            ))
         })?));
     }
     if obj.is_instance_of::<PyFloat>() {
