@@ -25,8 +25,10 @@ if ! command -v cargo >/dev/null 2>&1; then
   exit 1
 fi
 
-# The Rust build (the binary ends up in target/release/moreau).
-cargo build --release --workspace --locked
+# The Rust build (the binary ends up in target/release/moreau). The Python module is built by
+# maturin below (with the venv's interpreter: a plain cargo build of it would make the two
+# rebuild pyo3 in turn).
+cargo build --release --workspace --locked --exclude moreau-py
 
 # The Python venv (h5py, PedPy, matplotlib, pytest, selenium), reinstalled when the requirements change.
 if [ ! -x .venv/bin/python ]; then
@@ -40,6 +42,21 @@ if [ "$(cat .venv/.requirements.sha256 2>/dev/null)" != "$want" ]; then
   # Editable: python/moreau_run.py, plot_run.py and moreau_ensemble/ as they are in the tree.
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -e python
   echo "$want" > .venv/.requirements.sha256
+fi
+
+# The Python module `moreau` (crates/py): its wheel, built by the command the README gives
+# (HDF5 linked statically: CMake from the venv builds it once, ~7 min, then it is cached in
+# target/), installed into .venv; rebuilt only when the Rust or Python sources change.
+py_want=$(find Cargo.toml Cargo.lock crates -type f \( -name '*.rs' -o -name '*.toml' -o -name '*.py' \
+  -o -name '*.pyi' -o -name Cargo.lock \) -not -path '*/target/*' | LC_ALL=C sort | xargs sha256sum | sha256sum | cut -d' ' -f1)
+if [ "$(cat .venv/.moreau-py.sha256 2>/dev/null)" != "$py_want" ]; then
+  echo "setup: building the moreau Python module (crates/py) and installing it into .venv"
+  rm -f target/wheels/moreau-*.whl
+  PATH="$PWD/.venv/bin:$PATH" .venv/bin/maturin build --release --locked -m crates/py/Cargo.toml \
+    -o target/wheels </dev/null
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall \
+    target/wheels/moreau-*.whl
+  echo "$py_want" > .venv/.moreau-py.sha256
 fi
 
 # The FMUs (target/fmu/*.fmu) from the library the build above made.

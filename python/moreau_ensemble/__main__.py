@@ -19,8 +19,9 @@ def main(argv=None) -> int:
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (tcp://host:8786); "
                    "default: a LocalCluster on this machine")
     p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
-    p.add_argument("--engine", choices=["driver", "fmu"], default="driver",
-                   help="run the moreau binary (default) or the FMU through fmpy")
+    p.add_argument("--engine", choices=["driver", "python", "fmu"], default="driver",
+                   help="run the moreau binary (default), the moreau Python module in the "
+                   "workers' processes, or the FMU through fmpy")
     p.add_argument("--moreau", default=None,
                    help=f"the driver binary as the workers see it (default {default_moreau()})")
     p.add_argument("--fmu", help="the FMI 2 .fmu for --engine fmu")

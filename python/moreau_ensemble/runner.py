@@ -23,7 +23,7 @@ def _done(run_dir: pathlib.Path) -> dict | None:
         row = json.loads(result.read_text())
     except json.JSONDecodeError:
         return None
-    if row.get("status") == "complete" and row.get("engine") == "driver":
+    if row.get("status") == "complete" and row.get("engine") in ("driver", "python"):
         import h5py
 
         try:

@@ -1,5 +1,6 @@
-"""One run of a sweep, as a Dask task executes it on a worker: the `moreau` driver binary
-(or the FMU through fmpy) in the run's own directory, and the row it adds to the table.
+"""One run of a sweep, as a Dask task executes it on a worker: the `moreau` driver binary,
+the in-process Python module `moreau` (engine `python`: the same run file, no subprocess),
+or the FMU through fmpy, in the run's own directory, and the row it adds to the table.
 Failures become rows, never exceptions."""
 
 from __future__ import annotations
@@ -37,10 +38,12 @@ def run_variant(name: str, values: dict, seed: int, scene: str, run_dir: str,
     try:
         if engine == "driver":
             _driver(directory, moreau, row)
+        elif engine == "python":
+            _python(directory, row)
         elif engine == "fmu":
             _fmu(directory, fmu, row)
         else:
-            row["error"] = f"unknown engine {engine!r} (driver or fmu)"
+            row["error"] = f"unknown engine {engine!r} (driver, python or fmu)"
     except Exception as e:  # a task must report, not raise
         row["error"] = f"{type(e).__name__}: {e}"
     row["wall_seconds"] = time.perf_counter() - start
@@ -49,9 +52,6 @@ def run_variant(name: str, values: dict, seed: int, scene: str, run_dir: str,
 
 
 def _driver(directory: pathlib.Path, moreau: str, row: dict) -> None:
-    import h5py
-
-    output = directory / OUTPUT
     proc = subprocess.run(
         [moreau, "run", SCENE, "-o", OUTPUT, "--force", "--quiet", "--summary-json", "summary.json"],
         cwd=directory, capture_output=True, text=True, stdin=subprocess.DEVNULL)
@@ -59,6 +59,22 @@ def _driver(directory: pathlib.Path, moreau: str, row: dict) -> None:
         lines = [l for l in proc.stderr.strip().splitlines() if l.strip()]
         row["error"] = f"exit {proc.returncode}: " + (lines[-1] if lines else "no message")
         return
+    _read_run(directory / OUTPUT, row)
+
+
+def _python(directory: pathlib.Path, row: dict) -> None:
+    """The run in this worker's process through the `moreau` module (it releases the GIL,
+    so a worker's threads run in parallel). A bad scene raises `SceneError`: the row says so."""
+    import moreau
+
+    summary = moreau.run(moreau.Scene.from_file(directory / SCENE), directory / OUTPUT, force=True)
+    (directory / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    _read_run(directory / OUTPUT, row)
+
+
+def _read_run(output: pathlib.Path, row: dict) -> None:
+    import h5py
+
     with h5py.File(output, "r") as f:
         people = int(f["people/radius"].shape[0])
         exits = f["exits"]["t"][:] if f["exits"].shape[0] else []

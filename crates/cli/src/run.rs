@@ -9,11 +9,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
+use moreau_crowd::{Scene, Simulation};
 use moreau_integrate::ErrorEstimate;
-use moreau_io::{ContactRow, Overwrite, RunFile, RunHeader, RunWriter};
-use serde::Serialize;
+use moreau_io::{Overwrite, RunFile, RunWriter};
+use moreau_record::{Record, Summary};
 
 /// Arguments of `moreau run`.
 #[derive(Debug, clap::Args)]
@@ -77,31 +76,6 @@ pub fn adaptive(scene: &Scene, tol: f64, estimate: Estimate) -> Scene {
     scene
 }
 
-/// What a run reports at its end (the `--summary-json` object and the file's `summary`).
-#[derive(Debug, Serialize)]
-struct Summary {
-    scene: String,
-    output: Option<String>,
-    status: String,
-    people: usize,
-    passed_exit: usize,
-    not_yet_out: usize,
-    steps: usize,
-    frames: usize,
-    simulated_time: f64,
-    wall_seconds: f64,
-    ms_per_step: f64,
-    steps_per_second: f64,
-    iterations_per_step: f64,
-    max_eps: f64,
-    max_violation: f64,
-    steps_redone: usize,
-    steps_rejected: usize,
-    tol: Option<f64>,
-    broad_phase: String,
-    solvers: Vec<(String, usize)>,
-}
-
 fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
     match (&args.scene, &args.from) {
         (Some(path), None) => Ok((Scene::from_file(path)?, path.display().to_string())),
@@ -113,16 +87,6 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
         }
         _ => bail!("give a scene file or --from RUN.h5"),
     }
-}
-
-fn solver_text(sim: &Simulation) -> String {
-    let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
-    let solver = sim.solver_kind().describe(2 * sim.total_people());
-    format!(
-        "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \
-         broad phase {:?}, up to 8 redone steps per step\n",
-        sim.broad_phase()
-    )
 }
 
 fn command_line() -> String {
@@ -293,24 +257,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     let mut writer = match &args.output {
         Some(path) => {
-            let header = RunHeader {
-                version: env!("CARGO_PKG_VERSION").into(),
-                scene_name: sim.scene().name.clone(),
-                scene: sim.scene().to_toml(),
-                seed: sim.scene().seed,
-                solver: solver_text(&sim),
-                command: command_line(),
-                wkt_geometry: sim.scene().wkt(),
-                fps: 1.0 / sim.scene().time.output_interval,
-                radii: frame.radii.to_vec(),
-                walls: sim
-                    .walls()
-                    .segments()
-                    .iter()
-                    .map(|w| [w.a[0], w.a[1], w.b[0], w.b[1]])
-                    .collect(),
-                contacts: sim.scene().output.contacts,
-            };
+            let header = moreau_record::header(&sim, command_line());
             Some(RunWriter::create(path, &header, overwrite)?)
         }
         None => None,
@@ -334,49 +281,37 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
-    let mut record = Record {
-        writer: writer.as_mut(),
-        bar: &bar,
-        stats: RunStats::default(),
-        frames: 0,
-        exits: 0,
-        people,
-        pressure: Vec::new(),
-        signals: &signals,
+    let mut progress = |report: &moreau_core::StepReport, stats: &moreau_core::RunStats, left| {
+        // SIGINT or SIGTERM: stop after this step (the file is finished as interrupted).
+        if let Some(signal) = signals.caught() {
+            return Err(Box::new(signal) as moreau_crowd::ObserverError);
+        }
+        if !bar.is_hidden() {
+            bar.set_position((report.t * 1e3).round() as u64);
+            let rate = stats.steps as f64 / bar.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!(
+                "t = {:7.2} s  {:>8.1} steps/s  {left:>7} people left",
+                report.t, rate,
+            ));
+        }
+        Ok(())
     };
+    let mut record = Record::new(writer.as_mut(), people).with_progress(&mut progress);
     let outcome = sim.run(&mut record);
-    let (stats, frames) = (record.stats, record.frames);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 
     let (status, interrupted) = status_of(&outcome);
-    let summary = Summary {
-        scene: origin,
-        output: args.output.as_ref().map(|p| p.display().to_string()),
-        status: status.clone(),
-        people,
-        passed_exit: sim.exit_records().len(),
-        not_yet_out: people - sim.exit_records().len(),
-        steps: stats.steps,
-        frames,
-        simulated_time: sim.time(),
-        wall_seconds: wall,
-        ms_per_step: 1e3 * wall / stats.steps.max(1) as f64,
-        steps_per_second: stats.steps as f64 / wall.max(1e-12),
-        iterations_per_step: stats.iterations_per_step(),
-        max_eps: stats.max_eps,
-        max_violation: stats.max_violation,
-        steps_redone: stats.redone,
-        steps_rejected: stats.rejected,
-        tol: sim.scene().time.tol,
-        broad_phase: format!("{:?}", sim.broad_phase()),
-        solvers: stats
-            .solvers
-            .iter()
-            .map(|&(s, n)| (s.to_string(), n))
-            .collect(),
-    };
-    let json = serde_json::to_string_pretty(&summary).expect("plain data");
+    let summary = Summary::new(
+        &sim,
+        &record,
+        origin,
+        args.output.as_ref().map(|p| p.display().to_string()),
+        status.clone(),
+        wall,
+    );
+    let stats = &record.stats;
+    let json = summary.to_json();
     let mut failed: Option<anyhow::Error> = match interrupted {
         Some(_) => None,
         None => outcome.err().map(anyhow::Error::from),
@@ -433,73 +368,6 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             );
             Ok(ExitCode::from(1))
         }
-    }
-}
-
-/// What `moreau run` does as the run goes: writes steps, exits and frames to the file, adds
-/// up the steps, moves the progress bar.
-struct Record<'a> {
-    writer: Option<&'a mut RunWriter>,
-    bar: &'a ProgressBar,
-    stats: RunStats,
-    frames: usize,
-    exits: usize,
-    people: usize,
-    pressure: Vec<f64>,
-    signals: &'a Signals,
-}
-
-impl Observer for Record<'_> {
-    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
-        if let Some(signal) = self.signals.caught() {
-            return Err(Box::new(signal));
-        }
-        self.stats.add(report);
-        if let Some(w) = self.writer.as_deref_mut() {
-            w.step(report);
-        }
-        if !self.bar.is_hidden() {
-            self.bar.set_position((report.t * 1e3).round() as u64);
-            let rate = self.stats.steps as f64 / self.bar.elapsed().as_secs_f64().max(1e-9);
-            self.bar.set_message(format!(
-                "t = {:7.2} s  {:>8.1} steps/s  {:>7} people left",
-                report.t,
-                rate,
-                self.people - self.exits
-            ));
-        }
-        Ok(())
-    }
-
-    fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
-        self.exits += 1;
-        if let Some(w) = self.writer.as_deref_mut() {
-            w.exit(record.id, record.t)?;
-        }
-        Ok(())
-    }
-
-    fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
-        if let Some(w) = self.writer.as_deref_mut() {
-            if w.records_contacts() {
-                self.pressure.resize(self.people, f64::NAN);
-                f.pressure_by_id(&mut self.pressure);
-                let rows = f.contact_forces().map(|c| ContactRow {
-                    frame: 0,
-                    kind: match c.kind {
-                        ContactKind::PersonPerson => ContactRow::PERSON_PERSON,
-                        ContactKind::PersonWall => ContactRow::PERSON_WALL,
-                    },
-                    a: c.a.into(),
-                    b: c.b.into(),
-                    lambda: c.lambda,
-                });
-                w.contacts(rows, &self.pressure)?;
-            }
-            w.frame(f.t, f.ids, f.positions)?;
-        }
-        self.frames += 1;
-        Ok(())
     }
 }
 

@@ -85,8 +85,9 @@ pub trait ConstraintSet {
 }
 
 /// A convex, lower semicontinuous `ψ` whose subdifferential `G = ∂ψ` is the set-valued
-/// regular part of the right-hand side (dry friction, for example).
-pub trait ConvexPart {
+/// regular part of the right-hand side (dry friction, for example). `Send`, so that a scheme
+/// (and a crowd `Simulation`) can move to another thread.
+pub trait ConvexPart: Send {
     /// Writes the element of minimal norm of `f − ∂ψ(x)` into `out` (the explicit selection
     /// of the catching-up scheme, `seeds/002` Definition 4.3).
     fn min_norm_selection(&self, x: &[f64], f: &[f64], out: &mut [f64]);

@@ -404,6 +404,20 @@ impl Simulation {
         Ok(())
     }
 
+    /// Removes the people for whom `remove(id, position)` is true (a scene change, from the
+    /// next step on; they get no exit record) and returns how many were removed.
+    pub fn remove_people(&mut self, mut remove: impl FnMut(u32, [f64; 2]) -> bool) -> usize {
+        let keep: Vec<bool> = (0..self.people.len())
+            .map(|i| !remove(self.people.ids()[i], self.people.position(i)))
+            .collect();
+        let removed = keep.iter().filter(|k| !**k).count();
+        if removed > 0 {
+            self.people.retain(&keep);
+            self.stepping.state_resized();
+        }
+        removed
+    }
+
     fn rebuild_walls(&mut self) {
         let mut walls = self.scene.walls();
         walls.extend(
@@ -514,6 +528,23 @@ impl Simulation {
                 format!("must be finite and ≥ the current time {}", self.t),
             ));
         }
+        while self.advance_step(t_end, observer)?.is_some() {}
+        Ok(())
+    }
+
+    /// At most one step of [`advance_to`](Self::advance_to)`(t_end, observer)`: the frames due
+    /// before it, then the step (its report returned); `None`, after the frames due at
+    /// `t_end`, once `t_end` is reached (at once for a `t_end` at or before the current time).
+    /// Calling it until `None` is `advance_to`, step for step and bit for bit; callers use it
+    /// to look at the people between steps.
+    pub fn advance_step<O: Observer + ?Sized>(
+        &mut self,
+        t_end: f64,
+        observer: &mut O,
+    ) -> Result<Option<StepReport>, CrowdError> {
+        if !t_end.is_finite() {
+            return Err(CrowdError::invalid("t_end", t_end, "must be finite"));
+        }
         if self.frames == 0 {
             observer
                 .frame(&self.frame())
@@ -530,6 +561,7 @@ impl Simulation {
                     for record in &self.exit_log[seen..] {
                         observer.exit(record).map_err(CrowdError::Observer)?;
                     }
+                    return Ok(Some(report));
                 }
                 None => {
                     if stop == output {
@@ -539,7 +571,7 @@ impl Simulation {
                         self.frames += 1;
                     }
                     if stop == t_end {
-                        return Ok(());
+                        return Ok(None);
                     }
                 }
             }

@@ -1,0 +1,180 @@
+//! `moreau.Scene`: a validated scene (TOML file, TOML text, dict), its walkable area from a
+//! shapely polygon or WKT, and its TOML and dict forms.
+
+use moreau_crowd::Scene;
+use pyo3::prelude::*;
+use pyo3::types::{PyString, PyTuple};
+
+use crate::SceneError;
+use crate::value::{from_toml, to_py, to_toml};
+
+/// A crowd scene: walkable area, exits, groups of people, time and solver settings, as the
+/// TOML scene files of `data/scenes/` say them. Immutable; every constructor validates, and
+/// an invalid scene raises `SceneError` naming the field and the value.
+#[pyclass(name = "Scene", module = "moreau", frozen)]
+#[derive(Debug, Clone)]
+pub struct PyScene {
+    pub scene: Scene,
+}
+
+/// The rings `(outer, holes)` of a shapely `Polygon` or of its WKT, without the closing
+/// point.
+type Rings = (Vec<[f64; 2]>, Vec<Vec<[f64; 2]>>);
+
+/// A shapely geometry from a shapely geometry or a WKT string.
+pub fn geometry<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let shapely = obj.py().import("shapely")?;
+    if obj.is_instance_of::<PyString>() {
+        shapely
+            .call_method1("from_wkt", (obj,))
+            .map_err(|e| SceneError::new_err(format!("scene error at area = {obj}: {e}")))
+    } else {
+        Ok(obj.clone())
+    }
+}
+
+fn ring(coords: &Bound<'_, PyAny>) -> PyResult<Vec<[f64; 2]>> {
+    let mut points: Vec<[f64; 2]> = Vec::new();
+    for p in coords.getattr("coords")?.try_iter()? {
+        let p = p?;
+        points.push([p.get_item(0)?.extract()?, p.get_item(1)?.extract()?]);
+    }
+    if points.len() > 1 && points.first() == points.last() {
+        points.pop();
+    }
+    Ok(points)
+}
+
+fn rings(obj: &Bound<'_, PyAny>) -> PyResult<Rings> {
+    let geom = geometry(obj)?;
+    let kind: String = geom.getattr("geom_type")?.extract()?;
+    if kind != "Polygon" {
+        let wkt: String = geom.getattr("wkt")?.extract()?;
+        return Err(SceneError::new_err(format!(
+            "scene error at area = {wkt}: the walkable area must be one Polygon, not a {kind}"
+        )));
+    }
+    let outer = ring(&geom.getattr("exterior")?)?;
+    let holes = geom
+        .getattr("interiors")?
+        .try_iter()?
+        .map(|r| ring(&r?))
+        .collect::<PyResult<_>>()?;
+    Ok((outer, holes))
+}
+
+#[pymethods]
+impl PyScene {
+    /// Reads and validates a scene file (TOML).
+    #[staticmethod]
+    fn from_file(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Self> {
+        Scene::from_file(&path)
+            .map(|scene| PyScene { scene })
+            .map_err(|e| to_py(py, e))
+    }
+
+    /// Parses and validates a scene from TOML text; `origin` names it in error messages.
+    #[staticmethod]
+    #[pyo3(signature = (text, origin = "<string>"))]
+    fn from_toml(py: Python<'_>, text: &str, origin: &str) -> PyResult<Self> {
+        Scene::from_toml(text, origin)
+            .map(|scene| PyScene { scene })
+            .map_err(|e| to_py(py, e))
+    }
+
+    /// A scene from a dict of the TOML file's structure (nested dicts, lists, numbers,
+    /// strings; numpy arrays are taken as lists), validated like a file.
+    #[staticmethod]
+    fn from_dict(py: Python<'_>, d: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let value = to_toml(d, "")?;
+        if !value.is_table() {
+            return Err(SceneError::new_err(format!(
+                "scene error at <dict> = {d}: a scene is a dict"
+            )));
+        }
+        let text = toml::to_string(&value)
+            .map_err(|e| SceneError::new_err(format!("scene <dict>: {e}")))?;
+        Self::from_toml(py, &text, "<dict>")
+    }
+
+    /// This scene with another walkable area: a shapely `Polygon` (holes are obstacles) or
+    /// its WKT (`"POLYGON ((0 0, 10 0, 10 10, 0 10, 0 0))"`). Validated: exits, spawn areas
+    /// and targets must still fit it.
+    fn with_area(&self, py: Python<'_>, area: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let (outer, holes) = rings(area)?;
+        let mut scene = self.scene.clone();
+        scene.area.outer = outer;
+        scene.area.holes = holes;
+        scene.validate().map_err(|e| to_py(py, e))?;
+        Ok(PyScene { scene })
+    }
+
+    /// The scene as TOML (it reads back to an equal scene).
+    fn to_toml(&self) -> String {
+        self.scene.to_toml()
+    }
+
+    /// The scene as a dict of the TOML file's structure (`Scene.from_dict` reads it back).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let value = toml::Value::try_from(&self.scene)
+            .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+        from_toml(py, &value)
+    }
+
+    /// The scene's name.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.scene.name
+    }
+
+    /// The walkable area as WKT (what PedPy's `WalkableArea` reads).
+    #[getter]
+    fn wkt(&self) -> String {
+        self.scene.wkt()
+    }
+
+    /// The horizon (s).
+    #[getter]
+    fn horizon(&self) -> f64 {
+        self.scene.time.horizon
+    }
+
+    /// The time between output frames (s).
+    #[getter]
+    fn output_interval(&self) -> f64 {
+        self.scene.time.output_interval
+    }
+
+    /// The exits' names, in order (their indices are what `set_exit_open` also takes).
+    #[getter]
+    fn exits(&self) -> Vec<String> {
+        self.scene.exits.iter().map(|e| e.name.clone()).collect()
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other
+            .cast::<PyScene>()
+            .is_ok_and(|o| o.get().scene.to_toml() == self.scene.to_toml())
+    }
+
+    fn __hash__(&self) -> u64 {
+        moreau_crowd::SimState::hash_scene(&self.scene)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene(name={:?}, exits={}, groups={}, horizon={})",
+            self.scene.name,
+            self.scene.exits.len(),
+            self.scene.groups.len(),
+            self.scene.time.horizon
+        )
+    }
+
+    /// Pickled as its TOML.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let from_toml = slf.get_type().getattr("from_toml")?;
+        (from_toml, (slf.get().scene.to_toml(),)).into_pyobject(py)
+    }
+}

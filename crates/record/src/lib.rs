@@ -1,0 +1,229 @@
+//! A crowd run into its HDF5 run file: the observer ([`Record`]), the header
+//! ([`header`]) and the summary ([`Summary`]) that `moreau run` and the Python module both
+//! use, so that both write the same file.
+
+use moreau_core::{RunStats, StepReport};
+use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, Simulation};
+use moreau_io::{ContactRow, RunHeader, RunWriter};
+use serde::Serialize;
+
+/// The version written into run files (`moreau_version`).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The solver settings in force, as the run file's `solver` attribute says them.
+pub fn solver_text(sim: &Simulation) -> String {
+    let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
+    let solver = sim.solver_kind().describe(2 * sim.total_people());
+    format!(
+        "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \
+         broad phase {:?}, up to 8 redone steps per step\n",
+        sim.broad_phase()
+    )
+}
+
+/// The header of the run file of `sim` (not yet stepped); `command` is what made the file.
+pub fn header(sim: &Simulation, command: String) -> RunHeader {
+    let frame = sim.frame();
+    RunHeader {
+        version: VERSION.into(),
+        scene_name: sim.scene().name.clone(),
+        scene: sim.scene().to_toml(),
+        seed: sim.scene().seed,
+        solver: solver_text(sim),
+        command,
+        wkt_geometry: sim.scene().wkt(),
+        fps: 1.0 / sim.scene().time.output_interval,
+        radii: frame.radii.to_vec(),
+        walls: sim
+            .walls()
+            .segments()
+            .iter()
+            .map(|w| [w.a[0], w.a[1], w.b[0], w.b[1]])
+            .collect(),
+        contacts: sim.scene().output.contacts,
+    }
+}
+
+/// What a run reports at its end (`moreau run --summary-json` and the file's `summary`).
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    /// Where the scene came from.
+    pub scene: String,
+    /// The run file, if any.
+    pub output: Option<String>,
+    /// `complete` or `failed: …`.
+    pub status: String,
+    /// People at the start.
+    pub people: usize,
+    /// People who passed an exit.
+    pub passed_exit: usize,
+    /// People who did not.
+    pub not_yet_out: usize,
+    /// Steps taken.
+    pub steps: usize,
+    /// Frames reported.
+    pub frames: usize,
+    /// The time reached (s).
+    pub simulated_time: f64,
+    /// Wall-clock seconds of the run.
+    pub wall_seconds: f64,
+    /// Wall-clock milliseconds per step.
+    pub ms_per_step: f64,
+    /// Steps per wall-clock second.
+    pub steps_per_second: f64,
+    /// Solver iterations per step.
+    pub iterations_per_step: f64,
+    /// The largest certified ε (m²).
+    pub max_eps: f64,
+    /// The largest violation (m).
+    pub max_violation: f64,
+    /// Steps redone with a wider margin.
+    pub steps_redone: usize,
+    /// Trial steps rejected (adaptive steps).
+    pub steps_rejected: usize,
+    /// The adaptive steps' tolerance, if any.
+    pub tol: Option<f64>,
+    /// The broad phase in use.
+    pub broad_phase: String,
+    /// How many steps each solver answered.
+    pub solvers: Vec<(String, usize)>,
+}
+
+impl Summary {
+    /// The summary of `sim` after a run that `record` observed, `wall` seconds long.
+    pub fn new(
+        sim: &Simulation,
+        record: &Record<'_>,
+        scene: String,
+        output: Option<String>,
+        status: String,
+        wall: f64,
+    ) -> Self {
+        let (stats, people) = (&record.stats, sim.total_people());
+        Summary {
+            scene,
+            output,
+            status,
+            people,
+            passed_exit: sim.exit_records().len(),
+            not_yet_out: people - sim.exit_records().len(),
+            steps: stats.steps,
+            frames: record.frames,
+            simulated_time: sim.time(),
+            wall_seconds: wall,
+            ms_per_step: 1e3 * wall / stats.steps.max(1) as f64,
+            steps_per_second: stats.steps as f64 / wall.max(1e-12),
+            iterations_per_step: stats.iterations_per_step(),
+            max_eps: stats.max_eps,
+            max_violation: stats.max_violation,
+            steps_redone: stats.redone,
+            steps_rejected: stats.rejected,
+            tol: sim.scene().time.tol,
+            broad_phase: format!("{:?}", sim.broad_phase()),
+            solvers: stats
+                .solvers
+                .iter()
+                .map(|&(s, n)| (s.to_string(), n))
+                .collect(),
+        }
+    }
+
+    /// Pretty JSON (what the file's `summary` attribute holds).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("plain data")
+    }
+}
+
+/// Told of every step with the run's totals so far and the people not yet out; an error
+/// stops the run (an interrupt, say).
+pub type Progress<'a> =
+    dyn FnMut(&StepReport, &RunStats, usize) -> Result<(), ObserverError> + Send + 'a;
+
+/// What a run does as it goes: writes steps, exits and frames to the file (when there is
+/// one), adds up the steps, and tells `progress`.
+pub struct Record<'a> {
+    writer: Option<&'a mut RunWriter>,
+    progress: Option<&'a mut Progress<'a>>,
+    /// The steps added up.
+    pub stats: RunStats,
+    /// Frames seen.
+    pub frames: usize,
+    /// Exits seen.
+    pub exits: usize,
+    people: usize,
+    pressure: Vec<f64>,
+}
+
+impl std::fmt::Debug for Record<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Record")
+            .field("frames", &self.frames)
+            .field("exits", &self.exits)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a> Record<'a> {
+    /// Records a run of `people` people (everyone at the start) into `writer`, if any.
+    pub fn new(writer: Option<&'a mut RunWriter>, people: usize) -> Self {
+        Record {
+            writer,
+            progress: None,
+            stats: RunStats::default(),
+            frames: 0,
+            exits: 0,
+            people,
+            pressure: Vec::new(),
+        }
+    }
+
+    /// Tells `progress` of every step.
+    pub fn with_progress(mut self, progress: &'a mut Progress<'a>) -> Self {
+        self.progress = Some(progress);
+        self
+    }
+}
+
+impl Observer for Record<'_> {
+    fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
+        self.stats.add(report);
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.step(report);
+        }
+        if let Some(progress) = self.progress.as_deref_mut() {
+            progress(report, &self.stats, self.people - self.exits)?;
+        }
+        Ok(())
+    }
+
+    fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
+        self.exits += 1;
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.exit(record.id, record.t)?;
+        }
+        Ok(())
+    }
+
+    fn frame(&mut self, f: &Frame<'_>) -> Result<(), ObserverError> {
+        if let Some(w) = self.writer.as_deref_mut() {
+            if w.records_contacts() {
+                self.pressure.resize(self.people, f64::NAN);
+                f.pressure_by_id(&mut self.pressure);
+                let rows = f.contact_forces().map(|c| ContactRow {
+                    frame: 0,
+                    kind: match c.kind {
+                        ContactKind::PersonPerson => ContactRow::PERSON_PERSON,
+                        ContactKind::PersonWall => ContactRow::PERSON_WALL,
+                    },
+                    a: c.a.into(),
+                    b: c.b.into(),
+                    lambda: c.lambda,
+                });
+                w.contacts(rows, &self.pressure)?;
+            }
+            w.frame(f.t, f.ids, f.positions)?;
+        }
+        self.frames += 1;
+        Ok(())
+    }
+}

@@ -1,0 +1,447 @@
+"""The Python module `moreau` (crates/py) against the driver binary and against itself: the
+room stepped in-process gives `moreau run`'s positions bit for bit, `moreau.run` writes the
+CLI's file, state and pickling continue runs identically (also through a Dask worker), bad
+scenes and bad inputs raise and leave the simulation usable, two threads step two
+simulations at once, and the wheel built by the README's command installs into a fresh
+venv and runs."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import pathlib
+import pickle
+import subprocess
+import sys
+import threading
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+import moreau
+from conftest import MOREAU, ROOM, ROOT, moreau as moreau_cli
+
+ROOM60 = ROOT / "data" / "scenes" / "room-60.toml"
+
+
+def by_id(sim: moreau.Simulation, people: int) -> np.ndarray:
+    """The simulation's positions laid out like /frames/positions: (people, 2), NaN if absent."""
+    out = np.full((people, 2), np.nan)
+    out[sim.ids] = sim.positions
+    return out
+
+
+def short_room(horizon: float, **extra) -> moreau.Scene:
+    d = moreau.Scene.from_file(ROOM).to_dict()
+    d["time"]["horizon"] = horizon
+    for key, value in extra.items():
+        d[key] = value
+    return moreau.Scene.from_dict(d)
+
+
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_the_room_stepped_from_python_is_moreau_run_bit_for_bit(room_run):
+    with h5py.File(room_run) as f:
+        times = f["frames/time"][:]
+        expected = f["frames/positions"][:]
+        people = f["people/radius"].shape[0]
+    assert len(times) == 201 and expected.shape == (201, 150, 2)
+
+    # advance_to each frame time, as the driver's loop stops there.
+    sim = moreau.Simulation(moreau.Scene.from_file(ROOM))
+    assert same_bits(by_id(sim, people), expected[0])
+    for k in range(1, len(times)):
+        sim.advance_to(float(times[k]))
+        assert sim.time == times[k]
+        assert same_bits(by_id(sim, people), expected[k]), f"frame {k} (t = {times[k]})"
+
+    # step() takes the same steps: compare wherever a step lands on a frame time.
+    stepped = moreau.Simulation(ROOM)
+    k = 1
+    while k < len(times):
+        report = stepped.step()
+        assert report["t"] == stepped.time and report["status"] == "converged"
+        if abs(stepped.time - times[k]) < 1e-9:
+            assert same_bits(by_id(stepped, people), expected[k]), f"frame {k} by step()"
+            k += 1
+    assert stepped.steps == sim.steps
+
+
+def test_run_writes_the_file_of_moreau_run(room_run, tmp_path):
+    out = tmp_path / "py.h5"
+    summary = moreau.run(moreau.Scene.from_file(ROOM), out)
+    assert summary["status"] == "complete" and summary["people"] == 150
+    with pytest.raises(FileExistsError):
+        moreau.run(ROOM, out)
+    compared = []
+    with h5py.File(room_run) as cli, h5py.File(out) as py:
+        names = []
+        cli.visit(names.append)
+        py_names = []
+        py.visit(py_names.append)
+        assert sorted(names) == sorted(py_names)
+        for name in names:
+            a, b = cli[name], py[name]
+            assert type(a) is type(b), name
+            assert dict(a.attrs) == dict(b.attrs), name
+            if isinstance(a, h5py.Dataset):
+                assert a.dtype == b.dtype and a.shape == b.shape, name
+                assert a.chunks == b.chunks and a.compression == b.compression, name
+                x, y = a[()], b[()]
+                if x.dtype.names:  # compound: every column but the wall-clock timings
+                    cols = [c for c in x.dtype.names if not c.startswith("time_")]
+                    assert len(cols) >= 10 if name == "steps" else cols == list(x.dtype.names)
+                    for c in cols:
+                        assert np.array_equal(x[c], y[c], equal_nan=x[c].dtype.kind == "f"), (name, c)
+                else:
+                    assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), name
+                compared.append(name)
+        assert {"trajectory", "frames/positions", "steps", "exits", "walls"} <= set(compared)
+        differ = {"command", "summary"}
+        assert set(cli.attrs) == set(py.attrs)
+        for key in set(cli.attrs) - differ:
+            assert cli.attrs[key] == py.attrs[key], key
+        assert py.attrs["command"].startswith("moreau.run(")
+        s_cli, s_py = json.loads(cli.attrs["summary"]), json.loads(py.attrs["summary"])
+        assert set(s_cli) == set(s_py)
+        for key in ("status", "people", "passed_exit", "steps", "frames", "simulated_time",
+                    "max_eps", "max_violation", "solvers"):
+            assert s_cli[key] == s_py[key] == summary[key], key
+
+
+def test_state_restore_and_pickle_continue_a_run_identically():
+    scene = short_room(6.0)
+    straight = moreau.Simulation(scene)
+    straight.advance_to(6.0)
+
+    sim = moreau.Simulation(scene)
+    sim.advance_to(2.5)
+    sim_time_at_save = sim.time
+    assert sim_time_at_save == pytest.approx(2.5, abs=1e-9)
+    saved = sim.state()
+    pickled = pickle.dumps(sim)
+    sim.advance_to(6.0)
+    assert same_bits(sim.positions, straight.positions)
+
+    again = moreau.Simulation(scene)
+    again.restore(saved)
+    assert again.time == sim_time_at_save and again.last_report is None
+    again.advance_to(6.0)
+    assert same_bits(again.positions, straight.positions)
+    assert again.exit_records() == straight.exit_records()
+
+    unpickled = pickle.loads(pickled)
+    assert unpickled.time == sim_time_at_save and unpickled.scene == scene
+    unpickled.advance_to(6.0)
+    assert same_bits(unpickled.positions, straight.positions)
+    assert same_bits(unpickled.ids.astype(np.float64), straight.ids.astype(np.float64))
+
+    # A state of another scene, or damaged bytes: refused, nothing changes.
+    other = moreau.Simulation(ROOM60)
+    with pytest.raises(moreau.SceneError, match="scene_hash"):
+        other.restore(saved)
+    with pytest.raises(moreau.SceneError, match="state"):
+        again.restore(saved[: len(saved) // 2])
+    assert again.time == straight.time
+    assert pickle.loads(pickle.dumps(scene)) == scene
+
+
+def test_a_pickled_simulation_goes_to_a_dask_worker_and_comes_back():
+    from dask.distributed import Client, LocalCluster
+
+    scene = short_room(4.0)
+    here = moreau.Simulation(scene)
+    here.advance_to(1.0)
+    local = pickle.loads(pickle.dumps(here))
+    local.advance_to(4.0)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        # A lambda travels by value (the test module is not importable on the worker).
+        advanced = lambda sim, t: (sim.advance_to(t), sim)[1]  # noqa: E731
+        pid = client.submit(os.getpid).result()
+        back = client.submit(advanced, here, 4.0, pure=False).result()
+    assert pid != os.getpid(), "the task ran in another process"
+    assert back.time == local.time and back.time == pytest.approx(4.0, abs=1e-9)
+    assert same_bits(back.positions, local.positions)
+    straight = moreau.Simulation(scene)
+    straight.advance_to(4.0)
+    assert same_bits(back.positions, straight.positions)
+
+
+def test_bad_scenes_raise_scene_error_naming_the_field(tmp_path):
+    bad = ROOM.read_text().replace("radius = 0.2", "radius = -0.2")
+    with pytest.raises(moreau.SceneError) as e:
+        moreau.Scene.from_toml(bad)
+    assert e.value.field == "groups[0].radius" and e.value.value == "-0.2"
+    path = tmp_path / "bad.toml"
+    path.write_text(bad)
+    cli = moreau_cli("run", path, check=False)
+    assert cli.returncode == 2 and str(e.value) in cli.stderr, (str(e.value), cli.stderr)
+    with pytest.raises(moreau.SceneError, match="groups"):
+        moreau.Scene.from_file(path)
+    with pytest.raises(moreau.SceneError, match="radius"):
+        moreau.Simulation(path)
+
+    d = moreau.Scene.from_file(ROOM).to_dict()
+    d["time"]["horizn"] = 3.0
+    with pytest.raises(moreau.SceneError, match="horizn"):
+        moreau.Scene.from_dict(d)
+    d = moreau.Scene.from_file(ROOM).to_dict()
+    d["time"]["step"] = float("nan")
+    with pytest.raises(moreau.SceneError, match=r"time\.step"):
+        moreau.Scene.from_dict(d)
+    with pytest.raises(FileNotFoundError):
+        moreau.Scene.from_file(tmp_path / "missing.toml")
+
+
+def test_areas_from_shapely_and_wkt_and_dicts_round_trip():
+    import shapely
+
+    room = moreau.Scene.from_file(ROOM)
+    assert moreau.Scene.from_dict(room.to_dict()) == room
+    assert moreau.Scene.from_toml(room.to_toml()) == room
+    area = shapely.from_wkt(room.wkt)
+    assert room.with_area(area) == room
+    assert room.with_area(room.wkt) == room
+    # A pillar in the room (a hole): kept as a hole, and people start outside it.
+    pillar = shapely.box(4.0, 4.0, 5.0, 5.0)
+    holed = room.with_area(area.difference(pillar))
+    assert holed.to_dict()["area"]["holes"] and holed != room
+    sim = moreau.Simulation(holed)
+    assert not shapely.contains_xy(pillar, *sim.positions.T).any()
+    with pytest.raises(moreau.SceneError, match=r"area\.outer.*zero area"):
+        room.with_area("POLYGON ((0 0, 1 1, 2 2, 0 0))")
+    with pytest.raises(moreau.SceneError, match="Polygon"):
+        room.with_area(shapely.MultiPolygon([area, shapely.box(30, 30, 31, 31)]))
+
+
+def test_a_nan_speed_factor_raises_and_the_simulation_keeps_working():
+    scene = short_room(3.0)
+    plain = moreau.Simulation(scene)
+    plain.advance_to(3.0)
+    sim = moreau.Simulation(scene)
+    sim.advance_to(1.0)
+    for bad in (float("nan"), -0.5, float("inf")):
+        with pytest.raises(ValueError, match="speed_factor"):
+            sim.set_speed_factor(bad)
+    assert sim.speed_factor == 1.0
+    sim.advance_to(3.0)
+    assert same_bits(sim.positions, plain.positions)
+    assert np.isfinite(sim.positions).all()
+    # A valid factor changes the run: half speed walks about half as far in free flow.
+    slow = moreau.Simulation(scene)
+    slow.set_speed_factor(0.5)
+    slow.step()
+    assert np.median(np.linalg.norm(slow.velocities, axis=1)) == pytest.approx(0.5, abs=0.02)
+
+
+def test_velocities_report_and_contacts_of_the_last_step(tmp_path):
+    scene = short_room(6.0, output={"contacts": True})
+    sim = moreau.Simulation(scene)
+    assert np.isnan(sim.velocities).all() and sim.last_report is None
+    sim.advance_to(4.0)
+    before = sim.positions.copy()
+    report = sim.step()
+    assert set(report) >= {"t", "mu", "eps", "eps_target", "violation", "iterations",
+                           "solver", "status", "active", "timings"}
+    assert report == {**sim.last_report, "timings": report["timings"]}
+    assert report["eps"] <= report["eps_target"] and report["mu"] == pytest.approx(0.05)
+    assert np.array_equal(sim.velocities, (sim.positions - before) / report["mu"])
+
+    # contacts() against the driver's /contacts of the same frame.
+    toml = tmp_path / "contacts.toml"
+    toml.write_text(scene.to_toml())
+    out = tmp_path / "contacts.h5"
+    moreau_cli("run", toml, "-o", out, "--quiet")
+    sim = moreau.Simulation(scene)
+    sim.advance_to(5.0)
+    c = sim.contacts()
+    with h5py.File(out) as f:
+        frame = int(np.argmin(abs(f["frames/time"][:] - 5.0)))
+        rows = f["contacts"][:]
+    rows = rows[rows["frame"] == frame]
+    assert len(rows) > 10 and len(c["lambda"]) == len(rows)
+    assert np.array_equal(c["kind"], rows["kind"]) and np.array_equal(c["a"], rows["a"])
+    assert np.array_equal(c["b"], rows["b"]) and np.array_equal(c["lambda"], rows["lambda"])
+
+
+def test_exits_closed_and_people_removed_during_a_run():
+    import shapely
+
+    scene = short_room(8.0)
+    sim = moreau.Simulation(scene)
+    sim.advance_to(1.0)
+    with pytest.raises(ValueError, match="door"):
+        sim.set_exit_open("no such exit", False)
+    passed = sim.exit_records()
+    inside = sim.positions[:, 0] < 10.0
+    sim.set_exit_open("door", False)
+    assert sim.exits_open() == [False]
+    sim.advance_to(8.0)
+    assert sim.exit_records() == passed, "nobody passes a closed door"
+    assert (sim.positions[inside, 0] < 10.0).all()
+    sim.set_exit_open(0, True)
+    sim.advance_to(9.0)
+    assert len(sim.exit_records()) > len(passed)
+
+    sim = moreau.Simulation(scene)
+    sim.advance_to(1.0)
+    x, ids = sim.positions[:, 0], sim.ids
+    left = shapely.box(0.0, 0.0, 5.0, 10.0)
+    expect = ids[~(x < 5.0)]
+    assert sim.remove_people_in(left.wkt) == len(ids) - len(expect)
+    assert np.array_equal(sim.ids, expect) and sim.total_people == 150
+    sim.advance_to(3.0)
+    assert set(sim.ids) <= set(expect)
+    assert sim.remove_people_in(left) == 0
+
+
+def test_two_threads_step_two_simulations_at_once_as_sequential_runs():
+    scenes = [short_room(8.0), moreau.Scene.from_file(ROOM60)]
+    sequential = []
+    for s in scenes:
+        sim = moreau.Simulation(s)
+        sim.advance_to(8.0)
+        sequential.append(sim.positions)
+    sims = [moreau.Simulation(s) for s in scenes]
+    spans = [None, None]
+
+    def work(k):
+        start = time.perf_counter()
+        sims[k].advance_to(8.0)
+        spans[k] = (start, time.perf_counter())
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    # While a thread steps a simulation, another thread's call is refused, not blocked.
+    busy = 0
+    while any(t.is_alive() for t in threads):
+        try:
+            sims[0].time
+        except RuntimeError as e:
+            assert "another thread" in str(e)
+            busy += 1
+        time.sleep(0.001)
+    for t in threads:
+        t.join()
+    for sim, expected in zip(sims, sequential):
+        assert sim.time == pytest.approx(8.0, abs=1e-9) and same_bits(sim.positions, expected)
+    # Both ran at the same time (the GIL was released while they computed).
+    assert spans[0][0] < spans[1][1] and spans[1][0] < spans[0][1]
+    assert busy > 0
+
+
+def test_to_pedpy_from_a_run_file_and_from_memory(room_run):
+    traj_file, walk_file = moreau.to_pedpy(room_run)
+    sim = moreau.Simulation(ROOM, record=True)
+    sim.advance_to(3.0)
+    traj, walk = moreau.to_pedpy(sim)
+    assert traj.frame_rate == traj_file.frame_rate == 10.0
+    assert walk.polygon.equals(walk_file.polygon)
+    head = traj_file.data[traj_file.data["frame"] <= 30].sort_values(["frame", "id"])
+    mine = traj.data.sort_values(["frame", "id"])
+    assert len(mine) == len(head) == 31 * 150
+    for col in ("id", "frame", "x", "y"):
+        assert np.array_equal(mine[col].to_numpy(), head[col].to_numpy()), col
+    with pytest.raises(ValueError, match="record"):
+        moreau.Simulation(ROOM).recorded_frames()
+
+
+def test_the_ensemble_runs_in_process_with_engine_python(tmp_path):
+    from moreau_ensemble.task import run_variant
+
+    scene = short_room(1.0).to_toml()
+    rows = [run_variant("v", {}, 1, scene, str(tmp_path / engine), moreau=str(MOREAU), engine=engine)
+            for engine in ("python", "driver")]
+    assert rows[0]["status"] == rows[1]["status"] == "complete", rows
+    for key in ("people", "passed_exit"):
+        assert rows[0][key] == rows[1][key]
+    with h5py.File(rows[0]["output"]) as a, h5py.File(rows[1]["output"]) as b:
+        assert np.array_equal(a["frames/positions"][:], b["frames/positions"][:], equal_nan=True)
+    bad = run_variant("bad", {}, 1, scene.replace("radius = 0.2", "radius = -0.2"),
+                      str(tmp_path / "bad"), engine="python")
+    assert bad["status"] == "failed" and "SceneError" in bad["error"] and "radius" in bad["error"]
+
+
+# The README's command for the wheel (one place): HDF5 linked statically (CMake from .venv).
+WHEEL_COMMAND = ["maturin", "build", "--release", "--locked", "-m", "crates/py/Cargo.toml"]
+
+
+def test_the_wheel_installs_into_a_fresh_venv_and_runs_the_room(tmp_path, room_run):
+    venv_bin = pathlib.Path(sys.executable).parent
+    env = {**os.environ, "PATH": f"{venv_bin}{os.pathsep}{os.environ['PATH']}"}
+    wheels = tmp_path / "wheels"
+    build = subprocess.run([*WHEEL_COMMAND, "-o", str(wheels)], cwd=ROOT, env=env,
+                           capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=1800)
+    assert build.returncode == 0, build.stderr[-3000:]
+    (wheel,) = wheels.glob("moreau-*.whl")
+    assert "abi3" in wheel.name
+
+    fresh = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(fresh)], check=True)
+    pip = [str(fresh / "bin" / "python"), "-m", "pip", "install", "--quiet",
+           "--disable-pip-version-check"]
+    subprocess.run([*pip, "--no-deps", str(wheel)], check=True, stdin=subprocess.DEVNULL)
+    subprocess.run([*pip, f"numpy=={np.__version__}"], check=True, stdin=subprocess.DEVNULL)
+
+    out = tmp_path / "fresh.h5"
+    script = f"""
+import pathlib, subprocess, numpy as np, moreau
+lib = next(pathlib.Path(moreau.__file__).parent.glob("_moreau*.so"))
+print(subprocess.run(["ldd", str(lib)], capture_output=True, text=True).stdout)
+sim = moreau.Simulation(moreau.Scene.from_file({str(ROOM)!r}))
+for _ in range(20):
+    sim.step()
+np.save({str(tmp_path / "steps.npy")!r}, sim.positions)
+d = sim.scene.to_dict(); d["time"]["horizon"] = 1.0
+print(moreau.run(moreau.Scene.from_dict(d), {str(out)!r})["status"])
+"""
+    proc = subprocess.run([str(fresh / "bin" / "python"), "-c", script], cwd=tmp_path,
+                          capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "libhdf5" not in proc.stdout and "libc.so" in proc.stdout, proc.stdout
+    assert proc.stdout.strip().endswith("complete")
+    # 20 steps of 0.05 s is frame 10 of the driver's run; the file is the driver's up to 1 s.
+    with h5py.File(room_run) as f, h5py.File(out) as g:
+        assert same_bits(np.load(tmp_path / "steps.npy"), f["frames/positions"][10])
+        assert np.array_equal(g["frames/positions"][:], f["frames/positions"][:11])
+
+
+def test_the_readme_example_runs(tmp_path):
+    text = (ROOT / "README.md").read_text()
+    start = text.index("```python\n", text.index("## Python")) + len("```python\n")
+    code = text[start:text.index("```", start)]
+    (tmp_path / "data").symlink_to(ROOT / "data")
+    (tmp_path / "out").mkdir()
+    proc = subprocess.run([sys.executable, "-c", "import matplotlib; matplotlib.use('Agg')\n" + code],
+                          cwd=tmp_path, capture_output=True, text=True, stdin=subprocess.DEVNULL,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "through the door" in proc.stdout
+    assert (tmp_path / "room.png").stat().st_size > 10_000
+    with h5py.File(tmp_path / "out" / "room-150-py.h5") as f:
+        assert f.attrs["status"] == "complete" and f["frames/positions"].shape == (201, 150, 2)
+
+
+def test_an_error_in_the_progress_callback_stops_the_run_and_keeps_the_file(tmp_path):
+    calls = []
+
+    def progress(t, steps, left):
+        calls.append((t, steps, left))
+        raise KeyError("stop here")
+
+    out = tmp_path / "stopped.h5"
+    with pytest.raises(KeyError, match="stop here"):
+        moreau._moreau.run_to_file(ROOM, out, progress=progress)
+    (t, steps, left), = calls
+    assert 0 < t < 20.0 and steps > 0 and 0 < left <= 150
+    with h5py.File(out) as f:
+        assert f.attrs["status"].startswith("failed: stopped from Python")
+        assert 0 < f["frames/time"][-1] <= t and f["steps"].shape[0] == steps
