@@ -12,6 +12,7 @@ import sys
 import time
 
 import h5py
+import numpy as np
 import pytest
 
 import moreau_run
@@ -283,3 +284,48 @@ def test_plot_run_failed_on_a_run_with_no_steps(tmp_path):
     proc = plot(out, "-o", tmp_path / "plots")
     assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
     assert "nothing to plot" in proc.stderr, proc.stderr
+
+
+def test_a_killed_million_person_run_had_to_start_over(tmp_path):
+    """SIGKILL a run at a random moment after it saved a state, `moreau run --resume` it: the
+    file equals an uninterrupted run's, frame for frame and step for step (the dense 2,000
+    scene; the state is saved with every frame)."""
+    full = tmp_path / "full.h5"
+    moreau("run", DENSE, "-o", full, "--quiet")
+    out = tmp_path / "killed.h5"
+    partial = tmp_path / ".killed.h5.partial"
+    proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    try:
+        # Until a state was saved (and a frame or two more), then at a random moment.
+        while time.monotonic() < deadline:
+            try:
+                with h5py.File(partial, "r", locking=False) as f:
+                    if f["state"].attrs["slot"] > 0 and len(f["frames/time"]) >= 3:
+                        break
+            except (OSError, KeyError):
+                pass
+            time.sleep(0.05)
+        time.sleep(float(np.random.default_rng(11).uniform(0.0, 0.8)))
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert partial.exists() and not out.exists()
+    resumed = moreau("run", "--resume", out, "--quiet")
+    assert resumed.returncode == 0
+    assert out.exists() and not partial.exists()
+    with h5py.File(full, "r") as a, h5py.File(out, "r") as b:
+        assert b.attrs["status"] == "complete"
+        for name in ("frames/positions", "frames/time", "frames/count", "people/exit_time"):
+            assert np.array_equal(a[name][:], b[name][:], equal_nan=True), name
+        for name in ("trajectory", "exits"):
+            assert a[name][:].tobytes() == b[name][:].tobytes(), name
+        sa, sb = a["steps"][:], b["steps"][:]
+        assert len(sa) == len(sb)
+        for field in ("step", "t", "mu", "eps", "violation", "iterations", "assembled"):
+            assert np.array_equal(sa[field], sb[field]), field
+    # Nothing left to resume now.
+    again = moreau("run", "--resume", out, "--quiet", check=False)
+    assert again.returncode == 2 and "nothing to resume" in again.stderr

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use moreau_crowd::{Scene, Simulation};
+use moreau_crowd::{Scene, SimState, Simulation};
 use moreau_integrate::ErrorEstimate;
 use moreau_io::{Overwrite, RunFile, RunWriter};
 use moreau_record::{Record, Summary};
@@ -17,9 +17,14 @@ use moreau_record::{Record, Summary};
 /// Arguments of `moreau run`.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// The scene file (TOML). Give this or --from.
-    #[arg(required_unless_present = "from", conflicts_with = "from")]
+    /// The scene file (TOML). Give this, --from or --resume.
+    #[arg(required_unless_present_any = ["from", "resume"], conflicts_with = "from")]
     scene: Option<PathBuf>,
+    /// Go on with a run that was killed while writing OUT.h5: from the state saved with its
+    /// last frame in the partial file it left (`.OUT.h5.partial`), with the scene and settings
+    /// stored there; the frames it writes are those the run would have written.
+    #[arg(long, value_name = "OUT.h5", conflicts_with_all = ["scene", "from", "output", "tol"])]
+    resume: Option<PathBuf>,
     /// Take the scene stored in this run file: the run reproduces that file.
     #[arg(long, value_name = "RUN.h5")]
     from: Option<PathBuf>,
@@ -229,6 +234,71 @@ fn failed_status(error: &str) -> String {
     }
 }
 
+/// A new run: the scene (file, or stored in --from), its simulation and its writer.
+fn started(
+    args: &RunArgs,
+    overwrite: Overwrite,
+) -> Result<(Simulation, Option<RunWriter>, String)> {
+    let (mut scene, origin) = load_scene(args)?;
+    if let Some(tol) = args.tol {
+        scene = adaptive(&scene, tol, args.estimate);
+        scene.validate().context("--tol")?;
+    }
+    let sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
+    let people = sim.total_people();
+    if sim
+        .frame()
+        .ids
+        .iter()
+        .enumerate()
+        .any(|(k, &id)| id as usize != k)
+    {
+        bail!("internal: people are not numbered 0..{people} at the start");
+    }
+    let writer = match &args.output {
+        Some(path) => {
+            let header = moreau_record::header(&sim, command_line());
+            Some(RunWriter::create(path, &header, overwrite)?)
+        }
+        None => None,
+    };
+    Ok((sim, writer, origin))
+}
+
+/// A killed run taken up again: the scene stored in its partial file, the simulation restored
+/// to the state saved with its last frame, the writer cut back to that frame.
+fn resumed(out: &Path, overwrite: Overwrite) -> Result<(Simulation, Option<RunWriter>, String)> {
+    // The run ends by moving its file to `out`: an existing file there is replaced only with
+    // --force, and that is known now, not after the run (when there is a run to go on with).
+    if moreau_io::partial_path(out).is_file() {
+        moreau_io::check_output(out, overwrite)?;
+    }
+    let r = RunWriter::resume(out, overwrite)?;
+    let origin = format!("{} (resumed)", r.writer.partial().display());
+    let scene = Scene::from_toml(&r.header.scene, &origin)?;
+    let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
+    let state =
+        SimState::from_bytes(&r.state).with_context(|| format!("the state saved in {origin}"))?;
+    sim.restore(&state)
+        .with_context(|| format!("restoring the state saved in {origin}"))?;
+    Ok((sim, Some(r.writer), origin))
+}
+
+/// Steps `sim` to its horizon frame by frame, saving its state after every frame into the
+/// run file (what `--resume` goes on from).
+fn run_saving(
+    sim: &mut Simulation,
+    record: &mut Record<'_>,
+) -> Result<(), moreau_crowd::CrowdError> {
+    while let Some(t) = sim.next_frame_time() {
+        sim.advance_to(t, record)?;
+        record
+            .save_state(&sim.state())
+            .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
+    }
+    Ok(())
+}
+
 /// Runs `moreau run`. Errors before the run starts are returned (exit 2, nothing written);
 /// a failure during the run is reported, recorded in the file, and gives exit code 1; a run
 /// stopped by SIGINT or SIGTERM is finished with status `interrupted` (exit 130, 143).
@@ -239,29 +309,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         Overwrite::Never
     };
     check_paths(args, overwrite)?;
-    let (mut scene, origin) = load_scene(args)?;
-    if let Some(tol) = args.tol {
-        scene = adaptive(&scene, tol, args.estimate);
-        scene.validate().context("--tol")?;
-    }
-    let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
-    let people = sim.total_people();
-    let frame = sim.frame();
-    if frame
-        .ids
-        .iter()
-        .enumerate()
-        .any(|(k, &id)| id as usize != k)
-    {
-        bail!("internal: people are not numbered 0..{people} at the start");
-    }
-    let mut writer = match &args.output {
-        Some(path) => {
-            let header = moreau_record::header(&sim, command_line());
-            Some(RunWriter::create(path, &header, overwrite)?)
-        }
-        None => None,
+    let (mut sim, mut writer, origin) = match &args.resume {
+        Some(out) => resumed(out, overwrite)?,
+        None => started(args, overwrite)?,
     };
+    let people = sim.total_people();
+    let output = args.output.as_ref().or(args.resume.as_ref());
     let signals = Signals::install()?;
 
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
@@ -297,7 +350,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         Ok(())
     };
     let mut record = Record::new(writer.as_mut(), people).with_progress(&mut progress);
-    let outcome = sim.run(&mut record);
+    let outcome = run_saving(&mut sim, &mut record);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 
@@ -306,7 +359,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         &sim,
         &record,
         origin,
-        args.output.as_ref().map(|p| p.display().to_string()),
+        output.map(|p| p.display().to_string()),
         status.clone(),
         wall,
     );
@@ -339,7 +392,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             summary.iterations_per_step,
             stats.max_eps,
             stats.max_violation,
-            args.output
+            output
                 .as_ref()
                 .map_or(String::new(), |p| format!("; wrote {}", p.display())),
         );
@@ -348,7 +401,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         eprintln!(
             "moreau: {signal} at simulated time {} s{}",
             sim.time(),
-            args.output.as_ref().map_or(String::new(), |p| format!(
+            output.map_or(String::new(), |p| format!(
                 "; '{}' holds the run so far (status interrupted)",
                 p.display()
             ))

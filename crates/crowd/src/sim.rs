@@ -501,6 +501,17 @@ impl Simulation {
         }
     }
 
+    /// The time of the next frame [`advance_to`](Self::advance_to) will report (every output
+    /// interval, and the horizon; the first at the start), or `None` once the horizon's frame
+    /// was reported.
+    pub fn next_frame_time(&self) -> Option<f64> {
+        let horizon = self.scene.time.horizon;
+        if self.frames > 0 && self.stepping.reached(self.t, horizon) {
+            return None;
+        }
+        Some(self.next_output().min(horizon))
+    }
+
     /// The next time a frame is due: every output interval, and the horizon.
     fn next_output(&self) -> f64 {
         let time = &self.scene.time;

@@ -21,6 +21,10 @@ pub(crate) const STEPS: &str = "steps";
 pub(crate) const WALLS: &str = "walls";
 pub(crate) const CONTACTS: &str = "contacts";
 pub(crate) const FRAME_PRESSURE: &str = "frames/pressure";
+/// The group of the saved run state (two slots written in turn, `a` and `b`).
+pub(crate) const STATE: &str = "state";
+/// Bytes per chunk of a state slot (64 KiB: a small run's state takes one).
+pub(crate) const STATE_BYTES_PER_CHUNK: usize = 1 << 16;
 
 /// Rows per chunk of the appended tables (32 bytes a trajectory row: 256 KiB chunks).
 pub(crate) const ROWS_PER_CHUNK: usize = 8192;

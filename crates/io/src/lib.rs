@@ -16,6 +16,8 @@
 //! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall), `a`, `b` (person ids; for a wall, its row in `/walls`), `lambda` (float64, m/s): the contacts with `λ > 10⁻⁶ m/s` of the step that ended at each frame; attribute `units` |
 //! | `/frames/pressure` | only with contacts: float64 `[frames, people]`, each person's `Σ λ` over its contacts (m/s), NaN when absent |
 //!
+//! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
+//!
 //! Root attributes: `wkt_geometry` (the walkable area, WKT), `format`, `moreau_version`,
 //! `scene` (the whole scene, TOML), `scene_name`, `seed`, `solver` (the settings in force),
 //! `command`, `status` (`running`, then `complete`, `interrupted` or `failed: …`) and
@@ -38,4 +40,4 @@ mod writer;
 pub use error::IoError;
 pub use layout::{ContactRow, ExitRow, FORMAT, FORMATS_READ, RunHeader, StepRow, TrajectoryRow};
 pub use reader::RunFile;
-pub use writer::{FailPoint, Overwrite, RunWriter, check_output, lock_path, partial_path};
+pub use writer::{FailPoint, Overwrite, Resumed, RunWriter, check_output, lock_path, partial_path};

@@ -112,6 +112,127 @@ pub struct FailPoint {
     pub dataset: String,
 }
 
+/// What [`RunWriter::resume`] gives back.
+#[derive(Debug)]
+pub struct Resumed {
+    /// The writer, where the saved state left the file.
+    pub writer: RunWriter,
+    /// The header the run was started with (its scene, above all).
+    pub header: RunHeader,
+    /// The saved state's bytes.
+    pub state: Vec<u8>,
+}
+
+/// Where the datasets stood when a state was saved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct StateMarks {
+    frames: usize,
+    steps: usize,
+    exits: usize,
+    trajectory_rows: usize,
+    contact_rows: usize,
+}
+
+/// `/state`: two byte slots written in turn, and the group's attributes saying which one is
+/// whole (`slot`: 1 or 2, 0 before the first) and where the datasets stood. A slot is written
+/// while the attributes on disk still name the other one, so a kill at any moment leaves a
+/// whole state.
+#[derive(Debug)]
+struct StateSlots {
+    group: hdf5::Group,
+    slots: [Dataset; 2],
+    slot: u8,
+}
+
+const STATE_MARKS: [&str; 5] = [
+    "frames",
+    "steps",
+    "exits",
+    "trajectory_rows",
+    "contact_rows",
+];
+
+impl StateSlots {
+    fn create(file: &File) -> hdf5::Result<Self> {
+        let group = file.create_group(STATE)?;
+        let slot = |name: &str| {
+            group
+                .new_dataset::<u8>()
+                .chunk(STATE_BYTES_PER_CHUNK)
+                .shape(0..)
+                .create(name)
+        };
+        let slots = [slot("a")?, slot("b")?];
+        group
+            .new_attr::<u8>()
+            .shape(())
+            .create("slot")?
+            .write_scalar(&0u8)?;
+        for name in STATE_MARKS {
+            group
+                .new_attr::<u64>()
+                .shape(())
+                .create(name)?
+                .write_scalar(&0u64)?;
+        }
+        Ok(Self {
+            group,
+            slots,
+            slot: 0,
+        })
+    }
+
+    fn open(file: &File) -> hdf5::Result<Self> {
+        let group = file.group(STATE)?;
+        let slots = [group.dataset("a")?, group.dataset("b")?];
+        let slot = group.attr("slot")?.read_scalar::<u8>()?;
+        Ok(Self { group, slots, slot })
+    }
+
+    fn save(&mut self, bytes: &[u8], marks: StateMarks) -> hdf5::Result<()> {
+        let next = if self.slot == 1 { 2 } else { 1 };
+        let ds = &self.slots[usize::from(next - 1)];
+        ds.resize(bytes.len())?;
+        if !bytes.is_empty() {
+            ds.write_slice(bytes, 0..bytes.len())?;
+        }
+        let values = [
+            marks.frames,
+            marks.steps,
+            marks.exits,
+            marks.trajectory_rows,
+            marks.contact_rows,
+        ];
+        for (name, value) in STATE_MARKS.iter().zip(values) {
+            self.group.attr(name)?.write_scalar(&(value as u64))?;
+        }
+        self.group.attr("slot")?.write_scalar(&next)?;
+        self.slot = next;
+        Ok(())
+    }
+
+    fn load(&self) -> hdf5::Result<(Vec<u8>, Option<StateMarks>)> {
+        if self.slot == 0 {
+            return Ok((Vec::new(), None));
+        }
+        let bytes = self.slots[usize::from(self.slot - 1).min(1)].read_raw::<u8>()?;
+        let mut v = [0usize; 5];
+        for (k, name) in STATE_MARKS.iter().enumerate() {
+            v[k] = self.group.attr(name)?.read_scalar::<u64>()? as usize;
+        }
+        Ok((
+            bytes,
+            Some(StateMarks {
+                frames: v[0],
+                steps: v[1],
+                exits: v[2],
+                trajectory_rows: v[3],
+                contact_rows: v[4],
+            }),
+        ))
+    }
+}
+
 /// Writes one run file. Rows given between two frames are held in memory and written with
 /// the next frame, then the file is flushed: on disk the file is always a whole number of
 /// frames, whatever moment the process dies, and a frame whose writing fails (a full disk) is
@@ -133,6 +254,8 @@ pub struct RunWriter {
     steps: Dataset,
     /// `/contacts` and `/frames/pressure`, when the run records contact forces.
     contacts: Option<(Dataset, Dataset)>,
+    /// `/state` and its two slots.
+    state: StateSlots,
     people: usize,
     frames: usize,
     trajectory_rows: usize,
@@ -390,6 +513,7 @@ impl RunWriter {
             .with_data(&header.radii)
             .create(PEOPLE_RADIUS)
             .at(path, at("writing 'people/radius'"))?;
+        let state = StateSlots::create(&file).at(path, at("creating 'state'"))?;
         file.flush().at(path, at("flushing"))?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -405,6 +529,7 @@ impl RunWriter {
             exits,
             steps,
             contacts,
+            state,
             people: n,
             frames: 0,
             trajectory_rows: 0,
@@ -483,6 +608,150 @@ impl RunWriter {
         self.pending_pressure.clear();
         self.pending_pressure.extend_from_slice(pressure_by_id);
         Ok(())
+    }
+
+    /// Saves the run's state after the last frame (the bytes of a `SimState`) into the slot
+    /// not in use, then says so and flushes: a run killed at any moment leaves one whole state
+    /// and the counts of rows it goes with, for [`resume`](Self::resume). Between frames only
+    /// (nothing pending).
+    pub fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        if !self.pending_steps.is_empty() || !self.pending_exits.is_empty() {
+            return Err(self.layout_error(format!(
+                "a state saved between frames ({} steps not yet written)",
+                self.pending_steps.len()
+            )));
+        }
+        let marks = StateMarks {
+            frames: self.frames,
+            steps: self.step_rows,
+            exits: self.exit_rows,
+            trajectory_rows: self.trajectory_rows,
+            contact_rows: self.contact_rows,
+        };
+        let path = self.path.clone();
+        self.state
+            .save(bytes, marks)
+            .and_then(|()| self.file.flush())
+            .at(&path, || {
+                format!("saving the state after frame {}", marks.frames)
+            })
+    }
+
+    /// Reopens the partial file a killed run left for `path` ([`partial_path`]) to go on from
+    /// its last saved state: every dataset is cut back to where that state was saved (rows
+    /// written after it are dropped; the run will write them again), and the writer, the
+    /// header and the state's bytes are returned. `overwrite` is the rule for moving the file
+    /// to `path` when the run ends.
+    pub fn resume(path: &Path, overwrite: Overwrite) -> Result<Resumed, IoError> {
+        let lock = OutputLock::acquire(path)?;
+        let partial = partial_path(path);
+        if !partial.is_file() {
+            return Err(IoError::Layout {
+                path: path.to_path_buf(),
+                what: format!(
+                    "nothing to resume: no partial file '{}' (a run killed while writing \
+                     '{}' leaves one)",
+                    partial.display(),
+                    path.display()
+                ),
+            });
+        }
+        let header = crate::RunFile::open(&partial)?.header()?;
+        let file = without_locking()
+            .open_rw(&partial)
+            .at(&partial, || "opening for writing".into())?;
+        let format = file
+            .attr("format")
+            .and_then(|a| a.read_scalar::<VarLenUnicode>())
+            .at(&partial, || "reading attribute 'format'".into())?;
+        if format.as_str() != FORMAT {
+            return Err(IoError::Layout {
+                path: partial,
+                what: format!(
+                    "format '{format}' has no saved state (this moreau writes '{FORMAT}')"
+                ),
+            });
+        }
+        let at = |what: &str| {
+            let what = what.to_string();
+            move || what
+        };
+        let state = StateSlots::open(&file).at(&partial, at("opening 'state'"))?;
+        let (bytes, marks) = state.load().at(&partial, at("reading the saved state"))?;
+        let Some(marks) = marks else {
+            return Err(IoError::Layout {
+                path: partial,
+                what: "nothing to resume: the run was killed before its first frame's state was \
+                       saved; run it again with --force"
+                    .into(),
+            });
+        };
+        let open = |name: &str| {
+            file.dataset(name)
+                .at(&partial, || format!("opening '{name}'"))
+        };
+        let (trajectory, frame_time, frame_count, positions, exits, steps) = (
+            open(TRAJECTORY)?,
+            open(FRAME_TIME)?,
+            open(FRAME_COUNT)?,
+            open(FRAME_POSITIONS)?,
+            open(EXITS)?,
+            open(STEPS)?,
+        );
+        let contacts = if header.contacts {
+            Some((open(CONTACTS)?, open(FRAME_PRESSURE)?))
+        } else {
+            None
+        };
+        let n = header.radii.len();
+        let exit_rows: Vec<ExitRow> = exits
+            .read_slice_1d(0..marks.exits)
+            .map(|a| a.to_vec())
+            .at(&partial, at("reading 'exits'"))?;
+        let mut exit_times = vec![f64::NAN; n];
+        for row in &exit_rows {
+            if let Some(t) = exit_times.get_mut(row.id as usize) {
+                *t = row.t;
+            }
+        }
+        let writer = Self {
+            path: path.to_path_buf(),
+            partial: partial.clone(),
+            overwrite,
+            lock: Some(lock),
+            fail: None,
+            file,
+            trajectory,
+            frame_time,
+            frame_count,
+            positions,
+            exits,
+            steps,
+            contacts,
+            state,
+            people: n,
+            frames: marks.frames,
+            trajectory_rows: marks.trajectory_rows,
+            exit_rows: marks.exits,
+            step_rows: marks.steps,
+            contact_rows: marks.contact_rows,
+            exit_times,
+            pending_steps: Vec::new(),
+            pending_exits: Vec::new(),
+            rows: Vec::new(),
+            dense: Vec::new(),
+            pending_contacts: Vec::new(),
+            pending_pressure: Vec::new(),
+        };
+        writer
+            .roll_back()
+            .and_then(|()| writer.file.flush())
+            .at(&partial, at("cutting the datasets back to the saved state"))?;
+        Ok(Resumed {
+            writer,
+            header,
+            state: bytes,
+        })
     }
 
     /// Writes one output frame, `positions = [x0, y0, x1, y1, ...]` of the people `ids`, with
@@ -720,6 +989,7 @@ impl RunWriter {
             exits,
             steps,
             contacts,
+            state,
             ..
         } = self;
         drop((
@@ -730,6 +1000,7 @@ impl RunWriter {
             exits,
             steps,
             contacts,
+            state,
         ));
         keep(file.close().at(&path, || "closing".into()));
         keep(publish(&partial, &path, overwrite).map_err(|e| match e {

@@ -203,3 +203,61 @@ fn inspect_on_a_directory_said_no_such_file() {
     let err = RunFile::open(&missing).unwrap_err().to_string();
     assert!(err.contains("no such file"), "{err}");
 }
+
+/// A run killed after frames it wrote past its last saved state: resuming cuts every dataset
+/// back to that state (frames, trajectory, contacts, pressure, steps, exits), gives back the
+/// state's bytes and the header, and the run goes on from there to a whole file at its name.
+#[test]
+fn a_killed_run_resumes_from_the_state_saved_with_its_last_frame() {
+    let (n, path) = (3, scratch("resume.h5"));
+    let h = header(n, true);
+    {
+        let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+        for k in 0..3 {
+            write_frame(&mut w, k, n).unwrap();
+            w.save_state(format!("state after frame {k}").as_bytes())
+                .unwrap();
+        }
+        // A state between frames is refused (it would not match the rows).
+        w.step(&report(99));
+        assert!(w.save_state(b"between").is_err());
+        // Frame 3 is written, then the run "dies" before saving its state.
+        write_frame(&mut w, 3, n).unwrap();
+        std::mem::forget(w); // no finish, no close: as SIGKILL leaves it (the lock is released below)
+    }
+    let _ = std::fs::remove_file(moreau_io::lock_path(&path));
+    assert!(!path.exists() && partial_path(&path).exists());
+    assert_eq!(
+        RunFile::open(&partial_path(&path))
+            .unwrap()
+            .frame_times()
+            .unwrap()
+            .len(),
+        4
+    );
+
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    assert_eq!(r.state, b"state after frame 2");
+    assert_eq!(r.header, h);
+    let mut w = r.writer;
+    assert_eq!(w.frames(), 3);
+    // The run goes on: frame 3 again, then frame 4.
+    write_frame(&mut w, 3, n).unwrap();
+    write_frame(&mut w, 4, n).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(
+        f.frame_times().unwrap(),
+        vec![0.0, 0.1, 0.2, 0.30000000000000004, 0.4]
+    );
+    assert_eq!(f.trajectory().unwrap().len(), 5 * n);
+    assert_eq!(f.contacts().unwrap().len(), 5);
+    assert_eq!(f.steps().unwrap().len(), 8);
+    assert_eq!(f.exits().unwrap().len(), 4);
+    assert!(f.pressure(4).unwrap().is_some() && f.pressure(5).is_err());
+    assert!(!partial_path(&path).exists());
+
+    // Nothing to resume: a clear error naming the partial file it looked for.
+    let err = RunWriter::resume(&scratch("nothing.h5"), Overwrite::Never).unwrap_err();
+    assert!(err.to_string().contains("nothing to resume"), "{err}");
+}

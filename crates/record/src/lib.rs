@@ -3,7 +3,7 @@
 //! use, so that both write the same file.
 
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, Simulation};
+use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, SimState, Simulation};
 use moreau_io::{ContactRow, RunHeader, RunWriter};
 use serde::Serialize;
 
@@ -174,6 +174,14 @@ impl<'a> Record<'a> {
             exits: 0,
             people,
             pressure: Vec::new(),
+        }
+    }
+
+    /// Saves `state` into the run file after its last frame (nothing without a file).
+    pub fn save_state(&mut self, state: &SimState) -> Result<(), moreau_io::IoError> {
+        match self.writer.as_deref_mut() {
+            Some(w) => w.save_state(&state.to_bytes()),
+            None => Ok(()),
         }
     }
 
