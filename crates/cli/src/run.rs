@@ -11,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use moreau_crowd::{Scene, SimState, Simulation};
 use moreau_integrate::ErrorEstimate;
-use moreau_io::{Overwrite, RunFile, RunWriter};
+use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
 use moreau_record::{Record, Summary};
 
 /// Arguments of `moreau run`.
@@ -309,12 +309,14 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         Overwrite::Never
     };
     check_paths(args, overwrite)?;
-    let (mut sim, mut writer, origin) = match &args.resume {
+    let (mut sim, writer, origin) = match &args.resume {
         Some(out) => resumed(out, overwrite)?,
         None => started(args, overwrite)?,
     };
     let people = sim.total_people();
     let output = args.output.as_ref().or(args.resume.as_ref());
+    // The file is written on a thread of its own: the steps do not wait for the disk.
+    let mut writer = writer.map(BackgroundWriter::new);
     let signals = Signals::install()?;
 
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
@@ -349,7 +351,8 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         Ok(())
     };
-    let mut record = Record::new(writer.as_mut(), people).with_progress(&mut progress);
+    let mut record = Record::new(writer.as_mut().map(|w| w as &mut dyn RunSink), people)
+        .with_progress(&mut progress);
     let outcome = run_saving(&mut sim, &mut record);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();

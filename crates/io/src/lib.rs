@@ -32,11 +32,13 @@
 //! path ([`lock_path`]); files are opened without HDF5's file locking, so a run in progress
 //! can be read.
 
+mod background;
 mod error;
 mod layout;
 mod reader;
 mod writer;
 
+pub use background::{BackgroundWriter, RunSink};
 pub use error::IoError;
 pub use layout::{ContactRow, ExitRow, FORMAT, FORMATS_READ, RunHeader, StepRow, TrajectoryRow};
 pub use reader::RunFile;

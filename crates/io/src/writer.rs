@@ -561,6 +561,16 @@ impl RunWriter {
         self.pending_steps.push(StepRow::from(report));
     }
 
+    /// Records a step already in its stored form (written with the next frame).
+    pub(crate) fn step_row(&mut self, row: StepRow) {
+        self.pending_steps.push(row);
+    }
+
+    /// People the file holds (every id at the start).
+    pub fn people(&self) -> usize {
+        self.people
+    }
+
     /// Records that person `id` passed an exit at time `t` (written with the next frame).
     pub fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
         let slot = self

@@ -261,3 +261,81 @@ fn a_killed_run_resumes_from_the_state_saved_with_its_last_frame() {
     let err = RunWriter::resume(&scratch("nothing.h5"), Overwrite::Never).unwrap_err();
     assert!(err.to_string().contains("nothing to resume"), "{err}");
 }
+
+/// The same frames through a writer on its own thread give the same file as through one in
+/// the caller's thread; a write that fails there stops the run at a later frame or at the
+/// end, and the file keeps its whole frames.
+#[test]
+fn a_background_writer_writes_the_same_file_and_reports_its_failures() {
+    use moreau_io::{BackgroundWriter, RunSink};
+    let n = 3;
+    let write = |w: &mut dyn RunSink, k: usize| -> Result<(), IoError> {
+        if k > 0 {
+            w.step(&report(2 * k - 2));
+            w.step(&report(2 * k - 1));
+            w.exit(0, 0.1 * k as f64)?;
+        }
+        let row = ContactRow {
+            frame: 0,
+            kind: ContactRow::PERSON_PERSON,
+            a: 0,
+            b: 1,
+            lambda: 0.5 + k as f64,
+        };
+        w.contact_rows(&mut std::iter::once(row), &vec![0.5; n])?;
+        let q: Vec<f64> = (0..2 * n)
+            .map(|i| 1.0 + i as f64 + 0.01 * k as f64)
+            .collect();
+        w.frame(0.1 * k as f64, &[0, 1, 2], &q)?;
+        w.save_state(format!("after {k}").as_bytes())
+    };
+    let (direct, threaded) = (scratch("direct.h5"), scratch("threaded.h5"));
+    let mut a = RunWriter::create(&direct, &header(n, true), Overwrite::Never).unwrap();
+    let mut b = BackgroundWriter::new(
+        RunWriter::create(&threaded, &header(n, true), Overwrite::Never).unwrap(),
+    );
+    for k in 0..6 {
+        write(&mut a, k).unwrap();
+        write(&mut b, k).unwrap();
+    }
+    a.step(&report(99));
+    b.step(&report(99));
+    a.finish("complete", "{}").unwrap();
+    b.finish("complete", "{}").unwrap();
+    let (fa, fb) = (
+        RunFile::open(&direct).unwrap(),
+        RunFile::open(&threaded).unwrap(),
+    );
+    assert_eq!(fa.frame_times().unwrap(), fb.frame_times().unwrap());
+    assert_eq!(fa.trajectory().unwrap(), fb.trajectory().unwrap());
+    assert_eq!(fa.steps().unwrap(), fb.steps().unwrap());
+    assert_eq!(fa.steps().unwrap().len(), 11);
+    assert_eq!(fa.exits().unwrap(), fb.exits().unwrap());
+    assert_eq!(fa.contacts().unwrap(), fb.contacts().unwrap());
+    for k in 0..6 {
+        assert_eq!(fa.positions(k).unwrap(), fb.positions(k).unwrap());
+        assert_eq!(fa.pressure(k).unwrap(), fb.pressure(k).unwrap());
+    }
+
+    // A full disk at frame 2 on the writing thread: reported by a later call or by finish.
+    let failing = scratch("failing.h5");
+    let mut w = RunWriter::create(&failing, &header(n, true), Overwrite::Never).unwrap();
+    w.fail_at(FailPoint {
+        frame: 2,
+        dataset: "steps".into(),
+    });
+    let mut b = BackgroundWriter::new(w);
+    let first_error = (0..8).find_map(|k| write(&mut b, k).err());
+    let finished = b.finish("failed: disk full", "{}");
+    let error = first_error
+        .or(finished.err())
+        .expect("the failure is reported");
+    assert!(
+        error.to_string().contains("No space left on device"),
+        "{error}"
+    );
+    let f = RunFile::open(&partial_path(&failing))
+        .or_else(|_| RunFile::open(&failing))
+        .unwrap();
+    assert_eq!(f.frame_times().unwrap().len(), 2, "whole frames only");
+}

@@ -595,7 +595,8 @@ pub fn run_to_file(
                 format!("stopped from Python: {message}").into()
             })
         };
-        let mut record = Record::new(Some(&mut writer), people).with_progress(&mut tell);
+        let mut record = Record::new(Some(&mut writer as &mut dyn moreau_io::RunSink), people)
+            .with_progress(&mut tell);
         let outcome = sim.run(&mut record);
         let status = match &outcome {
             Ok(()) => "complete".to_string(),

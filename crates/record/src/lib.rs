@@ -4,7 +4,7 @@
 
 use moreau_core::{RunStats, StepReport};
 use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, SimState, Simulation};
-use moreau_io::{ContactRow, RunHeader, RunWriter};
+use moreau_io::{ContactRow, RunHeader, RunSink};
 use serde::Serialize;
 
 /// The version written into run files (`moreau_version`).
@@ -142,7 +142,7 @@ pub type Progress<'a> =
 /// What a run does as it goes: writes steps, exits and frames to the file (when there is
 /// one), adds up the steps, and tells `progress`.
 pub struct Record<'a> {
-    writer: Option<&'a mut RunWriter>,
+    writer: Option<&'a mut dyn RunSink>,
     progress: Option<&'a mut Progress<'a>>,
     /// The steps added up.
     pub stats: RunStats,
@@ -165,7 +165,7 @@ impl std::fmt::Debug for Record<'_> {
 
 impl<'a> Record<'a> {
     /// Records a run of `people` people (everyone at the start) into `writer`, if any.
-    pub fn new(writer: Option<&'a mut RunWriter>, people: usize) -> Self {
+    pub fn new(writer: Option<&'a mut dyn RunSink>, people: usize) -> Self {
         Record {
             writer,
             progress: None,
@@ -217,7 +217,7 @@ impl Observer for Record<'_> {
             if w.records_contacts() {
                 self.pressure.resize(self.people, f64::NAN);
                 f.pressure_by_id(&mut self.pressure);
-                let rows = f.contact_forces().map(|c| ContactRow {
+                let mut rows = f.contact_forces().map(|c| ContactRow {
                     frame: 0,
                     kind: match c.kind {
                         ContactKind::PersonPerson => ContactRow::PERSON_PERSON,
@@ -227,7 +227,7 @@ impl Observer for Record<'_> {
                     b: c.b.into(),
                     lambda: c.lambda,
                 });
-                w.contacts(rows, &self.pressure)?;
+                w.contact_rows(&mut rows, &self.pressure)?;
             }
             w.frame(f.t, f.ids, f.positions)?;
         }

@@ -1,0 +1,286 @@
+//! Writing a run file off the step's critical path: a [`RunWriter`] on its own thread, fed
+//! frame by frame through a bounded queue (back-pressure: at most two frames and two states in
+//! flight), and [`RunSink`], what an observer of a run writes to (either writer).
+
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use moreau_core::StepReport;
+
+use crate::error::IoError;
+use crate::layout::{ContactRow, StepRow};
+use crate::writer::RunWriter;
+
+/// What a run's observer writes: steps, exits, contact forces, frames and saved states, in
+/// the order they happen. [`RunWriter`] writes them at once; [`BackgroundWriter`] on its own
+/// thread.
+pub trait RunSink: Send {
+    /// Records a step (written with the next frame).
+    fn step(&mut self, report: &StepReport);
+    /// Records that person `id` passed an exit at time `t`.
+    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError>;
+    /// Whether the file records contact forces.
+    fn records_contacts(&self) -> bool;
+    /// The contact forces of the next frame and the pressure by id.
+    fn contact_rows(
+        &mut self,
+        rows: &mut dyn Iterator<Item = ContactRow>,
+        pressure_by_id: &[f64],
+    ) -> Result<(), IoError>;
+    /// One output frame.
+    fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError>;
+    /// The run's state after the last frame.
+    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError>;
+}
+
+impl RunSink for RunWriter {
+    fn step(&mut self, report: &StepReport) {
+        RunWriter::step(self, report);
+    }
+    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
+        RunWriter::exit(self, id, t)
+    }
+    fn records_contacts(&self) -> bool {
+        RunWriter::records_contacts(self)
+    }
+    fn contact_rows(
+        &mut self,
+        rows: &mut dyn Iterator<Item = ContactRow>,
+        pressure_by_id: &[f64],
+    ) -> Result<(), IoError> {
+        RunWriter::contacts(self, rows, pressure_by_id)
+    }
+    fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
+        RunWriter::frame(self, t, ids, positions)
+    }
+    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        RunWriter::save_state(self, bytes)
+    }
+}
+
+/// Everything between two frames, and the frame.
+#[derive(Debug, Default)]
+struct Batch {
+    steps: Vec<StepRow>,
+    exits: Vec<(u32, f64)>,
+    contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
+    t: f64,
+    ids: Vec<u32>,
+    positions: Vec<f64>,
+}
+
+enum Message {
+    Frame(Batch),
+    State(Vec<u8>),
+    Finish {
+        steps: Vec<StepRow>,
+        exits: Vec<(u32, f64)>,
+        status: String,
+        summary: String,
+    },
+}
+
+/// A [`RunWriter`] on its own thread. A write that fails there is reported by the next
+/// [`RunSink::frame`] or [`RunSink::save_state`] (the run stops one frame later than with a
+/// writer in the stepping thread, and the file keeps its whole frames as ever) and by
+/// [`finish`](Self::finish).
+#[derive(Debug)]
+pub struct BackgroundWriter {
+    queue: Option<SyncSender<Message>>,
+    thread: Option<JoinHandle<Result<(), IoError>>>,
+    failed: Arc<Mutex<Option<IoError>>>,
+    pending: Batch,
+    contacts: bool,
+    people: usize,
+    path: std::path::PathBuf,
+}
+
+impl BackgroundWriter {
+    /// Moves `writer` to a thread of its own.
+    pub fn new(writer: RunWriter) -> Self {
+        let (queue, inbox) = sync_channel(2);
+        let failed = Arc::new(Mutex::new(None));
+        let contacts = writer.records_contacts();
+        let people = writer.people();
+        let path = writer.path().to_path_buf();
+        let shared = Arc::clone(&failed);
+        let thread = std::thread::Builder::new()
+            .name("moreau-writer".into())
+            .spawn(move || work(writer, inbox, shared))
+            .expect("a thread for the run file");
+        Self {
+            queue: Some(queue),
+            thread: Some(thread),
+            failed,
+            pending: Batch::default(),
+            contacts,
+            people,
+            path,
+        }
+    }
+
+    /// The first error of the writing thread, if there was one (taken).
+    fn take_failure(&self) -> Option<IoError> {
+        self.failed.lock().ok().and_then(|mut f| f.take())
+    }
+
+    fn send(&mut self, message: Message) -> Result<(), IoError> {
+        if let Some(e) = self.take_failure() {
+            return Err(e);
+        }
+        let sent = self.queue.as_ref().map(|q| q.send(message));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            // The thread ended (it panicked): its error, or say so.
+            _ => {
+                let path = self.path.clone();
+                Err(self.join().err().unwrap_or(IoError::Layout {
+                    path,
+                    what: "the run file's writing thread ended early".into(),
+                }))
+            }
+        }
+    }
+
+    fn join(&mut self) -> Result<(), IoError> {
+        self.queue = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => Err(IoError::Layout {
+                path: self.path.clone(),
+                what: "the run file's writing thread panicked".into(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Ends the run as [`RunWriter::finish`] does, once every frame sent is written; the first
+    /// error of the whole writing is returned.
+    pub fn finish(mut self, status: &str, summary: &str) -> Result<(), IoError> {
+        let earlier = self.take_failure();
+        let message = Message::Finish {
+            steps: std::mem::take(&mut self.pending.steps),
+            exits: std::mem::take(&mut self.pending.exits),
+            status: status.to_string(),
+            summary: summary.to_string(),
+        };
+        let sent = self.queue.as_ref().map(|q| q.send(message));
+        let joined = self.join();
+        let later = self.take_failure();
+        match (earlier, sent, joined, later) {
+            (Some(e), ..) => Err(e),
+            (None, _, Err(e), _) => Err(e),
+            (None, _, Ok(()), Some(e)) => Err(e),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Drop for BackgroundWriter {
+    fn drop(&mut self) {
+        let _ = self.join();
+    }
+}
+
+/// The writing thread: writes each message in order; after a failure it keeps the first
+/// error for the stepping thread and only finishes the file.
+fn work(
+    mut writer: RunWriter,
+    inbox: Receiver<Message>,
+    failed: Arc<Mutex<Option<IoError>>>,
+) -> Result<(), IoError> {
+    let mut broken = false;
+    let fail = |e: IoError, broken: &mut bool| {
+        *broken = true;
+        if let Ok(mut f) = failed.lock() {
+            f.get_or_insert(e);
+        }
+    };
+    for message in inbox {
+        match message {
+            Message::Frame(batch) if !broken => {
+                if let Err(e) = write_batch(&mut writer, batch) {
+                    fail(e, &mut broken);
+                }
+            }
+            Message::State(bytes) if !broken => {
+                if let Err(e) = writer.save_state(&bytes) {
+                    fail(e, &mut broken);
+                }
+            }
+            Message::Finish {
+                steps,
+                exits,
+                status,
+                summary,
+            } => {
+                for s in steps {
+                    writer.step_row(s);
+                }
+                for (id, t) in exits {
+                    let _ = writer.exit(id, t);
+                }
+                return writer.finish(&status, &summary);
+            }
+            _ => {}
+        }
+    }
+    // The stepping side went away without finishing (it panicked): leave the partial file.
+    Ok(())
+}
+
+fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
+    for s in batch.steps {
+        writer.step_row(s);
+    }
+    for (id, t) in batch.exits {
+        writer.exit(id, t)?;
+    }
+    if let Some((rows, pressure)) = batch.contacts {
+        writer.contacts(rows, &pressure)?;
+    }
+    writer.frame(batch.t, &batch.ids, &batch.positions)
+}
+
+impl RunSink for BackgroundWriter {
+    fn step(&mut self, report: &StepReport) {
+        self.pending.steps.push(StepRow::from(report));
+    }
+    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
+        if id as usize >= self.people {
+            return Err(IoError::Layout {
+                path: self.path.clone(),
+                what: format!(
+                    "exit of person {id}, but the file holds {} people",
+                    self.people
+                ),
+            });
+        }
+        self.pending.exits.push((id, t));
+        Ok(())
+    }
+    fn records_contacts(&self) -> bool {
+        self.contacts
+    }
+    fn contact_rows(
+        &mut self,
+        rows: &mut dyn Iterator<Item = ContactRow>,
+        pressure_by_id: &[f64],
+    ) -> Result<(), IoError> {
+        if self.contacts {
+            self.pending.contacts = Some((rows.collect(), pressure_by_id.to_vec()));
+        }
+        Ok(())
+    }
+    fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
+        let mut batch = std::mem::take(&mut self.pending);
+        batch.t = t;
+        batch.ids = ids.to_vec();
+        batch.positions = positions.to_vec();
+        self.send(Message::Frame(batch))
+    }
+    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.send(Message::State(bytes.to_vec()))
+    }
+}
