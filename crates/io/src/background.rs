@@ -71,7 +71,7 @@ struct Batch {
 }
 
 enum Message {
-    Frame(Batch),
+    Frame(Box<Batch>),
     State(Vec<u8>),
     Finish {
         steps: Vec<StepRow>,
@@ -230,7 +230,8 @@ fn work(
     Ok(())
 }
 
-fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
+fn write_batch(writer: &mut RunWriter, batch: Box<Batch>) -> Result<(), IoError> {
+    let batch = *batch;
     for s in batch.steps {
         writer.step_row(s);
     }
@@ -278,7 +279,7 @@ impl RunSink for BackgroundWriter {
         batch.t = t;
         batch.ids = ids.to_vec();
         batch.positions = positions.to_vec();
-        self.send(Message::Frame(batch))
+        self.send(Message::Frame(Box::new(batch)))
     }
     fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
         self.send(Message::State(bytes.to_vec()))
