@@ -200,7 +200,7 @@ fn work(
     for message in inbox {
         match message {
             Message::Frame(batch) if !broken => {
-                if let Err(e) = write_batch(&mut writer, batch) {
+                if let Err(e) = write_batch(&mut writer, *batch) {
                     fail(e, &mut broken);
                 }
             }
@@ -230,8 +230,7 @@ fn work(
     Ok(())
 }
 
-fn write_batch(writer: &mut RunWriter, batch: Box<Batch>) -> Result<(), IoError> {
-    let batch = *batch;
+fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
     for s in batch.steps {
         writer.step_row(s);
     }
