@@ -46,7 +46,20 @@ impl RunFile {
                 what: "not a regular file".into(),
             });
         }
-        let file = crate::writer::without_locking().open(path).at(path, || {
+        // A partial file may be in the middle of a frame's flush (its superblock already
+        // names an end of file its data have not reached): wait for the flush, briefly.
+        let live = path
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().ends_with(".partial"));
+        let mut opened = crate::writer::without_locking().open(path);
+        for _ in 0..if live { 40 } else { 0 } {
+            if opened.is_ok() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            opened = crate::writer::without_locking().open(path);
+        }
+        let file = opened.at(path, || {
             "opening it as HDF5 (is it an HDF5 file, and whole, not truncated?)".into()
         })?;
         let me = Self {
