@@ -284,21 +284,6 @@ fn resumed(out: &Path, overwrite: Overwrite) -> Result<(Simulation, Option<RunWr
     Ok((sim, Some(r.writer), origin))
 }
 
-/// Steps `sim` to its horizon frame by frame, saving its state after every frame into the
-/// run file (what `--resume` goes on from).
-fn run_saving(
-    sim: &mut Simulation,
-    record: &mut Record<'_>,
-) -> Result<(), moreau_crowd::CrowdError> {
-    while let Some(t) = sim.next_frame_time() {
-        sim.advance_to(t, record)?;
-        record
-            .save_state(&sim.state())
-            .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
-    }
-    Ok(())
-}
-
 /// Runs `moreau run`. Errors before the run starts are returned (exit 2, nothing written);
 /// a failure during the run is reported, recorded in the file, and gives exit code 1; a run
 /// stopped by SIGINT or SIGTERM is finished with status `interrupted` (exit 130, 143).
@@ -353,7 +338,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
     let mut record = Record::new(writer.as_mut().map(|w| w as &mut dyn RunSink), people)
         .with_progress(&mut progress);
-    let outcome = run_saving(&mut sim, &mut record);
+    let outcome = moreau_record::run_to_horizon(&mut sim, &mut record);
     bar.finish_and_clear();
     let wall = start.elapsed().as_secs_f64();
 

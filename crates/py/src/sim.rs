@@ -597,7 +597,7 @@ pub fn run_to_file(
         };
         let mut record = Record::new(Some(&mut writer as &mut dyn moreau_io::RunSink), people)
             .with_progress(&mut tell);
-        let outcome = sim.run(&mut record);
+        let outcome = moreau_record::run_to_horizon(&mut sim, &mut record);
         let status = match &outcome {
             Ok(()) => "complete".to_string(),
             Err(e) => format!("failed: {e:#}"),

@@ -134,6 +134,22 @@ impl Summary {
     }
 }
 
+/// Steps `sim` to its horizon frame by frame through `record`, saving the run's state after
+/// every frame into its file (what `moreau run --resume` goes on from). What `moreau run` and
+/// the Python module's `run` both do.
+pub fn run_to_horizon(
+    sim: &mut Simulation,
+    record: &mut Record<'_>,
+) -> Result<(), moreau_crowd::CrowdError> {
+    while let Some(t) = sim.next_frame_time() {
+        sim.advance_to(t, record)?;
+        record
+            .save_state(&sim.state())
+            .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
+    }
+    Ok(())
+}
+
 /// Told of every step with the run's totals so far and the people not yet out; an error
 /// stops the run (an interrupt, say).
 pub type Progress<'a> =
