@@ -23,4 +23,4 @@ pub use parallel::Parallelism;
 pub use report::{RunStats, SolveStatus, StageTimings, StepReport};
 pub use rows::{ConstraintKey, ConstraintRows};
 pub use sets::{Ball, BoxSet, HalfSpace, HalfSpaces, SeparableAbs};
-pub use traits::{ConstraintSet, ConvexPart, ConvexSet, Field, FnField};
+pub use traits::{ConstraintSet, ConvexPart, ConvexSet, Field, FnField, count_outside};

@@ -73,15 +73,38 @@ pub trait ConstraintSet {
     ) -> usize {
         let mut violated = ConstraintRows::new(self.dim());
         self.assemble(t, q, -tol, &mut violated);
-        let mut known: Vec<_> = assembled.keys().to_vec();
-        known.sort_unstable();
-        violated
+        count_outside(&violated, assembled, tol, &mut Vec::new())
+    }
+}
+
+/// How many rows of `candidates` have `g < −tol` and a key that `assembled` lacks: the count
+/// [`ConstraintSet::crossed_outside`] returns. The violated keys (usually none) are collected
+/// in `scratch` and sorted, and `assembled`'s keys searched among them.
+pub fn count_outside(
+    candidates: &ConstraintRows,
+    assembled: &ConstraintRows,
+    tol: f64,
+    scratch: &mut Vec<crate::rows::ConstraintKey>,
+) -> usize {
+    scratch.clear();
+    scratch.extend(
+        candidates
             .keys()
             .iter()
-            .zip(violated.values())
-            .filter(|&(k, &g)| g < -tol && known.binary_search(k).is_err())
-            .count()
+            .zip(candidates.values())
+            .filter(|&(_, &g)| g < -tol)
+            .map(|(&k, _)| k),
+    );
+    if scratch.is_empty() {
+        return 0;
     }
+    scratch.sort_unstable();
+    let known = assembled
+        .keys()
+        .iter()
+        .filter(|k| scratch.binary_search(k).is_ok())
+        .count();
+    scratch.len() - known
 }
 
 /// A convex, lower semicontinuous `ψ` whose subdifferential `G = ∂ψ` is the set-valued

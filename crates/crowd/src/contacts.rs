@@ -2,7 +2,7 @@
 //! each behind [`ContactSource`] with its own stable key, and the crowd's constraint set for
 //! one step, borrowed from the people and the walls.
 
-use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet};
+use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet, count_outside};
 
 use crate::broad::BroadPhase;
 use crate::people::PeopleView;
@@ -242,8 +242,7 @@ impl ConstraintSet for CrowdContacts<'_> {
         3.0 * mu * vmax + 0.05 * rmin
     }
 
-    /// As the default, with the rows kept from step to step, and the assembled keys searched
-    /// only for the (usually no) rows violated beyond `tol`.
+    /// As the default, with the rows kept from step to step (no allocation per step).
     fn crossed_outside(
         &mut self,
         t: f64,
@@ -254,28 +253,9 @@ impl ConstraintSet for CrowdContacts<'_> {
         let mut check = std::mem::take(&mut self.sources.check);
         check.clear(self.dim());
         self.assemble(t, q, -tol, &mut check);
-        let crossed = &mut self.sources.crossed;
-        crossed.clear();
-        crossed.extend(
-            check
-                .keys()
-                .iter()
-                .zip(check.values())
-                .filter(|&(_, &g)| g < -tol)
-                .map(|(&k, _)| k),
-        );
+        let crossed = count_outside(&check, assembled, tol, &mut self.sources.crossed);
         self.sources.check = check;
-        let crossed = &mut self.sources.crossed;
-        if crossed.is_empty() {
-            return 0;
-        }
-        crossed.sort_unstable();
-        let known = assembled
-            .keys()
-            .iter()
-            .filter(|k| crossed.binary_search(k).is_ok())
-            .count();
-        crossed.len() - known
+        crossed
     }
 }
 

@@ -30,8 +30,9 @@ pub trait RunSink: Send {
     ) -> Result<(), IoError>;
     /// One output frame.
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError>;
-    /// The run's state after the last frame.
-    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError>;
+    /// The run's state after the last frame (its bytes, handed over: a writer on another
+    /// thread keeps them without a copy).
+    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError>;
 }
 
 impl RunSink for RunWriter {
@@ -54,8 +55,8 @@ impl RunSink for RunWriter {
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
         RunWriter::frame(self, t, ids, positions)
     }
-    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
-        RunWriter::save_state(self, bytes)
+    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
+        RunWriter::save_state(self, &bytes)
     }
 }
 
@@ -280,7 +281,7 @@ impl RunSink for BackgroundWriter {
         batch.positions = positions.to_vec();
         self.send(Message::Frame(Box::new(batch)))
     }
-    fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
-        self.send(Message::State(bytes.to_vec()))
+    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
+        self.send(Message::State(bytes))
     }
 }

@@ -287,7 +287,7 @@ fn a_background_writer_writes_the_same_file_and_reports_its_failures() {
             .map(|i| 1.0 + i as f64 + 0.01 * k as f64)
             .collect();
         w.frame(0.1 * k as f64, &[0, 1, 2], &q)?;
-        w.save_state(format!("after {k}").as_bytes())
+        w.save_state(format!("after {k}").into_bytes())
     };
     let (direct, threaded) = (scratch("direct.h5"), scratch("threaded.h5"));
     let mut a = RunWriter::create(&direct, &header(n, true), Overwrite::Never).unwrap();

@@ -196,7 +196,7 @@ impl<'a> Record<'a> {
     /// Saves `state` into the run file after its last frame (nothing without a file).
     pub fn save_state(&mut self, state: &SimState) -> Result<(), moreau_io::IoError> {
         match self.writer.as_deref_mut() {
-            Some(w) => w.save_state(&state.to_bytes()),
+            Some(w) => w.save_state(state.to_bytes()),
             None => Ok(()),
         }
     }
