@@ -16,6 +16,8 @@ pub enum ContactKind {
     PersonPerson = 0,
     /// A person and a wall segment: `g = dist(q_i, wall) − r_i`.
     PersonWall = 1,
+    /// A person and a segment of a moving body: `g = dist(q_i, segment(t)) − r_i`.
+    MovingWall = 2,
 }
 
 impl ContactKind {
@@ -31,6 +33,7 @@ impl ContactKind {
         let kind = match key >> 62 {
             0 => Some(ContactKind::PersonPerson),
             1 => Some(ContactKind::PersonWall),
+            2 => Some(ContactKind::MovingWall),
             _ => None,
         };
         (
@@ -269,7 +272,9 @@ mod tests {
         for (a, b) in [(0, 0), (1, 2), (max, max), (max, 0)] {
             let pp = ContactKind::PersonPerson.key(a, b);
             let pw = ContactKind::PersonWall.key(a, b);
-            assert_ne!(pp, pw);
+            let mw = ContactKind::MovingWall.key(a, b);
+            assert!(pp != pw && pw != mw && mw != pp);
+            assert_eq!(ContactKind::of(mw), (Some(ContactKind::MovingWall), a, b));
             assert_eq!(ContactKind::of(pp), (Some(ContactKind::PersonPerson), a, b));
             assert_eq!(ContactKind::of(pw), (Some(ContactKind::PersonWall), a, b));
         }

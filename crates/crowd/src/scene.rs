@@ -167,6 +167,42 @@ pub struct Group {
     pub destination: String,
 }
 
+/// One pose of a moving body: at time `t` its points are turned by `angle` about its pivot,
+/// then shifted by `offset`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Keyframe {
+    /// Time (s).
+    pub t: f64,
+    /// Translation from where the scene draws the body (m).
+    #[serde(default)]
+    pub offset: [f64; 2],
+    /// Rotation about the pivot, counter-clockwise (degrees).
+    #[serde(default)]
+    pub angle: f64,
+}
+
+/// A wall, door panel or obstacle with a prescribed motion: the feasible set moves with it (a
+/// sweeping process, seeds/000). Its pose is linear in time between keyframes and held before
+/// the first and after the last, so it moves continuously.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MovingBody {
+    /// Its name (in reports and the run file).
+    pub name: String,
+    /// An open polyline (a wall or a panel: people keep off both sides)…
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub line: Option<Vec<[f64; 2]>>,
+    /// …or a closed polygon (an obstacle: nobody inside).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub polygon: Option<Vec<[f64; 2]>>,
+    /// The point rotations turn about (default: the first vertex).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pivot: Option<[f64; 2]>,
+    /// Poses at increasing times.
+    pub keyframes: Vec<Keyframe>,
+}
+
 /// Time stepping.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -342,6 +378,9 @@ pub struct Scene {
     /// What a run records (absent: positions, exits and steps only).
     #[serde(default, skip_serializing_if = "Output::is_default")]
     pub output: Output,
+    /// Walls, panels and obstacles that move (absent: the geometry is fixed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moving: Vec<MovingBody>,
 }
 
 fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
@@ -594,6 +633,7 @@ impl Scene {
                 _ => {}
             }
         }
+        self.validate_moving()?;
         if self.groups.is_empty() {
             return Err(CrowdError::invalid(
                 "groups",
@@ -658,6 +698,89 @@ impl Scene {
                         &f,
                         &group.name,
                         "give either `positions`, or `count` and `spawn`",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_moving(&self) -> Result<(), CrowdError> {
+        for (b, body) in self.moving.iter().enumerate() {
+            let f = format!("moving[{b}]");
+            if self.moving[..b].iter().any(|x| x.name == body.name) {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    &body.name,
+                    "duplicate moving body name",
+                ));
+            }
+            match (&body.line, &body.polygon) {
+                (Some(line), None) => {
+                    if line.len() < 2 {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.line"),
+                            format!("{line:?}"),
+                            "a line needs at least 2 points",
+                        ));
+                    }
+                    for (i, p) in line.iter().enumerate() {
+                        check_point(&format!("{f}.line[{i}]"), *p)?;
+                    }
+                    if let Some(i) = (1..line.len()).find(|&i| line[i] == line[i - 1]) {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.line[{i}]"),
+                            format!("{:?}", line[i]),
+                            "repeats the point before it (a segment of zero length)",
+                        ));
+                    }
+                }
+                (None, Some(polygon)) => {
+                    check_polygon(&format!("{f}.polygon"), polygon)?;
+                }
+                _ => {
+                    return Err(CrowdError::invalid(
+                        &f,
+                        &body.name,
+                        "give exactly one of `line` and `polygon`",
+                    ));
+                }
+            }
+            if let Some(p) = body.pivot {
+                check_point(&format!("{f}.pivot"), p)?;
+            }
+            if body.keyframes.is_empty() {
+                return Err(CrowdError::invalid(
+                    format!("{f}.keyframes"),
+                    "[]",
+                    "a moving body needs at least one keyframe",
+                ));
+            }
+            for (k, key) in body.keyframes.iter().enumerate() {
+                let kf = format!("{f}.keyframes[{k}]");
+                if !(key.t >= 0.0 && key.t.is_finite()) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.t"),
+                        Num(key.t),
+                        "must be finite and ≥ 0",
+                    ));
+                }
+                if k > 0 && !(key.t > body.keyframes[k - 1].t) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.t"),
+                        Num(key.t),
+                        format!(
+                            "keyframe times must increase (the one before is at {})",
+                            Num(body.keyframes[k - 1].t)
+                        ),
+                    ));
+                }
+                check_point(&format!("{kf}.offset"), key.offset)?;
+                if !(key.angle.is_finite() && key.angle.abs() <= 1e6) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.angle"),
+                        Num(key.angle),
+                        "must be finite, within ±1e6 degrees",
                     ));
                 }
             }

@@ -13,6 +13,8 @@ use crate::contacts::{ContactKind, ContactSources, CrowdContacts, PersonPairs, P
 use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
+use crate::geometry::Segment;
+use crate::moving::{MovingBodies, PersonMovingWalls};
 use crate::people::{ExitRecord, People, Place};
 use crate::scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind};
 use crate::spawn::place_people;
@@ -33,6 +35,8 @@ pub struct Frame<'a> {
     /// The multipliers of the step that ended here, by contact key (every row it assembled,
     /// `λ = 0` for those not in contact; empty before the first step).
     pub multipliers: &'a [(ConstraintKey, f64)],
+    /// The segments of the moving bodies at `t`, in [`MovingBodies`] order (empty without).
+    pub moving_walls: &'a [Segment],
 }
 
 /// A contact that pushed in the step that ended at a frame.
@@ -167,6 +171,10 @@ pub struct Simulation {
     exits: Exits,
     /// The scene's walls, and those of closed exits.
     walls: Walls,
+    /// Walls, panels and obstacles that move.
+    moving: MovingBodies,
+    /// Their segments at `t`.
+    moving_now: Vec<Segment>,
     people: People,
     exit_log: Vec<ExitRecord>,
     scheme: Scheme<Projection>,
@@ -212,18 +220,30 @@ impl Simulation {
             ));
         }
         let walls = Walls::new(scene.walls());
+        let moving = MovingBodies::new(&scene);
+        let mut moving_now = Vec::new();
+        moving.segments_at(0.0, &mut moving_now);
         let exits = Exits::build(&scene)?;
-        let people = place_people(&scene, &walls, &exits)?;
+        let people = if moving.is_empty() {
+            place_people(&scene, &walls, &moving, &exits)?
+        } else {
+            let all = Walls::new(walls.segments().iter().chain(&moving_now).copied().collect());
+            place_people(&scene, &all, &moving, &exits)?
+        };
         let n = people.len();
         let broad = match scene.solver.broad_phase {
             BroadPhaseChoice::Grid => BroadPhaseKind::Grid,
             BroadPhaseChoice::Bvh => BroadPhaseKind::Bvh,
             BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
         };
-        let sources = ContactSources::new(vec![
+        let mut sources: Vec<Box<dyn crate::contacts::ContactSource>> = vec![
             Box::new(PersonPairs::new(broad.build())),
             Box::new(PersonWalls::default()),
-        ]);
+        ];
+        if !moving.is_empty() {
+            sources.push(Box::new(PersonMovingWalls::new(moving.clone())));
+        }
+        let sources = ContactSources::new(sources);
         let solver = scene
             .solver
             .kind
@@ -243,6 +263,8 @@ impl Simulation {
             scene,
             exits,
             walls,
+            moving,
+            moving_now,
             people,
             exit_log: Vec::new(),
             scheme,
@@ -293,7 +315,13 @@ impl Simulation {
             positions: self.people.positions(),
             radii: self.people.radii(),
             multipliers: self.scheme.correction().warm_start(),
+            moving_walls: &self.moving_now,
         }
+    }
+
+    /// The moving bodies (walls, panels, obstacles with a prescribed motion).
+    pub fn moving(&self) -> &MovingBodies {
+        &self.moving
     }
 
     /// Everyone who passed an exit so far, in order.
@@ -473,27 +501,105 @@ impl Simulation {
         let p = self.parts();
         let report = p
             .scheme
-            .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)?;
+            .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)
+            .map_err(|e| self.diagnose(e.into()))?;
         self.accept(&report);
         Ok(report)
     }
 
+    /// The end of the next step towards `t_stop` allowed by the moving bodies: none may move
+    /// more than half the smallest radius in one step, so none passes a person's centre within
+    /// a step (the linearization at `t_{k+1}` would put the person on the wrong side).
+    fn moving_stop(&self, t_stop: f64) -> f64 {
+        if self.moving.is_empty() {
+            return t_stop;
+        }
+        let beta = self.moving.max_speed(self.t, t_stop);
+        if beta == 0.0 {
+            return t_stop;
+        }
+        let r_min = self.people.radii().iter().copied().fold(f64::INFINITY, f64::min);
+        let largest = 0.5 * r_min / beta;
+        let fixed_within = matches!(self.stepping, Stepping::Fixed { step } if step <= largest);
+        if fixed_within || self.t + largest >= t_stop {
+            t_stop
+        } else {
+            // Whole fractions of the way to t_stop: the steps stay equal.
+            let parts = ((t_stop - self.t) / largest).ceil();
+            self.t + (t_stop - self.t) / parts
+        }
+    }
+
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
     fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
+        let t_stop = self.moving_stop(t_stop);
         let (k, t) = (self.steps, self.t);
         let p = self.parts();
         let report = p
             .stepping
-            .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)?;
+            .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)
+            .map_err(|e| self.diagnose(e.into()))?;
         if let Some(r) = &report {
             self.accept(r);
         }
         Ok(report)
     }
 
+    /// A step that failed to certify: when its constraints admit no velocity at all (checked by
+    /// a Farkas certificate, [`moreau_solve::infeasibility_certificate`]), the error names the
+    /// constraints, people and moving bodies at fault; otherwise `error` as it was.
+    fn diagnose(&self, error: CrowdError) -> CrowdError {
+        use moreau_integrate::IntegrateError;
+        let CrowdError::Integrate(IntegrateError::NotCertified { t, .. }) = &error else {
+            return error;
+        };
+        let problem = self.last_projection();
+        let Ok(Some(y)) = moreau_solve::infeasibility_certificate(&problem) else {
+            return error;
+        };
+        let mut contacts: Vec<(ContactKind, u32, u32, f64)> = problem
+            .jacobian
+            .keys()
+            .iter()
+            .zip(&y)
+            .filter(|(_, y)| **y > 1e-6)
+            .filter_map(|(&key, &y)| match ContactKind::of(key) {
+                (Some(kind), a, b) => Some((kind, a, b, y)),
+                _ => None,
+            })
+            .collect();
+        contacts.sort_by(|x, y| y.3.total_cmp(&x.3));
+        let mut people: Vec<u32> = contacts
+            .iter()
+            .flat_map(|&(kind, a, b, _)| {
+                std::iter::once(a).chain((kind == ContactKind::PersonPerson).then_some(b))
+            })
+            .collect();
+        people.sort_unstable();
+        people.dedup();
+        let bodies: Vec<u32> = self.moving.segment_bodies().collect();
+        let mut moving: Vec<u32> = contacts
+            .iter()
+            .filter(|c| c.0 == ContactKind::MovingWall)
+            .filter_map(|c| bodies.get(c.2 as usize).copied())
+            .collect();
+        moving.sort_unstable();
+        moving.dedup();
+        CrowdError::Infeasible(Box::new(crate::error::Infeasibility {
+            t: *t,
+            contacts,
+            people,
+            moving: moving
+                .iter()
+                .map(|&b| self.moving.names()[b as usize].clone())
+                .collect(),
+        }))
+    }
+
     fn accept(&mut self, report: &StepReport) {
         self.t = report.t;
         self.steps += 1;
+        self.moving.segments_at(self.t, &mut self.moving_now);
         let people = self.people.len();
         self.apply_exits();
         if self.people.len() != people {
@@ -714,6 +820,7 @@ impl Simulation {
             x.open = open;
         }
         self.rebuild_walls();
+        self.moving.segments_at(self.t, &mut self.moving_now);
         self.speed_factor = state.speed_factor;
         self.scheme
             .correction_mut()
