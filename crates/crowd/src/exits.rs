@@ -39,14 +39,22 @@ impl ExitRuntime {
         }
     }
 
-    /// Whether a person of radius `r` at `p` has passed the (open) exit.
+    /// How near a person's edge must come to an exit line to pass it (m): the wall slide's
+    /// range and 1 cm. A person walking to an exit line on a wall stops being pushed into the
+    /// wall [`WALL_RANGE`](crate::DesiredVelocity::WALL_RANGE) short of it, and one pressed
+    /// against it keeps the positive gap the projection leaves (up to its certified accuracy
+    /// `√ε`, millimetres): with a reach of one radius, neither ever passed.
+    pub const LINE_REACH: f64 = crate::DesiredVelocity::WALL_RANGE + 0.01;
+
+    /// Whether a person of radius `r` at `p` has passed the (open) exit: its centre inside the
+    /// exit area, or its edge within [`LINE_REACH`](Self::LINE_REACH) of the exit line.
     pub fn reached(&self, p: [f64; 2], r: f64) -> bool {
         if !self.open {
             return false;
         }
         match (&self.area, &self.segment) {
             (Some(a), _) => a.contains(p),
-            (None, Some(s)) => s.distance(p) <= r,
+            (None, Some(s)) => s.distance(p) <= r + Self::LINE_REACH,
             _ => false,
         }
     }

@@ -36,7 +36,9 @@ impl Body {
             ),
             (None, None) => (Vec::new(), false),
         };
-        let pivot = b.pivot.unwrap_or(points.first().copied().unwrap_or([0.0; 2]));
+        let pivot = b
+            .pivot
+            .unwrap_or(points.first().copied().unwrap_or([0.0; 2]));
         let n = points.len();
         let segments: Vec<Segment> = if closed {
             (0..n)
@@ -83,7 +85,10 @@ impl Body {
         let (a, b) = (keys[k], keys[k + 1]);
         let s = (t - a.0) / (b.0 - a.0);
         (
-            [a.1[0] + s * (b.1[0] - a.1[0]), a.1[1] + s * (b.1[1] - a.1[1])],
+            [
+                a.1[0] + s * (b.1[0] - a.1[0]),
+                a.1[1] + s * (b.1[1] - a.1[1]),
+            ],
             a.2 + s * (b.2 - a.2),
         )
     }
@@ -173,10 +178,7 @@ impl MovingBodies {
                 // Move the point back into the body's own frame instead of moving the ring.
                 let (offset, angle) = b.pose(t);
                 let (s, c) = angle.sin_cos();
-                let d = [
-                    p[0] - b.pivot[0] - offset[0],
-                    p[1] - b.pivot[1] - offset[1],
-                ];
+                let d = [p[0] - b.pivot[0] - offset[0], p[1] - b.pivot[1] - offset[1]];
                 let x = [
                     b.pivot[0] + c * d[0] + s * d[1],
                     b.pivot[1] - s * d[0] + c * d[1],
@@ -320,10 +322,14 @@ mod tests {
             let t = k as f64 * h;
             for x in [[1.0, 0.0], [1.5, 0.0], [2.0, 0.0]] {
                 let (p0, p1) = (b.place(b.pose(t), x), b.place(b.pose(t + h), x));
-                fastest = fastest.max(((p1[0] - p0[0]).powi(2) + (p1[1] - p0[1]).powi(2)).sqrt() / h);
+                fastest =
+                    fastest.max(((p1[0] - p0[0]).powi(2) + (p1[1] - p0[1]).powi(2)).sqrt() / h);
             }
         }
         assert!(fastest <= beta * (1.0 + 1e-9), "{fastest} > β = {beta}");
-        assert!(fastest >= 0.5 * beta, "β = {beta} is far from the fastest {fastest}");
+        assert!(
+            fastest >= 0.5 * beta,
+            "β = {beta} is far from the fastest {fastest}"
+        );
     }
 }

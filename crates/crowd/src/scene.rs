@@ -134,7 +134,8 @@ pub struct Exit {
     /// The exit area: reaching it (center inside) counts as passing the exit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub area: Option<Vec<[f64; 2]>>,
-    /// Or the exit line: coming within one radius of it counts as passing.
+    /// Or the exit line: a person whose edge comes within 6 cm of it has passed (the wall
+    /// slide's 5 cm and 1 cm: so a line on a wall is reached by people walking to it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub segment: Option<[[f64; 2]; 2]>,
     /// What happens there.

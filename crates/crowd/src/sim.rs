@@ -227,7 +227,14 @@ impl Simulation {
         let people = if moving.is_empty() {
             place_people(&scene, &walls, &moving, &exits)?
         } else {
-            let all = Walls::new(walls.segments().iter().chain(&moving_now).copied().collect());
+            let all = Walls::new(
+                walls
+                    .segments()
+                    .iter()
+                    .chain(&moving_now)
+                    .copied()
+                    .collect(),
+            );
             place_people(&scene, &all, &moving, &exits)?
         };
         let n = people.len();
@@ -518,7 +525,12 @@ impl Simulation {
         if beta == 0.0 {
             return t_stop;
         }
-        let r_min = self.people.radii().iter().copied().fold(f64::INFINITY, f64::min);
+        let r_min = self
+            .people
+            .radii()
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
         let largest = 0.5 * r_min / beta;
         let fixed_within = matches!(self.stepping, Stepping::Fixed { step } if step <= largest);
         if fixed_within || self.t + largest >= t_stop {

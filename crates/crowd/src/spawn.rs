@@ -9,9 +9,9 @@ use rand_chacha::ChaCha8Rng;
 use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::geometry::Polygon;
+use crate::moving::MovingBodies;
 use crate::people::{People, Place};
 use crate::scene::{Quantity, Scene};
-use crate::moving::MovingBodies;
 use crate::walls::Walls;
 
 fn draw(q: &Quantity, rng: &mut ChaCha8Rng) -> f64 {

@@ -220,7 +220,9 @@ impl RunFile {
         }
         let a = ds
             .read_slice::<f64, _, ndarray::Ix2>((frame, .., ..))
-            .at(&self.path, || format!("reading the moving walls of frame {frame}"))?;
+            .at(&self.path, || {
+                format!("reading the moving walls of frame {frame}")
+            })?;
         Ok(a.rows()
             .into_iter()
             .map(|r| [r[0], r[1], r[2], r[3]])

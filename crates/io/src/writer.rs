@@ -511,7 +511,8 @@ impl RunWriter {
         };
         let segments = header.moving_body.len();
         let moving = if segments > 0 {
-            file.create_group("moving").at(path, at("creating group 'moving'"))?;
+            file.create_group("moving")
+                .at(path, at("creating group 'moving'"))?;
             let names: Vec<VarLenUnicode> = header.moving_names.iter().map(|n| text(n)).collect();
             file.new_dataset_builder()
                 .with_data(&names)
@@ -952,8 +953,9 @@ impl RunWriter {
                 moving
                     .resize((frame + 1, self.moving_segments, 4))
                     .and_then(|_| {
-                        let view = ArrayView2::from_shape((self.moving_segments, 4), &self.pending_moving)
-                            .expect("4 numbers a segment");
+                        let view =
+                            ArrayView2::from_shape((self.moving_segments, 4), &self.pending_moving)
+                                .expect("4 numbers a segment");
                         moving.write_slice(view, (frame, .., ..))
                     }),
             )?;

@@ -150,7 +150,9 @@ fn clarabel_on(
 /// The certificate is checked here, not taken from Clarabel's status: with `s = max(1, |w|∞,
 /// |b|∞)`, it is returned only when `bᵀy < 0` and `n |Jᵀy|∞ s ≤ −bᵀy / 2`, so that no `v` with
 /// `|v|∞ ≤ s` meets every row.
-pub fn infeasibility_certificate(p: &ProjectionProblem<'_>) -> Result<Option<Vec<f64>>, SolveError> {
+pub fn infeasibility_certificate(
+    p: &ProjectionProblem<'_>,
+) -> Result<Option<Vec<f64>>, SolveError> {
     p.validate()?;
     let (m, n) = (p.rows(), p.dim());
     if m == 0 {
