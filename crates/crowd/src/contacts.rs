@@ -5,6 +5,7 @@
 use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet, count_outside};
 
 use crate::broad::BroadPhase;
+use crate::moving::MovingBodies;
 use crate::people::PeopleView;
 use crate::walls::Walls;
 
@@ -56,6 +57,8 @@ pub struct ContactQuery<'a> {
     pub people: PeopleView<'a>,
     /// The walls.
     pub walls: &'a Walls,
+    /// The walls, panels and obstacles that move.
+    pub moving: &'a MovingBodies,
     /// The margin (m).
     pub margin: f64,
 }
@@ -190,6 +193,7 @@ impl ContactSources {
         q: &[f64],
         people: PeopleView<'_>,
         walls: &Walls,
+        moving: &MovingBodies,
         margin: f64,
         rows: &mut ConstraintRows,
     ) {
@@ -198,6 +202,7 @@ impl ContactSources {
             q,
             people,
             walls,
+            moving,
             margin,
         };
         for s in &mut self.sources {
@@ -214,6 +219,8 @@ pub struct CrowdContacts<'a> {
     pub people: PeopleView<'a>,
     /// The walls.
     pub walls: &'a Walls,
+    /// The walls, panels and obstacles that move.
+    pub moving: &'a MovingBodies,
     /// The sources and their scratch.
     pub sources: &'a mut ContactSources,
 }
@@ -225,7 +232,7 @@ impl ConstraintSet for CrowdContacts<'_> {
 
     fn assemble(&mut self, t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {
         self.sources
-            .assemble(t, q, self.people, self.walls, margin, rows);
+            .assemble(t, q, self.people, self.walls, self.moving, margin, rows);
     }
 
     /// Two disks close by at most `|v_i| + |v_j|` per unit time and a disk closes on a wall at

@@ -34,7 +34,7 @@ pub use error::{CrowdError, Infeasibility};
 pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};
-pub use moving::{MovingBodies, PersonMovingWalls};
+pub use moving::{Drive, MovingBodies, PersonMovingWalls};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{
     BroadPhaseChoice, DesiredVelocityKind, ExitAction, Keyframe, Model, MovingBody, Output, Scene,

@@ -3,6 +3,7 @@
 //! contact source of people against them.
 
 use moreau_core::ConstraintRows;
+use serde::{Deserialize, Serialize};
 
 use crate::contacts::{ContactKind, ContactQuery, ContactSource};
 use crate::geometry::{Polygon, Segment, ring_contains};
@@ -119,12 +120,40 @@ impl Body {
     }
 }
 
+/// A body driven from outside (a co-simulation input) instead of by the clock: its keyframe
+/// parameter goes linearly from `s0` at `t0` to `s1` at `t1`, and stays at `s1` after.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Drive {
+    /// Start of the interval (s).
+    pub t0: f64,
+    /// Keyframe parameter at `t0`.
+    pub s0: f64,
+    /// End of the interval (s).
+    pub t1: f64,
+    /// Keyframe parameter at `t1`.
+    pub s1: f64,
+}
+
+impl Drive {
+    fn param(&self, t: f64) -> f64 {
+        if t >= self.t1 || self.t1 <= self.t0 {
+            self.s1
+        } else if t <= self.t0 {
+            self.s0
+        } else {
+            self.s0 + (self.s1 - self.s0) * (t - self.t0) / (self.t1 - self.t0)
+        }
+    }
+}
+
 /// The moving bodies of a scene; their segments are numbered body after body, in the order the
-/// scene lists them (the `b` of a [`ContactKind::MovingWall`] key).
+/// scene lists them (the `b` of a [`ContactKind::MovingWall`] key). Each follows its keyframes
+/// in time, or, once [driven](Self::drive), in a parameter set from outside.
 #[derive(Debug, Clone, Default)]
 pub struct MovingBodies {
     bodies: Vec<Body>,
     names: Vec<String>,
+    drives: Vec<Option<Drive>>,
 }
 
 impl MovingBodies {
@@ -133,7 +162,34 @@ impl MovingBodies {
         Self {
             bodies: scene.moving.iter().map(Body::new).collect(),
             names: scene.moving.iter().map(|b| b.name.clone()).collect(),
+            drives: vec![None; scene.moving.len()],
         }
+    }
+
+    /// The keyframe parameter of body `b` at time `t`: `t` itself, or its drive's.
+    pub fn param(&self, b: usize, t: f64) -> f64 {
+        match &self.drives[b] {
+            None => t,
+            Some(d) => d.param(t),
+        }
+    }
+
+    /// From now on body `b` is driven: its keyframe parameter goes linearly from its value at
+    /// `t0` to `s1` at `t1` (so it moves continuously), and stays there. A co-simulation sets
+    /// it before every step of its own (`t1` the end of that step).
+    pub fn drive(&mut self, b: usize, t0: f64, t1: f64, s1: f64) {
+        let s0 = self.param(b, t0);
+        self.drives[b] = Some(Drive { t0, s0, t1, s1 });
+    }
+
+    /// The drives of the bodies (`None`: following the clock), for a saved state.
+    pub fn drives(&self) -> &[Option<Drive>] {
+        &self.drives
+    }
+
+    /// Restores [`drives`](Self::drives).
+    pub fn set_drives(&mut self, drives: &[Option<Drive>]) {
+        self.drives.copy_from_slice(drives);
     }
 
     /// True when the scene has none.
@@ -162,8 +218,8 @@ impl MovingBodies {
     /// Every segment at time `t` into `out` (cleared first), in segment order.
     pub fn segments_at(&self, t: f64, out: &mut Vec<Segment>) {
         out.clear();
-        for b in &self.bodies {
-            let pose = b.pose(t);
+        for (k, b) in self.bodies.iter().enumerate() {
+            let pose = b.pose(self.param(k, t));
             out.extend(b.segments.iter().map(|s| Segment {
                 a: b.place(pose, s.a),
                 b: b.place(pose, s.b),
@@ -173,10 +229,10 @@ impl MovingBodies {
 
     /// True when `p` is inside a closed body at time `t`.
     pub fn inside(&self, t: f64, p: [f64; 2]) -> bool {
-        self.bodies.iter().any(|b| {
+        self.bodies.iter().enumerate().any(|(k, b)| {
             b.ring.as_ref().is_some_and(|ring| {
                 // Move the point back into the body's own frame instead of moving the ring.
-                let (offset, angle) = b.pose(t);
+                let (offset, angle) = b.pose(self.param(k, t));
                 let (s, c) = angle.sin_cos();
                 let d = [p[0] - b.pivot[0] - offset[0], p[1] - b.pivot[1] - offset[1]];
                 let x = [
@@ -192,7 +248,17 @@ impl MovingBodies {
     pub fn max_speed(&self, t0: f64, t1: f64) -> f64 {
         self.bodies
             .iter()
-            .map(|b| b.max_speed(t0, t1))
+            .enumerate()
+            .map(|(k, b)| match &self.drives[k] {
+                None => b.max_speed(t0, t1),
+                // The parameter runs at |ds/dt| over the drive's interval, 0 outside it.
+                Some(d) if d.t1 > d.t0 && t1 > d.t0 && t0 < d.t1 => {
+                    let rate = (d.s1 - d.s0).abs() / (d.t1 - d.t0);
+                    let (a, z) = (d.param(t0.max(d.t0)), d.param(t1.min(d.t1)));
+                    rate * b.max_speed(a.min(z), a.max(z))
+                }
+                Some(_) => 0.0,
+            })
             .fold(0.0, f64::max)
     }
 
@@ -213,24 +279,11 @@ impl MovingBodies {
 /// People against the moving bodies' segments at the query's time: `g(t, q) = dist(q_i,
 /// segment(t)) − r_i` with its exact gradient at `t`. The segments are placed and indexed
 /// ([`Walls`]) once per call: a few per scene, against every person.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct PersonMovingWalls {
-    bodies: MovingBodies,
     at: Vec<Segment>,
     index: Walls,
     near: Vec<u32>,
-}
-
-impl PersonMovingWalls {
-    /// Contacts with `bodies`.
-    pub fn new(bodies: MovingBodies) -> Self {
-        Self {
-            bodies,
-            at: Vec::new(),
-            index: Walls::default(),
-            near: Vec::new(),
-        }
-    }
 }
 
 impl ContactSource for PersonMovingWalls {
@@ -240,8 +293,11 @@ impl ContactSource for PersonMovingWalls {
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
         let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+        if at.moving.is_empty() {
+            return;
+        }
         let mut segments = std::mem::take(&mut self.at);
-        self.bodies.segments_at(at.t, &mut segments);
+        at.moving.segments_at(at.t, &mut segments);
         self.index = Walls::new(segments);
         for i in 0..radius.len() {
             let p = [q[2 * i], q[2 * i + 1]];

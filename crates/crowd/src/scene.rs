@@ -323,12 +323,18 @@ pub enum DesiredVelocityKind {
 }
 
 /// The model's choices that the papers leave open.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
     /// The desired velocity (`classic` or `lipschitz`).
     #[serde(default)]
     pub desired_velocity: DesiredVelocityKind,
+    /// With moving bodies: every this many seconds (at the first step from then on), the
+    /// distance fields are solved again around the bodies where they are, if any moved since
+    /// (the cost is the step report's `field` time). Absent: the fields see the fixed walls
+    /// only, and people walk into a closed door as if it were open.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_update: Option<f64>,
 }
 
 impl Model {
@@ -635,6 +641,15 @@ impl Scene {
             }
         }
         self.validate_moving()?;
+        if let Some(dt) = self.model.field_update
+            && !(dt > 0.0 && dt.is_finite())
+        {
+            return Err(CrowdError::invalid(
+                "model.field_update",
+                Num(dt),
+                "must be finite and > 0 (seconds between rebuilds of the distance fields)",
+            ));
+        }
         if self.groups.is_empty() {
             return Err(CrowdError::invalid(
                 "groups",

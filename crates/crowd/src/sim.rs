@@ -175,6 +175,9 @@ pub struct Simulation {
     moving: MovingBodies,
     /// Their segments at `t`.
     moving_now: Vec<Segment>,
+    /// When the distance fields were last solved around the moving bodies (`None`: they see
+    /// the fixed walls only).
+    fields_built: Option<f64>,
     people: People,
     exit_log: Vec<ExitRecord>,
     scheme: Scheme<Projection>,
@@ -223,7 +226,12 @@ impl Simulation {
         let moving = MovingBodies::new(&scene);
         let mut moving_now = Vec::new();
         moving.segments_at(0.0, &mut moving_now);
-        let exits = Exits::build(&scene)?;
+        let fields_built =
+            (!moving.is_empty() && scene.model.field_update.is_some()).then_some(0.0);
+        let exits = match fields_built {
+            None => Exits::build(&scene, &|p| scene.walkable(p))?,
+            Some(t) => Exits::build(&scene, &walkable_at(&scene, &moving, &moving_now, t))?,
+        };
         let people = if moving.is_empty() {
             place_people(&scene, &walls, &moving, &exits)?
         } else {
@@ -248,7 +256,7 @@ impl Simulation {
             Box::new(PersonWalls::default()),
         ];
         if !moving.is_empty() {
-            sources.push(Box::new(PersonMovingWalls::new(moving.clone())));
+            sources.push(Box::new(PersonMovingWalls::default()));
         }
         let sources = ContactSources::new(sources);
         let solver = scene
@@ -272,6 +280,7 @@ impl Simulation {
             walls,
             moving,
             moving_now,
+            fields_built,
             people,
             exit_log: Vec::new(),
             scheme,
@@ -329,6 +338,30 @@ impl Simulation {
     /// The moving bodies (walls, panels, obstacles with a prescribed motion).
     pub fn moving(&self) -> &MovingBodies {
         &self.moving
+    }
+
+    /// Drives moving body `body` from outside (a co-simulation input): its keyframe parameter
+    /// goes linearly from where it is now to `param` at time `t_end`, then stays (the body
+    /// moves continuously, so the sweeping stays a sweeping). Until the first call a body
+    /// follows its keyframes in time.
+    pub fn drive_moving(&mut self, body: usize, param: f64, t_end: f64) -> Result<(), CrowdError> {
+        let count = self.moving.names().len();
+        if body >= count {
+            return Err(CrowdError::invalid(
+                "moving",
+                body,
+                format!("the scene has {count} moving bodies"),
+            ));
+        }
+        if !(param.is_finite() && t_end.is_finite() && t_end >= self.t) {
+            return Err(CrowdError::invalid(
+                format!("moving[{body}] position"),
+                format!("{param} at t = {t_end}"),
+                format!("must be finite, at a time ≥ the current {}", self.t),
+            ));
+        }
+        self.moving.drive(body, self.t, t_end, param);
+        Ok(())
     }
 
     /// Everyone who passed an exit so far, in order.
@@ -391,6 +424,7 @@ impl Simulation {
             self.people.positions(),
             view,
             &self.walls,
+            &self.moving,
             margin,
             rows,
         );
@@ -495,6 +529,7 @@ impl Simulation {
             contacts: CrowdContacts {
                 people,
                 walls: &self.walls,
+                moving: &self.moving,
                 sources: &mut self.sources,
             },
             q,
@@ -504,12 +539,15 @@ impl Simulation {
     /// One step of size `mu` (whatever the scene's stepping says); then applies exits. For
     /// tests and tools that choose each step; runs call [`advance_to`](Self::advance_to).
     pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
+        let field = self.update_fields();
         let (k, t) = (self.steps, self.t);
         let p = self.parts();
-        let report = p
+        let mut report = p
             .scheme
             .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)
             .map_err(|e| self.diagnose(e.into()))?;
+        report.timings.field = field;
+        report.timings.total += field;
         self.accept(&report);
         Ok(report)
     }
@@ -542,19 +580,48 @@ impl Simulation {
         }
     }
 
+    /// Solves the distance fields again around the moving bodies where they are now, when
+    /// `model.field_update` seconds have passed since the last time and a body moved since;
+    /// returns the seconds it took.
+    fn update_fields(&mut self) -> f64 {
+        let (Some(built), Some(every)) = (self.fields_built, self.scene.model.field_update) else {
+            return 0.0;
+        };
+        if self.t < built + every * (1.0 - 1e-9) || self.moving.max_speed(built, self.t) == 0.0 {
+            return 0.0;
+        }
+        let start = std::time::Instant::now();
+        self.build_fields_at(self.t);
+        start.elapsed().as_secs_f64()
+    }
+
+    /// The distance fields around the moving bodies at `t` (their segments at `t` are in
+    /// `moving_now`).
+    fn build_fields_at(&mut self, t: f64) {
+        let walkable = walkable_at(&self.scene, &self.moving, &self.moving_now, t);
+        self.exits.rebuild_fields(&self.scene, &walkable);
+        self.fields_built = Some(t);
+    }
+
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
     fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
         let t_stop = self.moving_stop(t_stop);
+        if self.stepping.reached(self.t, t_stop) {
+            return Ok(None);
+        }
+        let field = self.update_fields();
         let (k, t) = (self.steps, self.t);
         let p = self.parts();
         let report = p
             .stepping
             .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)
             .map_err(|e| self.diagnose(e.into()))?;
-        if let Some(r) = &report {
-            self.accept(r);
-        }
-        Ok(report)
+        Ok(report.map(|mut r| {
+            r.timings.field = field;
+            r.timings.total += field;
+            self.accept(&r);
+            r
+        }))
     }
 
     /// A step that failed to certify: when its constraints admit no velocity at all (checked by
@@ -769,6 +836,8 @@ impl Simulation {
             exits: self.exit_log.clone(),
             exits_open: self.exits.exits.iter().map(|x| x.open).collect(),
             speed_factor: self.speed_factor,
+            moving: self.moving.drives().to_vec(),
+            fields_built: self.fields_built,
             stepping: self.stepping.state(),
             multipliers: self.scheme.correction().warm_start().to_vec(),
         }
@@ -817,6 +886,13 @@ impl Simulation {
                 format!("the scene has {} exits", self.exits.exits.len()),
             );
         }
+        if state.moving.len() != self.moving.names().len() {
+            return refuse(
+                "moving",
+                format!("{} drives", state.moving.len()),
+                format!("the scene has {} moving bodies", self.moving.names().len()),
+            );
+        }
         if !(state.time.is_finite() && state.speed_factor.is_finite()) {
             return refuse("time", state.time.to_string(), "must be finite".into());
         }
@@ -832,11 +908,31 @@ impl Simulation {
             x.open = open;
         }
         self.rebuild_walls();
+        self.moving.set_drives(&state.moving);
+        if let Some(built) = state.fields_built.filter(|_| self.fields_built.is_some()) {
+            self.moving.segments_at(built, &mut self.moving_now);
+            self.build_fields_at(built);
+        }
         self.moving.segments_at(self.t, &mut self.moving_now);
         self.speed_factor = state.speed_factor;
         self.scheme
             .correction_mut()
             .set_warm_start(&state.multipliers);
         Ok(())
+    }
+}
+
+/// Whether the grid cell centred at `p` is walkable at time `t`: in the scene's area, outside
+/// every closed moving body, and not crossed by a moving segment (`segments`, where the bodies
+/// are at `t`: within half a cell diagonal).
+fn walkable_at<'a>(
+    scene: &'a Scene,
+    moving: &'a MovingBodies,
+    segments: &'a [Segment],
+    t: f64,
+) -> impl Fn([f64; 2]) -> bool + 'a {
+    let reach = 0.5 * std::f64::consts::SQRT_2 * scene.solver.grid_cell;
+    move |p| {
+        scene.walkable(p) && !moving.inside(t, p) && segments.iter().all(|s| s.distance(p) > reach)
     }
 }

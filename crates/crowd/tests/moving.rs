@@ -421,3 +421,137 @@ output_interval = 0.5
         assert!((r.t - 4.75).abs() <= 0.05 + 1e-9, "{r:?}");
     }
 }
+
+/// A room split by a wall with two doors; a panel closes the lower door (the nearer one)
+/// during the first half second, before anybody reaches it.
+fn two_doors(field_update: Option<f64>) -> Scene {
+    scene(&format!(
+        r#"
+name = "two-doors"
+seed = 3
+[area]
+outer = [[0.0, 0.0], [5.9, 0.0], [5.9, 0.5], [6.1, 0.5], [6.1, 0.0], [12.0, 0.0], [12.0, 6.0],
+         [6.1, 6.0], [6.1, 5.5], [5.9, 5.5], [5.9, 6.0], [0.0, 6.0]]
+holes = [[[5.9, 1.7], [6.1, 1.7], [6.1, 4.3], [5.9, 4.3]]]
+[[exits]]
+name = "east"
+area = [[11.0, 0.0], [12.0, 0.0], [12.0, 6.0], [11.0, 6.0]]
+action = "remove"
+[[groups]]
+name = "south"
+count = 20
+spawn = [[1.0, 0.5], [4.0, 0.5], [4.0, 2.5], [1.0, 2.5]]
+radius = 0.2
+speed = 1.2
+destination = "east"
+[[moving]]
+name = "panel"
+line = [[6.0, 0.5], [6.0, 1.7]]
+keyframes = [{{ t = 0.0, offset = [0.0, -1.25] }}, {{ t = 0.5 }}]
+[model]
+{}
+[time]
+horizon = 25.0
+step = 0.05
+output_interval = 0.5
+"#,
+        field_update.map_or(String::new(), |dt| format!("field_update = {dt}"))
+    ))
+}
+
+#[test]
+fn the_desired_velocity_follows_a_door_that_closes_when_the_scene_asks() {
+    // Rebuilt every 0.5 s: everyone turns to the upper door and leaves through it.
+    let mut sim = Simulation::new(two_doors(Some(0.5))).unwrap();
+    let mut crossed = vec![f64::NAN; sim.total_people()];
+    let mut field_time = 0.0;
+    while let Some(r) = sim.advance_step(25.0, &mut ()).unwrap() {
+        field_time += r.timings.field;
+        let people = sim.people();
+        for i in 0..people.len() {
+            let p = people.position(i);
+            let id = people.ids()[i] as usize;
+            if p[0] > 6.1 && crossed[id].is_nan() {
+                crossed[id] = p[1];
+            }
+        }
+    }
+    assert_eq!(
+        sim.people().len(),
+        0,
+        "still in: {:?}",
+        sim.people().positions()
+    );
+    for (id, y) in crossed.iter().enumerate() {
+        assert!(
+            (4.3..=5.5).contains(y),
+            "person {id} went through at y = {y}"
+        );
+    }
+    assert!(field_time > 0.0, "no field rebuild was timed");
+    // Without rebuilds the fields still lead through the closed door: people press on it.
+    let mut stuck = Simulation::new(two_doors(None)).unwrap();
+    stuck.advance_to(25.0, &mut ()).unwrap();
+    assert!(
+        stuck.people().len() >= 15,
+        "{} of 20 still in without rebuilds",
+        stuck.people().len()
+    );
+}
+
+#[test]
+fn a_driven_wall_moves_continuously_with_its_input() {
+    // The chase, the wall driven from outside with its parameter set to the time at the end
+    // of each interval: the same closed form (the parameter is linear in between).
+    let mut sim =
+        Simulation::new(chase("horizon = 10.0\nstep = 0.05\noutput_interval = 0.1")).unwrap();
+    let exact = |t: f64| (5.0 + t).max(1.2 + 2.0 * t);
+    let mut worst: f64 = 0.0;
+    for k in 1..=20 {
+        let t_end = 0.5 * k as f64;
+        sim.drive_moving(0, t_end, t_end).unwrap();
+        while sim.advance_step(t_end, &mut ()).unwrap().is_some() {
+            let p = sim.people().position(0);
+            worst = worst.max((p[0] - exact(sim.time())).abs());
+        }
+    }
+    assert!(worst < 1e-5, "error {worst:.3e} m");
+    // Held: the wall stops where the input stops, and the walker walks away from it.
+    let x_wall = |sim: &Simulation| {
+        let mut s = Vec::new();
+        sim.moving().segments_at(sim.time(), &mut s);
+        s[0].a[0]
+    };
+    let before = x_wall(&sim);
+    sim.drive_moving(0, 10.0, 12.0).unwrap();
+    sim.advance_to(12.0, &mut ()).unwrap();
+    assert_eq!(x_wall(&sim), before);
+    assert!(sim.drive_moving(1, 0.0, 13.0).is_err());
+    assert!(sim.drive_moving(0, f64::NAN, 13.0).is_err());
+}
+
+#[test]
+fn a_run_with_moving_bodies_resumes_bit_for_bit_from_its_saved_state() {
+    for driven in [false, true] {
+        let run = |sim: &mut Simulation, t: f64| {
+            if driven {
+                sim.drive_moving(0, 0.1 * t, t).unwrap();
+            }
+            sim.advance_to(t, &mut ()).unwrap();
+        };
+        let mut whole = Simulation::new(two_doors(Some(0.5))).unwrap();
+        run(&mut whole, 3.1);
+        let saved = whole.state().to_bytes();
+        run(&mut whole, 6.0);
+
+        let mut resumed = Simulation::new(two_doors(Some(0.5))).unwrap();
+        let state = moreau_crowd::SimState::from_bytes(&saved).unwrap();
+        resumed.restore(&state).unwrap();
+        run(&mut resumed, 6.0);
+        let bits = |s: &Simulation| -> Vec<u64> {
+            s.people().positions().iter().map(|x| x.to_bits()).collect()
+        };
+        assert_eq!(bits(&whole), bits(&resumed), "driven = {driven}");
+        assert_eq!(whole.exit_records(), resumed.exit_records());
+    }
+}
