@@ -21,6 +21,7 @@ mod sim;
 mod spawn;
 mod state;
 mod walls;
+mod wkt;
 
 pub use broad::{
     BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, choose_broad_phase,
