@@ -154,6 +154,14 @@ type Rings = (Vec<[f64; 2]>, Vec<Vec<[f64; 2]>>);
 /// The rings of the one polygon `text` holds (a `POLYGON`, or a `MULTIPOLYGON` of one
 /// polygon), without their closing vertices; or why not.
 fn polygon_rings(text: &str) -> Result<Rings, String> {
+    // The parser recurses once per parenthesis: nested deep enough, it would overflow the
+    // stack and abort the process.
+    let depth = nesting(text);
+    if depth > 3 {
+        return Err(format!(
+            "parentheses nested {depth} deep: a POLYGON nests them 2 deep, a MULTIPOLYGON 3"
+        ));
+    }
     let geometry = Wkt::<f64>::from_str(text).map_err(|e| format!("not valid WKT: {e}"))?;
     if let Some(rest) = after_geometry(text)
         && !rest.trim().is_empty()
@@ -242,6 +250,22 @@ fn after_geometry(text: &str) -> Option<&str> {
     None
 }
 
+/// How deep the parentheses of `text` nest.
+fn nesting(text: &str) -> usize {
+    let (mut depth, mut deepest) = (0usize, 0);
+    for c in text.chars() {
+        match c {
+            '(' => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+            ')' => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    deepest
+}
+
 /// The WKT keyword of a geometry's type.
 fn type_name(geometry: &Wkt<f64>) -> &'static str {
     match geometry {
@@ -309,9 +333,29 @@ mod tests {
             ),
             ("POLYGON ((0 0, 1 0, 1 1, 0 0)", "not valid WKT"),
             ("", "not valid WKT"),
+            (
+                "GEOMETRYCOLLECTION (POLYGON ((0 0, 1 0, 1 1, 0 0)))",
+                "a GEOMETRYCOLLECTION",
+            ),
+            (
+                "GEOMETRYCOLLECTION (MULTIPOLYGON (((0 0, 1 0, 1 1, 0 0))))",
+                "parentheses nested 4 deep",
+            ),
         ] {
             let err = polygon_rings(text).unwrap_err();
             assert!(err.contains(why), "{text:?}: {err:?} does not say {why:?}");
+        }
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_before_the_parser_recurses_into_it() {
+        // Unchecked, each of these overflows the parser's stack and aborts the process.
+        for text in [
+            "GEOMETRYCOLLECTION (".repeat(100_000),
+            format!("POLYGON {}", "(".repeat(1_000_000)),
+        ] {
+            let err = polygon_rings(&text).unwrap_err();
+            assert!(err.contains("parentheses nested"), "{err}");
         }
     }
 

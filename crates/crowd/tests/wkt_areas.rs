@@ -197,3 +197,55 @@ fn a_scene_read_by_serde_alone_is_not_valid_until_its_wkt_is_read() {
     let msg = scene.validate().unwrap_err().to_string();
     assert_mentions(&msg, &["at area = POLYGON ((0 0,", "WKT not read"]);
 }
+
+#[test]
+fn mutated_wkt_gives_an_error_or_a_scene_whose_wkt_reads_back_to_it() {
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+
+    // The room's WKT cut somewhere, a few WKT-ish characters put there, the rest kept or not.
+    let piece = prop::collection::vec(
+        prop::sample::select(vec![
+            '(', ')', ',', ' ', '0', '1', '9', '.', '-', '+', 'e', 'Z', 'M', 'P',
+        ]),
+        0..8,
+    );
+    let strategy = (0..=WKT.len(), piece, any::<bool>());
+    let mut runner = TestRunner::new_with_rng(
+        Config {
+            cases: 4000,
+            failure_persistence: None,
+            ..Config::default()
+        },
+        TestRng::from_seed(RngAlgorithm::ChaCha, &[7; 32]),
+    );
+    let (accepted, refused) = (std::cell::Cell::new(0), std::cell::Cell::new(0));
+    runner
+        .run(&strategy, |(cut, piece, keep_rest)| {
+            let piece: String = piece.into_iter().collect();
+            let rest = if keep_rest { &WKT[cut..] } else { "" };
+            let text = format!("{}{piece}{rest}", &WKT[..cut]);
+            match read(&format!("area = {text:?}")) {
+                Ok(scene) => {
+                    accepted.set(accepted.get() + 1);
+                    let again = read(&format!("area = {:?}", scene.wkt())).unwrap();
+                    prop_assert_eq!(again, scene, "{}", text);
+                }
+                Err(e) => {
+                    refused.set(refused.get() + 1);
+                    // The TOML is valid: every refusal is a value's, naming its field (the
+                    // area's, or one the new area no longer fits).
+                    prop_assert!(matches!(e, CrowdError::Invalid { .. }), "{}: {}", text, e);
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    // Both outcomes were met (a mutation that keeps the text whole is accepted).
+    let (accepted, refused) = (accepted.get(), refused.get());
+    assert!(
+        accepted > 0 && refused > 0,
+        "{accepted} accepted, {refused} refused"
+    );
+    eprintln!("{accepted} accepted, {refused} refused");
+}
