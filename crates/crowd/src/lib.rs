@@ -22,6 +22,7 @@ mod sim;
 mod spawn;
 mod state;
 mod walls;
+mod wkt;
 
 pub use broad::{
     BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, choose_broad_phase,

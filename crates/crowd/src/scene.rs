@@ -104,15 +104,19 @@ impl Quantity {
     }
 }
 
-/// The walkable area: an outer polygon with holes (obstacles); walls are their edges.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The walkable area: an outer polygon with holes (obstacles); walls are their edges. A
+/// scene file gives it by its rings (`[area] outer = ..., holes = ...`) or as WKT
+/// (`area = "POLYGON (...)"`, `[area] wkt_file = "room.wkt"`: see `crate::wkt`); read, it is
+/// its rings, and it is written back as them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Area {
     /// Outer boundary.
     pub outer: Vec<[f64; 2]>,
     /// Obstacles inside it.
-    #[serde(default)]
     pub holes: Vec<Vec<[f64; 2]>>,
+    /// The WKT the scene file gave, until [`Scene::from_toml`] reads it into the rings.
+    #[serde(skip)]
+    pub(crate) wkt_source: Option<crate::wkt::WktSource>,
 }
 
 /// What happens to a person who reaches an exit.
@@ -459,15 +463,24 @@ impl Scene {
             path: path.display().to_string(),
             source,
         })?;
-        Self::from_toml(&text, &path.display().to_string())
+        let dir = path.parent().unwrap_or(Path::new(""));
+        Self::from_toml_in(&text, &path.display().to_string(), dir)
     }
 
-    /// Parses and validates a scene from TOML text; `origin` names it in errors.
+    /// Parses and validates a scene from TOML text; `origin` names it in errors. An
+    /// `[area] wkt_file` is read relative to the current directory.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, CrowdError> {
-        let scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
+        Self::from_toml_in(text, origin, Path::new(""))
+    }
+
+    /// [`Scene::from_toml`], with an `[area] wkt_file` read relative to `dir` (what
+    /// [`Scene::from_file`] gives: the scene file's directory).
+    pub fn from_toml_in(text: &str, origin: &str, dir: &Path) -> Result<Self, CrowdError> {
+        let mut scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
             path: origin.to_string(),
             message: e.to_string(),
         })?;
+        scene.area.read_wkt(dir)?;
         scene.validate()?;
         Ok(scene)
     }
@@ -479,6 +492,7 @@ impl Scene {
 
     /// Checks every value that can be checked without building the scene.
     pub fn validate(&self) -> Result<(), CrowdError> {
+        self.area.check_read()?;
         let outer = check_polygon("area.outer", &self.area.outer)?;
         for (h, hole) in self.area.holes.iter().enumerate() {
             let poly = check_polygon(&format!("area.holes[{h}]"), hole)?;

@@ -58,6 +58,29 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ("unknown-key.toml", &["unknown field", "colour"]),
         ("empty-polygon.toml", &["area.outer", "0 vertices"]),
         ("no-groups.toml", &["groups", "no people"]),
+        (
+            "wkt-unclosed-parenthesis.toml",
+            &[
+                "at area = POLYGON ((0 0, 6 0, 6 6, 0 6, 0 0)",
+                "not valid WKT",
+                "Missing closing parenthesis",
+            ],
+        ),
+        (
+            "wkt-file-missing.toml",
+            &[
+                "at area.wkt_file = no-such-room.wkt",
+                "cannot read",
+                "bad-scenes/no-such-room.wkt",
+            ],
+        ),
+        (
+            "wkt-linestring.toml",
+            &[
+                "at area = LINESTRING (0 0, 6 0, 6 6, 0 6)",
+                "a LINESTRING: the walkable area is a POLYGON",
+            ],
+        ),
     ];
     let on_disk = std::fs::read_dir(format!(
         "{}/../../tests/bad-scenes",
