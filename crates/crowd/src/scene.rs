@@ -9,6 +9,7 @@ use moreau_integrate::{AdaptiveSettings, ErrorEstimate, Stepping};
 pub use moreau_solve::SolverKind;
 
 use crate::error::CrowdError;
+use crate::events::Inflow;
 use crate::geometry::{Polygon, Segment, ring_contains};
 
 /// The bounds a scene must keep so that building and running it cannot exhaust the machine:
@@ -63,7 +64,7 @@ pub enum Quantity {
 }
 
 impl Quantity {
-    fn check(&self, field: &str, positive: bool) -> Result<(), CrowdError> {
+    pub(crate) fn check(&self, field: &str, positive: bool) -> Result<(), CrowdError> {
         let ok = |x: f64| x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
         let need = if positive {
             "must be finite and > 0"
@@ -165,6 +166,9 @@ pub struct Group {
     pub speed: Quantity,
     /// The name of the exit they walk to.
     pub destination: String,
+    /// When they start walking (s; absent: at once): before it they stand, and can be pushed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub release: Option<f64>,
 }
 
 /// Time stepping.
@@ -331,6 +335,9 @@ pub struct Scene {
     pub exits: Vec<Exit>,
     /// The groups of people.
     pub groups: Vec<Group>,
+    /// People entering while the run goes ([`Inflow`]; absent: none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<Inflow>,
     /// Time stepping.
     pub time: Time,
     /// Solver settings.
@@ -344,7 +351,7 @@ pub struct Scene {
     pub output: Output,
 }
 
-fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
+pub(crate) fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
     if v.len() < 3 {
         return Err(CrowdError::invalid(
             field,
@@ -384,7 +391,7 @@ fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
 }
 
 /// A point: finite, and within [`limits::MAX_COORDINATE`] of the origin on both axes.
-fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
+pub(crate) fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
     if !p[0].is_finite() || !p[1].is_finite() {
         return Err(CrowdError::invalid(
             field,
@@ -594,11 +601,11 @@ impl Scene {
                 _ => {}
             }
         }
-        if self.groups.is_empty() {
+        if self.groups.is_empty() && self.sources.is_empty() {
             return Err(CrowdError::invalid(
                 "groups",
                 "[]",
-                "the scene has no people",
+                "the scene has no people (give groups, or sources)",
             ));
         }
         let mut people = 0.0;
@@ -662,7 +669,7 @@ impl Scene {
                 }
             }
         }
-        Ok(())
+        crate::events::validate(self)
     }
 
     /// The walls: edges of the outer polygon (counter-clockwise) and of the holes (clockwise),
@@ -712,19 +719,19 @@ impl Scene {
         ring_contains(&self.area.outer, p) && !self.area.holes.iter().any(|h| ring_contains(h, p))
     }
 
+    /// The radii of the groups' and the sources' people.
+    fn radii(&self) -> impl Iterator<Item = &Quantity> {
+        let sources = self.sources.iter().map(|s| &s.radius);
+        self.groups.iter().map(|g| &g.radius).chain(sources)
+    }
+
     /// The smallest radius any person can have.
     pub fn min_radius(&self) -> f64 {
-        self.groups
-            .iter()
-            .map(|g| g.radius.min())
-            .fold(f64::INFINITY, f64::min)
+        self.radii().map(Quantity::min).fold(f64::INFINITY, f64::min)
     }
 
     /// The largest radius any person can have.
     pub fn max_radius(&self) -> f64 {
-        self.groups
-            .iter()
-            .map(|g| g.radius.max())
-            .fold(0.0, f64::max)
+        self.radii().map(Quantity::max).fold(0.0, f64::max)
     }
 }

@@ -11,6 +11,7 @@ use moreau_solve::ProjectionSolver;
 use crate::broad::{BroadPhaseKind, choose_broad_phase};
 use crate::contacts::{ContactKind, ContactSources, CrowdContacts, PersonPairs, PersonWalls};
 use crate::error::CrowdError;
+use crate::events::{EntryRecord, Events};
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
 use crate::people::{ExitRecord, People, Place};
@@ -135,6 +136,10 @@ pub trait Observer {
     fn exit(&mut self, _record: &ExitRecord) -> Result<(), ObserverError> {
         Ok(())
     }
+    /// When a person enters from an inflow source (after the step's exits).
+    fn enter(&mut self, _record: &EntryRecord) -> Result<(), ObserverError> {
+        Ok(())
+    }
 }
 
 /// Observes nothing.
@@ -169,6 +174,8 @@ pub struct Simulation {
     walls: Walls,
     people: People,
     exit_log: Vec<ExitRecord>,
+    /// Release times and inflow sources.
+    events: Events,
     scheme: Scheme<Projection>,
     sources: ContactSources,
     stepping: Stepping,
@@ -214,6 +221,7 @@ impl Simulation {
         let walls = Walls::new(scene.walls());
         let exits = Exits::build(&scene)?;
         let people = place_people(&scene, &walls, &exits)?;
+        let events = Events::build(&scene, &walls, &exits, &people)?;
         let n = people.len();
         let broad = match scene.solver.broad_phase {
             BroadPhaseChoice::Grid => BroadPhaseKind::Grid,
@@ -227,7 +235,10 @@ impl Simulation {
         let solver = scene
             .solver
             .kind
-            .build(Parallelism::threads(scene.solver.threads), 2 * n)
+            .build(
+                Parallelism::threads(scene.solver.threads),
+                2 * (n + events.capacity()),
+            )
             .map_err(moreau_integrate::IntegrateError::from)?;
         let settings = LinearizedSettings {
             max_violation: scene.solver.max_violation,
@@ -245,6 +256,7 @@ impl Simulation {
             walls,
             people,
             exit_log: Vec::new(),
+            events,
             scheme,
             sources,
             stepping,
@@ -275,9 +287,10 @@ impl Simulation {
         self.steps
     }
 
-    /// People at the start.
+    /// Everyone so far: the people at the start and those who entered since (every id is
+    /// below it).
     pub fn total_people(&self) -> usize {
-        self.total
+        self.total + self.events.emitted()
     }
 
     /// The people present.
@@ -453,6 +466,7 @@ impl Simulation {
                 goals: &self.exits.goals,
                 walls: &self.walls,
                 people,
+                release: &self.events.release,
                 speed_factor: self.speed_factor,
                 kind: self.scene.model.desired_velocity,
                 near: &self.near,
@@ -496,7 +510,17 @@ impl Simulation {
         self.steps += 1;
         let people = self.people.len();
         self.apply_exits();
-        if self.people.len() != people {
+        let left = self.people.len() != people;
+        let stepping = &self.stepping;
+        let entered = self.events.after_step(
+            self.t,
+            |t, target| stepping.reached(t, target),
+            &mut self.people,
+            &self.scene,
+            &self.walls,
+            &self.exits,
+        );
+        if left || entered > 0 {
             self.stepping.state_resized();
         }
     }
@@ -571,6 +595,9 @@ impl Simulation {
                     observer.step(&report).map_err(CrowdError::Observer)?;
                     for record in &self.exit_log[seen..] {
                         observer.exit(record).map_err(CrowdError::Observer)?;
+                    }
+                    for record in self.events.entered() {
+                        observer.enter(record).map_err(CrowdError::Observer)?;
                     }
                     return Ok(Some(report));
                 }
@@ -650,6 +677,7 @@ impl Simulation {
             people: self.people.clone(),
             exits: self.exit_log.clone(),
             exits_open: self.exits.exits.iter().map(|x| x.open).collect(),
+            inflow: self.events.state(),
             speed_factor: self.speed_factor,
             stepping: self.stepping.state(),
             multipliers: self.scheme.correction().warm_start().to_vec(),
@@ -699,6 +727,9 @@ impl Simulation {
                 format!("the scene has {} exits", self.exits.exits.len()),
             );
         }
+        if let Err((field, value, reason)) = self.events.check(&state.inflow, &state.people) {
+            return refuse(field, value, reason);
+        }
         if !(state.time.is_finite() && state.speed_factor.is_finite()) {
             return refuse("time", state.time.to_string(), "must be finite".into());
         }
@@ -714,6 +745,7 @@ impl Simulation {
             x.open = open;
         }
         self.rebuild_walls();
+        self.events.restore(&state.inflow);
         self.speed_factor = state.speed_factor;
         self.scheme
             .correction_mut()

@@ -12,14 +12,16 @@ use crate::error::IoError;
 use crate::layout::{ContactRow, StepRow};
 use crate::writer::RunWriter;
 
-/// What a run's observer writes: steps, exits, contact forces, frames and saved states, in
-/// the order they happen. [`RunWriter`] writes them at once; [`BackgroundWriter`] on its own
+/// What a run's observer writes: steps, exits, people entering, contact forces, frames and
+/// saved states, in the order they happen. [`RunWriter`] writes them at once; [`BackgroundWriter`] on its own
 /// thread.
 pub trait RunSink: Send {
     /// Records a step (written with the next frame).
     fn step(&mut self, report: &StepReport);
     /// Records that person `id` passed an exit at time `t`.
     fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError>;
+    /// Records that person `id` of radius `radius` entered (ids in order, each the next).
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError>;
     /// Whether the file records contact forces.
     fn records_contacts(&self) -> bool;
     /// The contact forces of the next frame and the pressure by id.
@@ -41,6 +43,9 @@ impl RunSink for RunWriter {
     }
     fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
         RunWriter::exit(self, id, t)
+    }
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+        RunWriter::enter(self, id, radius)
     }
     fn records_contacts(&self) -> bool {
         RunWriter::records_contacts(self)
@@ -64,6 +69,8 @@ impl RunSink for RunWriter {
 #[derive(Debug, Default)]
 struct Batch {
     steps: Vec<StepRow>,
+    /// Who entered, with their radii, in order.
+    entries: Vec<(u32, f64)>,
     exits: Vec<(u32, f64)>,
     contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
     t: f64,
@@ -76,6 +83,7 @@ enum Message {
     State(Vec<u8>),
     Finish {
         steps: Vec<StepRow>,
+        entries: Vec<(u32, f64)>,
         exits: Vec<(u32, f64)>,
         status: String,
         summary: String,
@@ -93,6 +101,7 @@ pub struct BackgroundWriter {
     failed: Arc<Mutex<Option<IoError>>>,
     pending: Batch,
     contacts: bool,
+    /// People the file holds, those who entered included (ids `0..people`).
     people: usize,
     path: std::path::PathBuf,
 }
@@ -162,6 +171,7 @@ impl BackgroundWriter {
         let earlier = self.take_failure();
         let message = Message::Finish {
             steps: std::mem::take(&mut self.pending.steps),
+            entries: std::mem::take(&mut self.pending.entries),
             exits: std::mem::take(&mut self.pending.exits),
             status: status.to_string(),
             summary: summary.to_string(),
@@ -212,12 +222,16 @@ fn work(
             }
             Message::Finish {
                 steps,
+                entries,
                 exits,
                 status,
                 summary,
             } => {
                 for s in steps {
                     writer.step_row(s);
+                }
+                for (id, radius) in entries {
+                    let _ = writer.enter(id, radius);
                 }
                 for (id, t) in exits {
                     let _ = writer.exit(id, t);
@@ -234,6 +248,10 @@ fn work(
 fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
     for s in batch.steps {
         writer.step_row(s);
+    }
+    // Everyone who entered before anyone's exit: a newcomer may leave in the same batch.
+    for (id, radius) in batch.entries {
+        writer.enter(id, radius)?;
     }
     for (id, t) in batch.exits {
         writer.exit(id, t)?;
@@ -259,6 +277,20 @@ impl RunSink for BackgroundWriter {
             });
         }
         self.pending.exits.push((id, t));
+        Ok(())
+    }
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+        if id as usize != self.people {
+            return Err(IoError::Layout {
+                path: self.path.clone(),
+                what: format!(
+                    "person {id} entered, but the next id is {} (people enter in order of id)",
+                    self.people
+                ),
+            });
+        }
+        self.people += 1;
+        self.pending.entries.push((id, radius));
         Ok(())
     }
     fn records_contacts(&self) -> bool {
