@@ -248,9 +248,10 @@ impl SourceRuntime {
         self.start + k as f64 / self.rate
     }
 
-    /// How many people are due by `t` (within the run's tolerance on times, `reached`), at
+    /// How many people are due by `t` (a time within `tolerance` of `t` counts as reached), at
     /// most by `end` and at most `count`.
-    fn due(&self, t: f64, reached: &impl Fn(f64, f64) -> bool) -> u64 {
+    fn due(&self, t: f64, tolerance: f64) -> u64 {
+        let reached = |time: f64, target: f64| target - time <= tolerance;
         let by = |time: f64| {
             let mut k = (self.rate * (time - self.start)).floor().max(0.0) as u64;
             while k > 0 && !reached(time, self.due_at(k)) {
@@ -267,11 +268,17 @@ impl SourceRuntime {
 
 /// The scheduled events of a run: release times by group, the sources with their state, and
 /// who entered in the last step.
+///
+/// Times add up steps with rounding (200 steps of 0.05 s end at 10.000000000000007 s, 100 at
+/// 4.99999999999999 s), so a time within a billionth of a step of an event's time counts as
+/// reached, as the run's stepping counts its stops (`Stepping::reached`).
 #[derive(Debug, Clone)]
 pub(crate) struct Events {
-    /// Per group index (the scene's groups, then one per source): the time before which its
-    /// people stand.
-    pub release: Vec<f64>,
+    /// Per group index (the scene's groups, then one per source): its people stand at times
+    /// before it (the group's release less the tolerance on times).
+    pub stand_until: Vec<f64>,
+    /// Times within this of an event's time count as reached (s): a billionth of a step.
+    tolerance: f64,
     sources: Vec<SourceRuntime>,
     /// The people at the start: the first id a source gives.
     first_id: u32,
@@ -293,15 +300,18 @@ impl Events {
         exits: &Exits,
         people: &People,
     ) -> Result<Self, CrowdError> {
-        let mut release: Vec<f64> = scene
+        let tolerance = 1e-9 * scene.time.step;
+        let mut stand_until: Vec<f64> = scene
             .groups
             .iter()
-            .map(|g| g.release.unwrap_or(0.0))
+            .map(|g| g.release.unwrap_or(0.0) - tolerance)
             .collect();
-        release.extend(scene.sources.iter().map(|_| 0.0));
+        // A source's people walk as soon as they enter.
+        stand_until.extend(scene.sources.iter().map(|_| f64::NEG_INFINITY));
         let first_id = u32::try_from(people.len()).expect("at most 2³¹ − 1 people");
         let mut out = Self {
-            release,
+            stand_until,
+            tolerance,
             sources: Vec::new(),
             first_id,
             max_radius: scene.max_radius(),
@@ -338,7 +348,7 @@ impl Events {
                 waiting_radius: None,
             };
             out.check_room(scene, walls, exits, s, &runtime)?;
-            // The bound of the scene's people is `most_people`: keep to it whatever rounding.
+            // The bound of the scene's people is `most_people`: keep to it whatever happens.
             runtime.count = runtime
                 .count
                 .min(source.most_people(scene.time.horizon) as u64);
@@ -436,11 +446,10 @@ impl Events {
 
     /// After the step that ended at `t`: places the people due by then who fit (in each
     /// source's order, the sources in turn), at the end of `people` with the next ids, and
-    /// returns how many entered. `reached(t, target)` is the run's test of a time reached.
+    /// returns how many entered.
     pub fn after_step(
         &mut self,
         t: f64,
-        reached: impl Fn(f64, f64) -> bool,
         people: &mut People,
         scene: &Scene,
         walls: &Walls,
@@ -448,7 +457,7 @@ impl Events {
     ) -> usize {
         self.entered.clear();
         for s in 0..self.sources.len() {
-            let due = self.sources[s].due(t, &reached);
+            let due = self.sources[s].due(t, self.tolerance);
             if self.sources[s].emitted >= due {
                 continue;
             }
@@ -592,14 +601,14 @@ impl Events {
         if let Some(&g) = people
             .groups()
             .iter()
-            .find(|&&g| g as usize >= self.release.len())
+            .find(|&&g| g as usize >= self.stand_until.len())
         {
             return Err((
                 "people",
                 format!("group {g}"),
                 format!(
                     "the scene has {} groups and sources",
-                    self.release.len()
+                    self.stand_until.len()
                 ),
             ));
         }

@@ -226,8 +226,9 @@ pub struct DesiredVelocity<'a> {
     pub walls: &'a Walls,
     /// The people.
     pub people: PeopleView<'a>,
-    /// Per group index (`PeopleView::group`): the time (s) before which its people stand.
-    pub release: &'a [f64],
+    /// Per group index (`PeopleView::group`): its people stand at times before it (s; the
+    /// group's release).
+    pub stand_until: &'a [f64],
     /// Multiplies every desired speed (an input of co-simulation).
     pub speed_factor: f64,
     /// Classic (jumps at the wall slide and on arrival) or Lipschitz.
@@ -298,7 +299,7 @@ impl Field for DesiredVelocity<'_> {
     fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
         let mut near = self.near.borrow_mut();
         for i in 0..self.people.id.len() {
-            let v = if t < self.release[self.people.group[i] as usize] {
+            let v = if t < self.stand_until[self.people.group[i] as usize] {
                 [0.0, 0.0]
             } else {
                 self.velocity(i, [q[2 * i], q[2 * i + 1]], &mut near)

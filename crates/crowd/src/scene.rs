@@ -333,7 +333,8 @@ pub struct Scene {
     pub area: Area,
     /// The exits.
     pub exits: Vec<Exit>,
-    /// The groups of people.
+    /// The groups of people (absent: none, for a scene whose people all come from sources).
+    #[serde(default)]
     pub groups: Vec<Group>,
     /// People entering while the run goes ([`Inflow`]; absent: none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]

@@ -466,7 +466,7 @@ impl Simulation {
                 goals: &self.exits.goals,
                 walls: &self.walls,
                 people,
-                release: &self.events.release,
+                stand_until: &self.events.stand_until,
                 speed_factor: self.speed_factor,
                 kind: self.scene.model.desired_velocity,
                 near: &self.near,
@@ -511,10 +511,8 @@ impl Simulation {
         let people = self.people.len();
         self.apply_exits();
         let left = self.people.len() != people;
-        let stepping = &self.stepping;
         let entered = self.events.after_step(
             self.t,
-            |t, target| stepping.reached(t, target),
             &mut self.people,
             &self.scene,
             &self.walls,
