@@ -580,7 +580,9 @@ impl Events {
                     format!("it brings at most {}", source.count),
                 ));
             }
-            if x.waiting_radius.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
+            if x.waiting_radius
+                .is_some_and(|r| !(r.is_finite() && r > 0.0))
+            {
                 return Err((
                     "inflow",
                     format!("{:?}", x.waiting_radius),

@@ -183,7 +183,10 @@ impl People {
         group: u32,
         place: Place,
     ) {
-        assert!(self.id.last().is_none_or(|&last| last < id), "ids must increase");
+        assert!(
+            self.id.last().is_none_or(|&last| last < id),
+            "ids must increase"
+        );
         self.id.push(id);
         self.position.extend_from_slice(&position);
         self.radius.push(radius);

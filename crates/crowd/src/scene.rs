@@ -728,7 +728,9 @@ impl Scene {
 
     /// The smallest radius any person can have.
     pub fn min_radius(&self) -> f64 {
-        self.radii().map(Quantity::min).fold(f64::INFINITY, f64::min)
+        self.radii()
+            .map(Quantity::min)
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// The largest radius any person can have.

@@ -58,14 +58,15 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ("unknown-key.toml", &["unknown field", "colour"]),
         ("empty-polygon.toml", &["area.outer", "0 vertices"]),
         ("no-groups.toml", &["groups", "no people"]),
-        (
-            "negative-release.toml",
-            &["groups[0].release", "-1", "≥ 0"],
-        ),
+        ("negative-release.toml", &["groups[0].release", "-1", "≥ 0"]),
         ("source-rate-zero.toml", &["sources[0].rate", "0", "> 0"]),
         (
             "source-outside.toml",
-            &["sources[0].area", "[-1.0, 0.0]", "outside the walkable area"],
+            &[
+                "sources[0].area",
+                "[-1.0, 0.0]",
+                "outside the walkable area",
+            ],
         ),
         (
             "source-unknown-destination.toml",

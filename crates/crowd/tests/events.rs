@@ -242,7 +242,11 @@ destination = "end"
         (0..20).collect::<Vec<u32>>()
     );
     assert!(entries.0.windows(2).all(|w| w[0].t < w[1].t));
-    assert!(entries.0[19].t > 4.0, "the last entered at {}", entries.0[19].t);
+    assert!(
+        entries.0[19].t > 4.0,
+        "the last entered at {}",
+        entries.0[19].t
+    );
 }
 
 #[test]

@@ -95,8 +95,12 @@ fn round_trip(scene: Scene, t_save: f64, t_end: f64) -> (usize, usize, SimState)
         assert_eq!(steps, all.steps, "step reports");
         let exits: Vec<ExitRecord> = before.exits.iter().chain(&after.exits).copied().collect();
         assert_eq!(exits, all.exits, "exit records");
-        let entries: Vec<EntryRecord> =
-            before.entries.iter().chain(&after.entries).copied().collect();
+        let entries: Vec<EntryRecord> = before
+            .entries
+            .iter()
+            .chain(&after.entries)
+            .copied()
+            .collect();
         assert_eq!(entries, all.entries, "entry records");
         assert_eq!(before.frames + after.frames, all.frames, "frames");
         assert_eq!(second.frame().ids, whole.frame().ids);

@@ -895,7 +895,11 @@ impl RunWriter {
         named(PEOPLE_RADIUS, self.injected(frame, PEOPLE_RADIUS))?;
         named(
             PEOPLE_RADIUS,
-            append(&self.people_radius, &mut { self.people }, &self.pending_people),
+            append(
+                &self.people_radius,
+                &mut { self.people },
+                &self.pending_people,
+            ),
         )?;
         let mut trajectory_rows = self.trajectory_rows;
         named(TRAJECTORY, self.injected(frame, TRAJECTORY))?;
@@ -906,13 +910,11 @@ impl RunWriter {
         named(FRAME_POSITIONS, self.injected(frame, FRAME_POSITIONS))?;
         named(
             FRAME_POSITIONS,
-            self.positions
-                .resize((frame + 1, people, 2))
-                .and_then(|_| {
-                    let view = ArrayView2::from_shape((people, 2), &self.dense)
-                        .expect("2 coordinates a person");
-                    self.positions.write_slice(view, (frame, .., ..))
-                }),
+            self.positions.resize((frame + 1, people, 2)).and_then(|_| {
+                let view = ArrayView2::from_shape((people, 2), &self.dense)
+                    .expect("2 coordinates a person");
+                self.positions.write_slice(view, (frame, .., ..))
+            }),
         )?;
         named(FRAME_TIME, self.injected(frame, FRAME_TIME))?;
         named(FRAME_TIME, append(&self.frame_time, &mut { frame }, &[t]))?;
@@ -997,7 +999,11 @@ impl RunWriter {
             .and_then(|_| append(&self.exits, &mut exits, &self.pending_exits))
             .and_then(|_| self.append_people_ids())
             .and_then(|_| {
-                append(&self.people_radius, &mut { self.people }, &self.pending_people)
+                append(
+                    &self.people_radius,
+                    &mut { self.people },
+                    &self.pending_people,
+                )
             })
             .and_then(|_| self.positions.resize((self.frames, people, 2)))
             .and_then(|_| match &self.contacts {

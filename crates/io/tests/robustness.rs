@@ -149,7 +149,10 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
             assert_eq!(rows("people/id"), n + 1, "{dataset}");
             assert_eq!(rows("people/radius"), n + 1, "{dataset}");
             assert_eq!(rows("people/exit_time"), n + 1, "{dataset}");
-            assert_eq!(f.dataset("frames/positions").unwrap().shape(), [3, n + 1, 2]);
+            assert_eq!(
+                f.dataset("frames/positions").unwrap().shape(),
+                [3, n + 1, 2]
+            );
         }
     }
 }
@@ -405,10 +408,7 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
     }
     w.finish("complete", "{}").unwrap();
     let f = RunFile::open(&path).unwrap();
-    assert_eq!(
-        f.header().unwrap().radii,
-        [0.2, 0.2, 0.1, 0.2, 0.3, 0.4]
-    );
+    assert_eq!(f.header().unwrap().radii, [0.2, 0.2, 0.1, 0.2, 0.3, 0.4]);
     assert_eq!(f.frame_counts().unwrap(), vec![2, 3, 4, 5, 6]);
     assert_eq!(f.positions(4).unwrap().len(), 12);
     assert!(f.positions(0).unwrap()[4..].iter().all(|x| x.is_nan()));

@@ -221,7 +221,10 @@ fn people_who_enter_during_the_run_extend_the_file() {
     w.enter(2, 0.3).unwrap();
     // Ids come in order: the next is 3, not 5.
     let err = w.enter(5, 0.3).unwrap_err().to_string();
-    assert!(err.contains("person 5") && err.contains("next id is 3"), "{err}");
+    assert!(
+        err.contains("person 5") && err.contains("next id is 3"),
+        "{err}"
+    );
     w.frame(0.1, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
         .unwrap();
     // Person 3 enters and leaves between two frames: in the file all the same.

@@ -2,7 +2,7 @@
 //! writer thread `moreau run` uses): the file holds every person who was ever in the run, with
 //! their radius, trajectory and exit, and people simply appear in later frames.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use moreau_crowd::{Scene, Simulation};
 use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
@@ -27,7 +27,7 @@ fn scene() -> Scene {
 }
 
 /// Runs the scene into `path`, through the writer thread or not; returns the simulation.
-fn record(path: &PathBuf, threaded: bool) -> Simulation {
+fn record(path: &Path, threaded: bool) -> Simulation {
     let mut sim = Simulation::new(scene()).unwrap();
     let writer = RunWriter::create(path, &header(&sim, "test".into()), Overwrite::Never).unwrap();
     let people = sim.total_people();
@@ -51,7 +51,10 @@ fn the_run_file_holds_everyone_who_entered() {
     let sim = record(&path, false);
     let (start, total) = (20, sim.total_people());
     assert_eq!(total, start + 48, "3 a second for 16 s");
-    assert!(!sim.exit_records().is_empty(), "nobody left: the test would not see exits");
+    assert!(
+        !sim.exit_records().is_empty(),
+        "nobody left: the test would not see exits"
+    );
 
     let f = RunFile::open(&path).unwrap();
     let radii = f.header().unwrap().radii;
