@@ -71,63 +71,73 @@ fn run_checked(
 
 #[test]
 fn a_group_released_at_2_s_stands_until_then_and_walks_after() {
-    // Alone in the corridor: nobody pushes them. A second group, released at once, walks from
-    // the first step (release is per group).
+    // Alone in the corridor: nobody pushes them. A group released at 5 s (where the sum of
+    // 100 steps of 0.05 s is 4.99999999999999 s) and one released at once (release is per
+    // group), far from each other.
     let scene = corridor(
-        20.0,
-        4.0,
+        40.0,
+        6.0,
         r#"
 [[groups]]
-name = "later"
+name = "at 2 s"
 positions = [[3.0, 2.0]]
 radius = 0.2
 speed = 1.0
 destination = "end"
 release = 2.0
 [[groups]]
+name = "at 5 s"
+positions = [[12.0, 3.0]]
+radius = 0.2
+speed = 1.0
+destination = "end"
+release = 5.0
+[[groups]]
 name = "now"
-positions = [[10.0, 1.0]]
+positions = [[22.0, 1.0]]
 radius = 0.2
 speed = 1.0
 destination = "end"
 "#,
     );
     let mut sim = Simulation::new(scene).unwrap();
-    let later = sim.people().groups().iter().position(|&g| g == 0).unwrap();
-    let now = 1 - later;
+    let index = |g: u32| sim.people().groups().iter().position(|&x| x == g).unwrap();
+    let people = [(index(0), 2.0), (index(1), 5.0), (index(2), 0.0)];
     let start = sim.people().positions().to_vec();
     let bits = |q: &[f64], i: usize| [q[2 * i].to_bits(), q[2 * i + 1].to_bits()];
-    let (mut standing, mut walking) = (0, 0);
-    let mut velocities = vec![0.0; 4];
+    let mut standing = [0; 3];
+    let mut velocities = vec![0.0; 6];
     loop {
         let t = sim.time();
         sim.desired_velocities(&mut velocities);
         let before = sim.people().positions().to_vec();
-        if sim.advance_step(4.0, &mut ()).unwrap().is_none() {
+        if sim.advance_step(6.0, &mut ()).unwrap().is_none() {
             break;
         }
         let after = sim.people().positions();
-        assert_ne!(bits(after, now), bits(&before, now), "t = {t}: 'now' stood");
-        // Released at the step that starts at 2 s (times are sums of steps: within rounding).
-        if t < 2.0 - 1e-6 {
-            assert_eq!(velocities[2 * later..2 * later + 2], [0.0, 0.0], "t = {t}");
-            assert_eq!(
-                bits(after, later),
-                bits(&start, later),
-                "t = {t}: moved before its release"
-            );
-            standing += 1;
-        } else {
-            assert!(velocities[2 * later] > 0.9, "t = {t}: {velocities:?}");
-            assert!(
-                after[2 * later] > before[2 * later] + 0.04,
-                "t = {t}: did not walk after its release"
-            );
-            walking += 1;
+        for (k, &(i, release)) in people.iter().enumerate() {
+            // Released at the step that starts at the release time (times are sums of
+            // steps: within rounding).
+            if t < release - 1e-6 {
+                assert_eq!(velocities[2 * i..2 * i + 2], [0.0, 0.0], "t = {t}");
+                assert_eq!(
+                    bits(after, i),
+                    bits(&start, i),
+                    "t = {t}: moved before its release at {release}"
+                );
+                standing[k] += 1;
+            } else {
+                assert!(velocities[2 * i] > 0.9, "t = {t}: {velocities:?}");
+                assert!(
+                    after[2 * i] > before[2 * i] + 0.04,
+                    "t = {t}: did not walk after its release at {release}"
+                );
+            }
         }
     }
-    // 40 steps of 0.05 s before t = 2 (the 40th starts at 1.95), 40 after.
-    assert_eq!((standing, walking), (40, 40));
+    // Steps of 0.05 s: 40 start before 2 s, 100 before 5 s; 120 in all.
+    assert_eq!(sim.steps(), 120);
+    assert_eq!(standing, [40, 100, 0]);
 }
 
 #[test]
