@@ -175,3 +175,53 @@ def test_an_adaptive_run_writes_frames_on_output_times(tmp_path):
     assert np.all(run.steps["eps"] <= run.steps["eps_target"] * (1 + 1e-12))
     assert moreau_run.min_gaps(run).min() >= -run.steps["violation"].max() - 1e-12
     assert run.summary["tol"] == 0.01
+
+
+def test_people_who_enter_during_the_run_are_in_the_file(tmp_path):
+    """data/scenes/gate-inflow.toml: 20 people wait from the start, 60 enter through a gate
+    (3 a second for 20 s). Every one of them is in every per-person dataset, appears in the
+    frames from when they entered, and PedPy reads them all."""
+    from conftest import ROOT
+
+    out = tmp_path / "gate.h5"
+    moreau("run", ROOT / "data" / "scenes" / "gate-inflow.toml", "-o", out, "--quiet")
+    run = moreau_run.load(out)
+    n, frames = 80, len(run.time)
+    with h5py.File(out, "r") as f:
+        assert f.attrs["format"] == "moreau-run/3"
+        np.testing.assert_array_equal(f["people/id"][:], np.arange(n))
+        exit_time = f["people/exit_time"][:]
+    assert run.radius.shape == (n,) and exit_time.shape == (n,)
+    assert run.positions.shape == (frames, n, 2)
+    assert run.summary["people"] == n
+    assert run.summary["passed_exit"] == len(run.exits) > 0
+    np.testing.assert_array_equal(exit_time[run.exits["id"]], run.exits["t"])
+
+    # The trajectory and the dense array agree; everyone is in some frame.
+    traj = run.trajectory
+    np.testing.assert_array_equal(np.bincount(traj["frame"], minlength=frames), run.count)
+    dense = run.positions[traj["frame"], traj["id"]]
+    np.testing.assert_array_equal(dense[:, 0], traj["x"])
+    assert np.isnan(run.positions).any(axis=2).sum() == frames * n - len(traj)
+    first = np.full(n, frames)
+    np.minimum.at(first, traj["id"], traj["frame"])
+    assert np.all(first < frames)
+    # The 20 of the start are in frame 0; the newcomers come later, in order of id, the
+    # k-th (from 1) due at k/3 s and in the first frame (every 0.1 s) after its step.
+    assert np.all(first[:20] == 0)
+    assert np.all(np.diff(first[20:]) >= 0)
+    due = np.arange(1, 61) / 3.0
+    entered = run.time[first[20:]]
+    assert np.all(entered >= due - 1e-9) and np.all(entered <= due + 0.15), entered - due
+    assert run.count[0] == 20 and run.count.max() > 20
+
+    # Nobody overlaps beyond the certified violation in any frame.
+    assert moreau_run.min_gaps(run).min() >= -run.steps["violation"].max() - 1e-12
+
+    traj_pedpy = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=out)
+    assert traj_pedpy.data["id"].nunique() == n
+    assert traj_pedpy.data.groupby("id")["frame"].min().to_numpy().tolist() == first.tolist()
+
+    # The player shows them all (each from the frame they entered).
+    shown = moreau("view", out, "-o", tmp_path / "gate.html")
+    assert f"{frames} frames, {n} of {n} people" in shown.stdout

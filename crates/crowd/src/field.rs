@@ -226,8 +226,9 @@ pub struct ExitGoal {
 
 /// The desired velocity `U(q)` of every person: speed × descent direction of the distance to
 /// the person's current goal, slid along any wall the person is touching so that it never
-/// points into a wall. Persons without a goal stand still. Borrowed for a step from the
-/// people, the walls and the distance fields.
+/// points into a wall. Persons without a goal stand still, and so do the people of a group not
+/// yet released (at `t` before its release time). Borrowed for a step from the people, the
+/// walls, the distance fields and the release times.
 #[derive(Debug)]
 pub struct DesiredVelocity<'a> {
     /// The distance fields.
@@ -238,6 +239,9 @@ pub struct DesiredVelocity<'a> {
     pub walls: &'a Walls,
     /// The people.
     pub people: PeopleView<'a>,
+    /// Per group index (`PeopleView::group`): its people stand at times before it (s; the
+    /// group's release).
+    pub stand_until: &'a [f64],
     /// Multiplies every desired speed (an input of co-simulation).
     pub speed_factor: f64,
     /// Classic (jumps at the wall slide and on arrival) or Lipschitz.
@@ -303,10 +307,16 @@ impl Field for DesiredVelocity<'_> {
     fn dim(&self) -> usize {
         2 * self.people.id.len()
     }
-    fn eval(&self, _t: f64, q: &[f64], out: &mut [f64]) {
+    /// The desired velocities of the step that starts at `t`: zero for the people whose
+    /// group is released after `t`.
+    fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
         let mut near = self.near.borrow_mut();
         for i in 0..self.people.id.len() {
-            let v = self.velocity(i, [q[2 * i], q[2 * i + 1]], &mut near);
+            let v = if t < self.stand_until[self.people.group[i] as usize] {
+                [0.0, 0.0]
+            } else {
+                self.velocity(i, [q[2 * i], q[2 * i + 1]], &mut near)
+            };
             out[2 * i] = v[0];
             out[2 * i + 1] = v[1];
         }

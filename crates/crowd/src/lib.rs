@@ -5,12 +5,14 @@
 //! with the catching-up scheme: the desired velocity ([`DesiredVelocity`], from geodesic
 //! distances) and the feasible set ([`CrowdContacts`]: rows from the [`ContactSource`]s, pairs
 //! of people through a [`BroadPhase`], people and walls through the [`Walls`] index) are
-//! borrowed from the people at every step. [`Simulation::advance_to`] is the one step loop;
-//! [`SimState`] is its state as a value. Only what the scene declares is built.
+//! borrowed from the people at every step. Scheduled events (groups released at a time,
+//! [`Inflow`] sources bringing people in) act between steps. [`Simulation::advance_to`] is the
+//! one step loop; [`SimState`] is its state as a value. Only what the scene declares is built.
 
 mod broad;
 mod contacts;
 mod error;
+mod events;
 mod exits;
 mod field;
 mod geometry;
@@ -32,6 +34,7 @@ pub use contacts::{
     PersonWalls,
 };
 pub use error::{CrowdError, Infeasibility};
+pub use events::{EntryRecord, Inflow, InflowState};
 pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};

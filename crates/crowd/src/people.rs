@@ -27,8 +27,8 @@ pub struct ExitRecord {
 }
 
 /// The people present, as one struct of arrays indexed alike; ids increase along the arrays
-/// (people are numbered along a space-filling curve of their starting positions, and leaving
-/// keeps the order).
+/// (people are numbered along a space-filling curve of their starting positions, leaving
+/// keeps the order, and people who enter later get the next ids and go at the end).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct People {
     id: Vec<u32>,
@@ -49,6 +49,8 @@ pub struct PeopleView<'a> {
     pub radius: &'a [f64],
     /// Desired speeds (m/s).
     pub speed: &'a [f64],
+    /// Index of each person's group: the scene's groups, then one per inflow source.
+    pub group: &'a [u32],
     /// Where each is headed.
     pub place: &'a [Place],
 }
@@ -116,7 +118,8 @@ impl People {
         &self.speed
     }
 
-    /// Index of each person's group in the scene.
+    /// Index of each person's group: `0..groups` the scene's groups, `groups + s` the people
+    /// of inflow source `s`.
     pub fn groups(&self) -> &[u32] {
         &self.group
     }
@@ -142,6 +145,7 @@ impl People {
             id: &self.id,
             radius: &self.radius,
             speed: &self.speed,
+            group: &self.group,
             place: &self.place,
         }
     }
@@ -154,6 +158,7 @@ impl People {
                 id: &self.id,
                 radius: &self.radius,
                 speed: &self.speed,
+                group: &self.group,
                 place: &self.place,
             },
         )
@@ -162,6 +167,32 @@ impl People {
     /// Sets where person `i` is headed.
     pub(crate) fn set_place(&mut self, i: usize, place: Place) {
         self.place[i] = place;
+    }
+
+    /// Adds a person at the end, with an id above every id so far: the one place where
+    /// per-person arrays grow.
+    ///
+    /// # Panics
+    /// If `id` is not above the last id (a bug in the caller).
+    pub(crate) fn push(
+        &mut self,
+        id: u32,
+        position: [f64; 2],
+        radius: f64,
+        speed: f64,
+        group: u32,
+        place: Place,
+    ) {
+        assert!(
+            self.id.last().is_none_or(|&last| last < id),
+            "ids must increase"
+        );
+        self.id.push(id);
+        self.position.extend_from_slice(&position);
+        self.radius.push(radius);
+        self.speed.push(speed);
+        self.group.push(group);
+        self.place.push(place);
     }
 
     /// Keeps the people whose `keep` is true, in order: the one place where per-person arrays
@@ -210,7 +241,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn retain_keeps_every_array_aligned() {
+    fn retain_and_push_keep_every_array_aligned() {
         let mut p = People::new(
             vec![1, 4, 7],
             vec![0.0, 0.5, 1.0, 1.5, 2.0, 2.5],
@@ -220,13 +251,18 @@ mod tests {
             vec![Place::ToExit(0), Place::ToTarget(0), Place::Arrived(1)],
         );
         p.retain(&[true, false, true]);
-        assert_eq!(p.ids(), &[1, 7]);
-        assert_eq!(p.positions(), &[0.0, 0.5, 2.0, 2.5]);
-        assert_eq!(p.radii(), &[0.1, 0.3]);
-        assert_eq!(p.speeds(), &[1.0, 1.2]);
-        assert_eq!(p.groups(), &[0, 0]);
-        assert_eq!(p.places(), &[Place::ToExit(0), Place::Arrived(1)]);
+        p.push(9, [3.0, 3.5], 0.4, 1.3, 2, Place::ToExit(0));
+        assert_eq!(p.ids(), &[1, 7, 9]);
+        assert_eq!(p.positions(), &[0.0, 0.5, 2.0, 2.5, 3.0, 3.5]);
+        assert_eq!(p.radii(), &[0.1, 0.3, 0.4]);
+        assert_eq!(p.speeds(), &[1.0, 1.2, 1.3]);
+        assert_eq!(p.groups(), &[0, 0, 2]);
+        assert_eq!(
+            p.places(),
+            &[Place::ToExit(0), Place::Arrived(1), Place::ToExit(0)]
+        );
         assert_eq!(p.index_of(7), Some(1));
+        assert_eq!(p.view().group, &[0, 0, 2]);
         assert_eq!(p.index_of(4), None);
         assert!(p.check().is_ok());
     }

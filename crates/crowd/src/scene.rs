@@ -9,6 +9,7 @@ use moreau_integrate::{AdaptiveSettings, ErrorEstimate, Stepping};
 pub use moreau_solve::SolverKind;
 
 use crate::error::CrowdError;
+use crate::events::Inflow;
 use crate::geometry::{Polygon, Segment, ring_contains};
 
 /// The bounds a scene must keep so that building and running it cannot exhaust the machine:
@@ -63,7 +64,7 @@ pub enum Quantity {
 }
 
 impl Quantity {
-    fn check(&self, field: &str, positive: bool) -> Result<(), CrowdError> {
+    pub(crate) fn check(&self, field: &str, positive: bool) -> Result<(), CrowdError> {
         let ok = |x: f64| x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
         let need = if positive {
             "must be finite and > 0"
@@ -170,6 +171,9 @@ pub struct Group {
     pub speed: Quantity,
     /// The name of the exit they walk to.
     pub destination: String,
+    /// When they start walking (s; absent: at once): before it they stand, and can be pushed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub release: Option<f64>,
 }
 
 /// One pose of a moving body: at time `t` its points are turned by `angle` about its pivot,
@@ -376,8 +380,12 @@ pub struct Scene {
     pub area: Area,
     /// The exits.
     pub exits: Vec<Exit>,
-    /// The groups of people.
+    /// The groups of people (absent: none, for a scene whose people all come from sources).
+    #[serde(default)]
     pub groups: Vec<Group>,
+    /// People entering while the run goes ([`Inflow`]; absent: none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<Inflow>,
     /// Time stepping.
     pub time: Time,
     /// Solver settings.
@@ -394,7 +402,7 @@ pub struct Scene {
     pub moving: Vec<MovingBody>,
 }
 
-fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
+pub(crate) fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
     if v.len() < 3 {
         return Err(CrowdError::invalid(
             field,
@@ -434,7 +442,7 @@ fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
 }
 
 /// A point: finite, and within [`limits::MAX_COORDINATE`] of the origin on both axes.
-fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
+pub(crate) fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
     if !p[0].is_finite() || !p[1].is_finite() {
         return Err(CrowdError::invalid(
             field,
@@ -664,11 +672,11 @@ impl Scene {
                 "must be finite and > 0 (seconds between rebuilds of the distance fields)",
             ));
         }
-        if self.groups.is_empty() {
+        if self.groups.is_empty() && self.sources.is_empty() {
             return Err(CrowdError::invalid(
                 "groups",
                 "[]",
-                "the scene has no people",
+                "the scene has no people (give groups, or sources)",
             ));
         }
         let mut people = 0.0;
@@ -732,7 +740,7 @@ impl Scene {
                 }
             }
         }
-        Ok(())
+        crate::events::validate(self)
     }
 
     fn validate_moving(&self) -> Result<(), CrowdError> {
@@ -865,19 +873,21 @@ impl Scene {
         ring_contains(&self.area.outer, p) && !self.area.holes.iter().any(|h| ring_contains(h, p))
     }
 
+    /// The radii of the groups' and the sources' people.
+    fn radii(&self) -> impl Iterator<Item = &Quantity> {
+        let sources = self.sources.iter().map(|s| &s.radius);
+        self.groups.iter().map(|g| &g.radius).chain(sources)
+    }
+
     /// The smallest radius any person can have.
     pub fn min_radius(&self) -> f64 {
-        self.groups
-            .iter()
-            .map(|g| g.radius.min())
+        self.radii()
+            .map(Quantity::min)
             .fold(f64::INFINITY, f64::min)
     }
 
     /// The largest radius any person can have.
     pub fn max_radius(&self) -> f64 {
-        self.groups
-            .iter()
-            .map(|g| g.radius.max())
-            .fold(0.0, f64::max)
+        self.radii().map(Quantity::max).fold(0.0, f64::max)
     }
 }

@@ -11,6 +11,7 @@ use moreau_solve::ProjectionSolver;
 use crate::broad::{BroadPhaseKind, choose_broad_phase};
 use crate::contacts::{ContactKind, ContactSources, CrowdContacts, PersonPairs, PersonWalls};
 use crate::error::CrowdError;
+use crate::events::{EntryRecord, Events};
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
 use crate::geometry::Segment;
@@ -139,6 +140,10 @@ pub trait Observer {
     fn exit(&mut self, _record: &ExitRecord) -> Result<(), ObserverError> {
         Ok(())
     }
+    /// When a person enters from an inflow source (after the step's exits).
+    fn enter(&mut self, _record: &EntryRecord) -> Result<(), ObserverError> {
+        Ok(())
+    }
 }
 
 /// Observes nothing.
@@ -180,6 +185,8 @@ pub struct Simulation {
     fields_built: Option<f64>,
     people: People,
     exit_log: Vec<ExitRecord>,
+    /// Release times and inflow sources.
+    events: Events,
     scheme: Scheme<Projection>,
     sources: ContactSources,
     stepping: Stepping,
@@ -245,6 +252,7 @@ impl Simulation {
             );
             place_people(&scene, &all, &moving, &exits)?
         };
+        let events = Events::build(&scene, &walls, &exits, &people)?;
         let n = people.len();
         let broad = match scene.solver.broad_phase {
             BroadPhaseChoice::Grid => BroadPhaseKind::Grid,
@@ -262,7 +270,10 @@ impl Simulation {
         let solver = scene
             .solver
             .kind
-            .build(Parallelism::threads(scene.solver.threads), 2 * n)
+            .build(
+                Parallelism::threads(scene.solver.threads),
+                2 * (n + events.capacity()),
+            )
             .map_err(moreau_integrate::IntegrateError::from)?;
         let settings = LinearizedSettings {
             max_violation: scene.solver.max_violation,
@@ -283,6 +294,7 @@ impl Simulation {
             fields_built,
             people,
             exit_log: Vec::new(),
+            events,
             scheme,
             sources,
             stepping,
@@ -313,9 +325,10 @@ impl Simulation {
         self.steps
     }
 
-    /// People at the start.
+    /// Everyone so far: the people at the start and those who entered since (every id is
+    /// below it).
     pub fn total_people(&self) -> usize {
-        self.total
+        self.total + self.events.emitted()
     }
 
     /// The people present.
@@ -522,6 +535,7 @@ impl Simulation {
                 goals: &self.exits.goals,
                 walls: &self.walls,
                 people,
+                stand_until: &self.events.stand_until,
                 speed_factor: self.speed_factor,
                 kind: self.scene.model.desired_velocity,
                 near: &self.near,
@@ -681,7 +695,15 @@ impl Simulation {
         self.moving.segments_at(self.t, &mut self.moving_now);
         let people = self.people.len();
         self.apply_exits();
-        if self.people.len() != people {
+        let left = self.people.len() != people;
+        let entered = self.events.after_step(
+            self.t,
+            &mut self.people,
+            &self.scene,
+            &self.walls,
+            &self.exits,
+        );
+        if left || entered > 0 {
             self.stepping.state_resized();
         }
     }
@@ -756,6 +778,9 @@ impl Simulation {
                     observer.step(&report).map_err(CrowdError::Observer)?;
                     for record in &self.exit_log[seen..] {
                         observer.exit(record).map_err(CrowdError::Observer)?;
+                    }
+                    for record in self.events.entered() {
+                        observer.enter(record).map_err(CrowdError::Observer)?;
                     }
                     return Ok(Some(report));
                 }
@@ -835,6 +860,7 @@ impl Simulation {
             people: self.people.clone(),
             exits: self.exit_log.clone(),
             exits_open: self.exits.exits.iter().map(|x| x.open).collect(),
+            inflow: self.events.state(),
             speed_factor: self.speed_factor,
             moving: self.moving.drives().to_vec(),
             fields_built: self.fields_built,
@@ -893,6 +919,9 @@ impl Simulation {
                 format!("the scene has {} moving bodies", self.moving.names().len()),
             );
         }
+        if let Err((field, value, reason)) = self.events.check(&state.inflow, &state.people) {
+            return refuse(field, value, reason);
+        }
         if !(state.time.is_finite() && state.speed_factor.is_finite()) {
             return refuse("time", state.time.to_string(), "must be finite".into());
         }
@@ -914,6 +943,7 @@ impl Simulation {
             self.build_fields_at(built);
         }
         self.moving.segments_at(self.t, &mut self.moving_now);
+        self.events.restore(&state.inflow);
         self.speed_factor = state.speed_factor;
         self.scheme
             .correction_mut()

@@ -14,7 +14,8 @@ use crate::people::{People, Place};
 use crate::scene::{Quantity, Scene};
 use crate::walls::Walls;
 
-fn draw(q: &Quantity, rng: &mut ChaCha8Rng) -> f64 {
+/// A value of `q`: itself, or drawn uniformly from `rng`.
+pub(crate) fn draw(q: &Quantity, rng: &mut ChaCha8Rng) -> f64 {
     match *q {
         Quantity::Fixed(x) => x,
         Quantity::Uniform { min, max } => {

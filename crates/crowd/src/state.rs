@@ -6,6 +6,7 @@ use moreau_integrate::SteppingState;
 use serde::{Deserialize, Serialize};
 
 use crate::error::CrowdError;
+use crate::events::InflowState;
 use crate::people::{ExitRecord, People};
 use crate::scene::Scene;
 
@@ -14,8 +15,8 @@ use crate::scene::Scene;
 ///
 /// What is *not* in it, because it is rebuilt from the scene: the geometry, the distance
 /// fields, the solver's scratch and symbolic analyses (the same pattern gives the same
-/// ordering). The random generator only places people at the start, so no random state is
-/// left to save.
+/// ordering). The random generator of the start is spent; each inflow source's own random
+/// stream is saved with the source ([`InflowState`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SimState {
     /// [`SimState::FORMAT`] when written.
@@ -34,6 +35,9 @@ pub struct SimState {
     pub exits: Vec<ExitRecord>,
     /// Which exits are open.
     pub exits_open: Vec<bool>,
+    /// Each inflow source's state (people placed, the radius of the first waiting, its random
+    /// stream), in the scene's order.
+    pub inflow: Vec<InflowState>,
     /// The factor on every desired speed.
     pub speed_factor: f64,
     /// How each moving body is driven (`None`: by its keyframes in time).
@@ -48,7 +52,8 @@ pub struct SimState {
 }
 
 impl SimState {
-    /// The layout version; bumped whenever a field changes meaning.
+    /// The layout version; bumped whenever a field changes meaning (2: `inflow`, `moving`,
+    /// `fields_built`).
     pub const FORMAT: u32 = 2;
 
     /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of

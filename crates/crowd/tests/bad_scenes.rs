@@ -81,6 +81,32 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
                 "a LINESTRING: the walkable area is a POLYGON",
             ],
         ),
+        ("negative-release.toml", &["groups[0].release", "-1", "≥ 0"]),
+        ("source-rate-zero.toml", &["sources[0].rate", "0", "> 0"]),
+        (
+            "source-outside.toml",
+            &[
+                "sources[0].area",
+                "[-1.0, 0.0]",
+                "outside the walkable area",
+            ],
+        ),
+        (
+            "source-unknown-destination.toml",
+            &["sources[0].destination", "window", "no exit"],
+        ),
+        (
+            "source-too-many.toml",
+            &["sources[0].rate", "1000000", "more than the limit of 1e7"],
+        ),
+        (
+            "source-stop-before-start.toml",
+            &["sources[0].stop", "1", "> start = 1.5"],
+        ),
+        (
+            "source-no-room.toml",
+            &["sources[0].area", "radius 0.2", "clear of the walls"],
+        ),
     ];
     let on_disk = std::fs::read_dir(format!(
         "{}/../../tests/bad-scenes",
@@ -102,7 +128,7 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
 
 #[test]
 fn the_reference_scenes_are_valid_and_round_trip() {
-    for name in ["room-150", "dense-2000"] {
+    for name in ["room-150", "dense-2000", "gate-inflow"] {
         let path = format!(
             "{}/../../data/scenes/{name}.toml",
             env!("CARGO_MANIFEST_DIR")

@@ -1,9 +1,12 @@
 //! The state of a run as a value: saved mid-run, serialized, restored into a new simulation
-//! of the same scene, the run goes on bit for bit (positions, exits and step reports), with
-//! fixed and with adaptive steps; a state of another scene, or damaged bytes, is refused.
+//! of the same scene, the run goes on bit for bit (positions, exits, entries and step
+//! reports), with fixed and with adaptive steps, with people leaving and entering; a state of
+//! another scene, or damaged bytes, is refused.
 
 use moreau_core::StepReport;
-use moreau_crowd::{ExitRecord, Hall, Observer, ObserverError, Scene, SimState, Simulation};
+use moreau_crowd::{
+    EntryRecord, ExitRecord, Hall, Observer, ObserverError, Scene, SimState, Simulation,
+};
 
 fn room(horizon: f64) -> Scene {
     let mut scene = Scene::from_file(concat!(
@@ -39,6 +42,7 @@ fn essentials(r: &StepReport) -> String {
 struct Log {
     steps: Vec<String>,
     exits: Vec<ExitRecord>,
+    entries: Vec<EntryRecord>,
     frames: usize,
 }
 
@@ -51,6 +55,10 @@ impl Observer for Log {
         self.exits.push(*record);
         Ok(())
     }
+    fn enter(&mut self, record: &EntryRecord) -> Result<(), ObserverError> {
+        self.entries.push(*record);
+        Ok(())
+    }
     fn frame(&mut self, _f: &moreau_crowd::Frame<'_>) -> Result<(), ObserverError> {
         self.frames += 1;
         Ok(())
@@ -59,8 +67,9 @@ impl Observer for Log {
 
 /// Runs `scene` to `t_end` in one go, and again stopping at `t_save`, saving the state
 /// (through its binary form and through JSON), restoring it into a fresh simulation and going
-/// on: both must agree bit for bit.
-fn round_trip(scene: Scene, t_save: f64, t_end: f64) -> (usize, usize) {
+/// on: both must agree bit for bit. Returns the steps and exits of the whole run, and the
+/// saved state.
+fn round_trip(scene: Scene, t_save: f64, t_end: f64) -> (usize, usize, SimState) {
     let mut whole = Simulation::new(scene.clone()).unwrap();
     let mut all = Log::default();
     whole.advance_to(t_end, &mut all).unwrap();
@@ -86,6 +95,13 @@ fn round_trip(scene: Scene, t_save: f64, t_end: f64) -> (usize, usize) {
         assert_eq!(steps, all.steps, "step reports");
         let exits: Vec<ExitRecord> = before.exits.iter().chain(&after.exits).copied().collect();
         assert_eq!(exits, all.exits, "exit records");
+        let entries: Vec<EntryRecord> = before
+            .entries
+            .iter()
+            .chain(&after.entries)
+            .copied()
+            .collect();
+        assert_eq!(entries, all.entries, "entry records");
         assert_eq!(before.frames + after.frames, all.frames, "frames");
         assert_eq!(second.frame().ids, whole.frame().ids);
         // Bit for bit: compare the bits, not within a tolerance.
@@ -95,14 +111,15 @@ fn round_trip(scene: Scene, t_save: f64, t_end: f64) -> (usize, usize) {
             bits(whole.frame().positions)
         );
         assert_eq!(second.state(), whole.state());
+        assert_eq!(second.total_people(), whole.total_people());
     }
-    (all.steps.len(), all.exits.len())
+    (all.steps.len(), all.exits.len(), saved)
 }
 
 #[test]
 fn a_restored_state_continues_bit_for_bit_with_fixed_steps() {
     // 200 steps of 0.05 s, saved after 100: the queue at the door has formed by then.
-    let (steps, exits) = round_trip(room(10.0), 5.0, 10.0);
+    let (steps, exits, _) = round_trip(room(10.0), 5.0, 10.0);
     assert_eq!(steps, 200);
     assert!(
         exits > 10,
@@ -114,7 +131,7 @@ fn a_restored_state_continues_bit_for_bit_with_fixed_steps() {
 fn a_restored_state_continues_bit_for_bit_with_adaptive_steps() {
     let mut scene = room(6.0);
     scene.time.tol = Some(0.01);
-    let (steps, exits) = round_trip(scene, 3.0, 6.0);
+    let (steps, exits, _) = round_trip(scene, 3.0, 6.0);
     assert!(steps > 60, "{steps} adaptive steps");
     assert!(exits > 0);
 }
@@ -124,8 +141,85 @@ fn a_restored_state_continues_bit_for_bit_when_people_leave() {
     // People who pass the hall's door are removed: the state shrinks before the save.
     let mut hall = Hall::new(400, 2.6);
     hall.horizon = 4.0;
-    let (_, exits) = round_trip(hall.scene().unwrap(), 2.0, 4.0);
+    let (_, exits, _) = round_trip(hall.scene().unwrap(), 2.0, 4.0);
     assert!(exits > 5, "{exits} left");
+}
+
+/// A corridor with a group released at 1.5 s in front of a gate whose inflow (6 a second,
+/// radii drawn) outruns what its 0.3 m square takes (one person at a time): a queue waits.
+fn gate_with_a_queue(horizon: f64) -> Scene {
+    let text = format!(
+        r#"
+name = "queue"
+seed = 5
+[area]
+outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 3.0], [0.0, 3.0]]
+[[exits]]
+name = "end"
+area = [[11.5, 0.0], [12.0, 0.0], [12.0, 3.0], [11.5, 3.0]]
+action = "remove"
+[[groups]]
+name = "waiting"
+count = 8
+spawn = [[2.0, 0.0], [4.0, 0.0], [4.0, 3.0], [2.0, 3.0]]
+radius = 0.2
+speed = 1.0
+destination = "end"
+release = 1.5
+[[sources]]
+name = "turnstile"
+area = [[0.5, 1.35], [0.8, 1.35], [0.8, 1.65], [0.5, 1.65]]
+rate = 6.0
+stop = 3.0
+radius = {{ min = 0.2, max = 0.25 }}
+speed = {{ min = 1.1, max = 1.4 }}
+destination = "end"
+[time]
+horizon = {horizon}
+step = 0.05
+output_interval = 0.25
+[solver]
+eps_kappa = 1e-3
+max_violation = 1e-6
+"#
+    );
+    Scene::from_toml(&text, "queue").unwrap()
+}
+
+#[test]
+fn a_restored_state_continues_bit_for_bit_mid_inflow_with_a_queue() {
+    // Saved at 1.2 s: the group still stands, the source owes 7 and has placed fewer, the
+    // first waiting has a radius drawn.
+    let (_, exits, saved) = round_trip(gate_with_a_queue(10.0), 1.2, 10.0);
+    let inflow = saved.inflow[0];
+    assert!(
+        inflow.emitted >= 1 && inflow.emitted < 7,
+        "{} placed by 1.2 s: no queue to save",
+        inflow.emitted
+    );
+    assert!(inflow.waiting_radius.is_some(), "{inflow:?}");
+    assert!(exits > 5, "{exits} left");
+}
+
+#[test]
+fn a_restored_state_continues_bit_for_bit_mid_inflow_with_adaptive_steps() {
+    let mut scene = gate_with_a_queue(6.0);
+    scene.time.tol = Some(0.01);
+    let (steps, _, saved) = round_trip(scene, 2.0, 6.0);
+    assert!(steps > 20, "{steps} adaptive steps");
+    assert!(saved.inflow[0].emitted >= 1);
+}
+
+#[test]
+fn the_gate_inflow_scene_restores_bit_for_bit_before_its_release() {
+    let mut scene = Scene::from_file(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/scenes/gate-inflow.toml"
+    ))
+    .unwrap();
+    scene.time.horizon = 8.0;
+    let (_, _, saved) = round_trip(scene, 4.0, 8.0);
+    assert_eq!(saved.inflow[0].emitted, 12);
 }
 
 #[test]
@@ -153,6 +247,18 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
     let err = sim.restore(&forged).unwrap_err().to_string();
     assert!(
         err.contains("state.people") && err.contains("ToExit(7)"),
+        "{err}"
+    );
+    // Inflow state for a source the scene does not have.
+    let mut forged = state.clone();
+    forged.inflow.push(moreau_crowd::InflowState {
+        emitted: 3,
+        waiting_radius: None,
+        rng_word: 0,
+    });
+    let err = sim.restore(&forged).unwrap_err().to_string();
+    assert!(
+        err.contains("state.inflow") && err.contains("1 sources"),
         "{err}"
     );
     let mut newer = state.clone();

@@ -12,14 +12,16 @@ use crate::error::IoError;
 use crate::layout::{ContactRow, StepRow};
 use crate::writer::RunWriter;
 
-/// What a run's observer writes: steps, exits, contact forces, frames and saved states, in
-/// the order they happen. [`RunWriter`] writes them at once; [`BackgroundWriter`] on its own
+/// What a run's observer writes: steps, exits, people entering, contact forces, frames and
+/// saved states, in the order they happen. [`RunWriter`] writes them at once; [`BackgroundWriter`] on its own
 /// thread.
 pub trait RunSink: Send {
     /// Records a step (written with the next frame).
     fn step(&mut self, report: &StepReport);
     /// Records that person `id` passed an exit at time `t`.
     fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError>;
+    /// Records that person `id` of radius `radius` entered (ids in order, each the next).
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError>;
     /// Whether the file records contact forces.
     fn records_contacts(&self) -> bool;
     /// The contact forces of the next frame and the pressure by id.
@@ -43,6 +45,9 @@ impl RunSink for RunWriter {
     }
     fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
         RunWriter::exit(self, id, t)
+    }
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+        RunWriter::enter(self, id, radius)
     }
     fn records_contacts(&self) -> bool {
         RunWriter::records_contacts(self)
@@ -69,6 +74,8 @@ impl RunSink for RunWriter {
 #[derive(Debug, Default)]
 struct Batch {
     steps: Vec<StepRow>,
+    /// Who entered, with their radii, in order.
+    entries: Vec<(u32, f64)>,
     exits: Vec<(u32, f64)>,
     contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
     moving: Option<Vec<[f64; 4]>>,
@@ -82,6 +89,7 @@ enum Message {
     State(Vec<u8>),
     Finish {
         steps: Vec<StepRow>,
+        entries: Vec<(u32, f64)>,
         exits: Vec<(u32, f64)>,
         status: String,
         summary: String,
@@ -99,6 +107,7 @@ pub struct BackgroundWriter {
     failed: Arc<Mutex<Option<IoError>>>,
     pending: Batch,
     contacts: bool,
+    /// People the file holds, those who entered included (ids `0..people`).
     people: usize,
     path: std::path::PathBuf,
 }
@@ -168,6 +177,7 @@ impl BackgroundWriter {
         let earlier = self.take_failure();
         let message = Message::Finish {
             steps: std::mem::take(&mut self.pending.steps),
+            entries: std::mem::take(&mut self.pending.entries),
             exits: std::mem::take(&mut self.pending.exits),
             status: status.to_string(),
             summary: summary.to_string(),
@@ -218,12 +228,16 @@ fn work(
             }
             Message::Finish {
                 steps,
+                entries,
                 exits,
                 status,
                 summary,
             } => {
                 for s in steps {
                     writer.step_row(s);
+                }
+                for (id, radius) in entries {
+                    let _ = writer.enter(id, radius);
                 }
                 for (id, t) in exits {
                     let _ = writer.exit(id, t);
@@ -240,6 +254,10 @@ fn work(
 fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
     for s in batch.steps {
         writer.step_row(s);
+    }
+    // Everyone who entered before anyone's exit: a newcomer may leave in the same batch.
+    for (id, radius) in batch.entries {
+        writer.enter(id, radius)?;
     }
     for (id, t) in batch.exits {
         writer.exit(id, t)?;
@@ -268,6 +286,20 @@ impl RunSink for BackgroundWriter {
             });
         }
         self.pending.exits.push((id, t));
+        Ok(())
+    }
+    fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+        if id as usize != self.people {
+            return Err(IoError::Layout {
+                path: self.path.clone(),
+                what: format!(
+                    "person {id} entered, but the next id is {} (people enter in order of id)",
+                    self.people
+                ),
+            });
+        }
+        self.people += 1;
+        self.pending.entries.push((id, radius));
         Ok(())
     }
     fn records_contacts(&self) -> bool {

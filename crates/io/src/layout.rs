@@ -4,10 +4,12 @@ use hdf5::H5Type;
 use hdf5::types::FixedAscii;
 use moreau_core::StepReport;
 
-/// The value of the root attribute `format`; bumped when the layout changes.
-pub const FORMAT: &str = "moreau-run/2";
-/// Earlier formats this moreau still reads (their layout is a subset of this one's).
-pub const FORMATS_READ: &[&str] = &["moreau-run/1", FORMAT];
+/// The value of the root attribute `format`; bumped when the layout changes (3: people who
+/// enter during the run extend the per-person datasets; `/state` marks `people`).
+pub const FORMAT: &str = "moreau-run/3";
+/// Earlier formats this moreau still reads (their layout is a subset of this one's: their
+/// per-person datasets hold everyone from the start).
+pub const FORMATS_READ: &[&str] = &["moreau-run/1", "moreau-run/2", FORMAT];
 
 pub(crate) const TRAJECTORY: &str = "trajectory";
 pub(crate) const FRAME_TIME: &str = "frames/time";
@@ -39,6 +41,9 @@ pub(crate) const ROWS_PER_CHUNK: usize = 8192;
 pub(crate) const SMALL_ROWS_PER_CHUNK: usize = 1024;
 /// People per chunk of `frames/positions` (one frame, 16 bytes a person: 512 KiB chunks).
 pub(crate) const PEOPLE_PER_CHUNK: usize = 32768;
+/// People per chunk of `frames/positions` at least: the people axis grows when people enter,
+/// with chunks of the size chosen at the start (16 KiB; NaN padding deflates to nothing).
+pub(crate) const MIN_PEOPLE_PER_CHUNK: usize = 1024;
 /// Deflate level: shuffled float64 gain little above this and cost much more time.
 pub(crate) const DEFLATE: u8 = 3;
 
@@ -187,7 +192,8 @@ pub struct RunHeader {
     pub wkt_geometry: String,
     /// `trajectory.fps`: output frames per second.
     pub fps: f64,
-    /// `people/radius`: the radius of person `id`, for every id `0..n`.
+    /// `people/radius`: the radius of person `id`, for every id `0..n` (written: the people at
+    /// the start; read back: everyone the file holds, those who entered later too).
     pub radii: Vec<f64>,
     /// `walls`: the wall segments `[x0, y0, x1, y1]` at the start (contacts name them by row).
     pub walls: Vec<[f64; 4]>,

@@ -7,8 +7,8 @@
 //! |---|---|
 //! | `/trajectory` | compound rows `id` (int64), `frame` (int64), `x`, `y` (float64); attribute `fps` |
 //! | `/frames/time`, `/frames/count` | time and number of people present, per output frame |
-//! | `/frames/positions` | float64 `[frames, people, 2]`, indexed by person id, NaN when absent |
-//! | `/people/id`, `/people/radius` | everyone at the start, by id |
+//! | `/frames/positions` | float64 `[frames, people, 2]`, indexed by person id, NaN when absent (before a person entered, after they left) |
+//! | `/people/id`, `/people/radius` | everyone in the run, by id: the people at the start, then those who entered (from inflow sources), appended with the frame after they entered |
 //! | `/people/exit_time` | time each person passed an exit, NaN if never (written when the run ends) |
 //! | `/exits` | compound rows `id`, `t`, appended as people pass exits (complete up to the last frame) |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |
@@ -18,7 +18,15 @@
 //! | `/frames/moving_walls` | only with moving bodies: float64 `[frames, segments, 4]`, each moving segment `x0, y0, x1, y1` where it is at the frame |
 //! | `/moving/name`, `/moving/body` | only with moving bodies: the bodies' names (strings), and each segment's body (int64, its row in `/moving/name`) |
 //!
-//! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
+//! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `people`, `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
+//!
+//! People who enter during the run (format `moreau-run/3`) extend the per-person datasets:
+//! `/people/id` and `/people/radius` grow by a row each, and the people axis of
+//! `/frames/positions` and `/frames/pressure` by a column, NaN in the frames before. Ids stay
+//! `0..people` in order, so every per-person dataset keeps being indexed by id, the files of
+//! earlier formats (`moreau-run/1`, `/2`: everyone from the start, fixed-size datasets) read
+//! the same way, and `/trajectory` is unchanged: a person's rows simply start at a later
+//! frame (what PedPy reads).
 //!
 //! Root attributes: `wkt_geometry` (the walkable area, WKT), `format`, `moreau_version`,
 //! `scene` (the whole scene, TOML), `scene_name`, `seed`, `solver` (the settings in force),

@@ -101,8 +101,9 @@ impl Drop for OutputLock {
 }
 
 /// Where writing a run file fails on purpose, for tests of what a failure leaves (a full disk
-/// in the middle of a frame): the `dataset` of frame `frame` (`trajectory`, `frames/positions`,
-/// `frames/time`, `frames/count`, `contacts`, `frames/pressure`, `steps`, `exits`, `flush`).
+/// in the middle of a frame): the `dataset` of frame `frame` (`people/id`, `people/radius`,
+/// `trajectory`, `frames/positions`, `frames/time`, `frames/count`, `contacts`,
+/// `frames/pressure`, `steps`, `exits`, `flush`).
 #[doc(hidden)]
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FailPoint {
@@ -126,6 +127,7 @@ pub struct Resumed {
 /// Where the datasets stood when a state was saved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct StateMarks {
+    people: usize,
     frames: usize,
     steps: usize,
     exits: usize,
@@ -144,7 +146,8 @@ struct StateSlots {
     slot: u8,
 }
 
-const STATE_MARKS: [&str; 5] = [
+const STATE_MARKS: [&str; 6] = [
+    "people",
     "frames",
     "steps",
     "exits",
@@ -197,6 +200,7 @@ impl StateSlots {
             ds.write_slice(bytes, 0..bytes.len())?;
         }
         let values = [
+            marks.people,
             marks.frames,
             marks.steps,
             marks.exits,
@@ -216,18 +220,19 @@ impl StateSlots {
             return Ok((Vec::new(), None));
         }
         let bytes = self.slots[usize::from(self.slot - 1).min(1)].read_raw::<u8>()?;
-        let mut v = [0usize; 5];
+        let mut v = [0usize; 6];
         for (k, name) in STATE_MARKS.iter().enumerate() {
             v[k] = self.group.attr(name)?.read_scalar::<u64>()? as usize;
         }
         Ok((
             bytes,
             Some(StateMarks {
-                frames: v[0],
-                steps: v[1],
-                exits: v[2],
-                trajectory_rows: v[3],
-                contact_rows: v[4],
+                people: v[0],
+                frames: v[1],
+                steps: v[2],
+                exits: v[3],
+                trajectory_rows: v[4],
+                contact_rows: v[5],
             }),
         ))
     }
@@ -246,6 +251,8 @@ pub struct RunWriter {
     lock: Option<OutputLock>,
     fail: Option<FailPoint>,
     file: File,
+    people_id: Dataset,
+    people_radius: Dataset,
     trajectory: Dataset,
     frame_time: Dataset,
     frame_count: Dataset,
@@ -260,7 +267,10 @@ pub struct RunWriter {
     moving_segments: usize,
     /// `/state` and its two slots.
     state: StateSlots,
+    /// People in the whole frames written (ids `0..people`).
     people: usize,
+    /// The radii of the people who entered since the last frame (ids `people..`).
+    pending_people: Vec<f64>,
     frames: usize,
     trajectory_rows: usize,
     exit_rows: usize,
@@ -469,11 +479,11 @@ impl RunWriter {
             .at(path, at("creating 'frames/count'"))?;
         let positions = file
             .new_dataset::<f64>()
-            .chunk((1, n.clamp(1, PEOPLE_PER_CHUNK), 2))
+            .chunk((1, n.clamp(MIN_PEOPLE_PER_CHUNK, PEOPLE_PER_CHUNK), 2))
             .shuffle()
             .deflate(DEFLATE)
             .fill_value(f64::NAN)
-            .shape((0.., n, 2))
+            .shape((0.., n.., 2))
             .create(FRAME_POSITIONS)
             .at(path, at("creating 'frames/positions'"))?;
         let walls: Vec<f64> = header.walls.iter().flatten().copied().collect();
@@ -498,17 +508,18 @@ impl RunWriter {
                 .at(path, at("writing attribute 'contacts.units'"))?;
             let pressure = file
                 .new_dataset::<f64>()
-                .chunk((1, n.clamp(1, 2 * PEOPLE_PER_CHUNK)))
+                .chunk((1, n.clamp(2 * MIN_PEOPLE_PER_CHUNK, 2 * PEOPLE_PER_CHUNK)))
                 .shuffle()
                 .deflate(DEFLATE)
                 .fill_value(f64::NAN)
-                .shape((0.., n))
+                .shape((0.., n..))
                 .create(FRAME_PRESSURE)
                 .at(path, at("creating 'frames/pressure'"))?;
             Some((rows, pressure))
         } else {
             None
         };
+        // The people at the start; those who enter later are appended with the frame after.
         let segments = header.moving_body.len();
         let moving = if segments > 0 {
             file.create_group("moving")
@@ -534,13 +545,11 @@ impl RunWriter {
             None
         };
         let ids: Vec<i64> = (0..n as i64).collect();
-        file.new_dataset_builder()
-            .with_data(&ids)
-            .create(PEOPLE_ID)
+        let people_id = table::<i64>(&file, PEOPLE_ID, ROWS_PER_CHUNK)
+            .and_then(|ds| append(&ds, &mut 0, &ids).map(|()| ds))
             .at(path, at("writing 'people/id'"))?;
-        file.new_dataset_builder()
-            .with_data(&header.radii)
-            .create(PEOPLE_RADIUS)
+        let people_radius = table::<f64>(&file, PEOPLE_RADIUS, ROWS_PER_CHUNK)
+            .and_then(|ds| append(&ds, &mut 0, &header.radii).map(|()| ds))
             .at(path, at("writing 'people/radius'"))?;
         let state = StateSlots::create(&file).at(path, at("creating 'state'"))?;
         file.flush().at(path, at("flushing"))?;
@@ -551,6 +560,8 @@ impl RunWriter {
             lock: None,
             fail: None,
             file,
+            people_id,
+            people_radius,
             trajectory,
             frame_time,
             frame_count,
@@ -562,6 +573,7 @@ impl RunWriter {
             moving_segments: segments,
             state,
             people: n,
+            pending_people: Vec::new(),
             frames: 0,
             trajectory_rows: 0,
             exit_rows: 0,
@@ -598,22 +610,34 @@ impl RunWriter {
         self.pending_steps.push(row);
     }
 
-    /// People the file holds (every id at the start).
+    /// People the file holds: at the start, and every one who entered since (ids `0..people`).
     pub fn people(&self) -> usize {
-        self.people
+        self.people + self.pending_people.len()
+    }
+
+    /// Records that person `id` of radius `radius` entered the run (written with the next
+    /// frame, or when the run ends): ids come in order, each the next one.
+    pub fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+        let next = self.people();
+        if id as usize != next {
+            return Err(self.layout_error(format!(
+                "person {id} entered, but the next id is {next} (people enter in order of id)"
+            )));
+        }
+        self.pending_people.push(radius);
+        self.exit_times.push(f64::NAN);
+        Ok(())
     }
 
     /// Records that person `id` passed an exit at time `t` (written with the next frame).
     pub fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
+        let people = self.people();
         let slot = self
             .exit_times
             .get_mut(id as usize)
             .ok_or_else(|| IoError::Layout {
                 path: self.path.clone(),
-                what: format!(
-                    "exit of person {id}, but the file holds {} people",
-                    self.people
-                ),
+                what: format!("exit of person {id}, but the file holds {people} people"),
             })?;
         *slot = t;
         self.pending_exits.push(ExitRow { id: id as i64, t });
@@ -636,11 +660,11 @@ impl RunWriter {
         if self.contacts.is_none() {
             return Ok(());
         }
-        if pressure_by_id.len() != self.people {
+        if pressure_by_id.len() != self.people() {
             return Err(self.layout_error(format!(
                 "pressure of {} people, but the file holds {}",
                 pressure_by_id.len(),
-                self.people
+                self.people()
             )));
         }
         let frame = self.frames as i64;
@@ -673,13 +697,19 @@ impl RunWriter {
     /// and the counts of rows it goes with, for [`resume`](Self::resume). Between frames only
     /// (nothing pending).
     pub fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
-        if !self.pending_steps.is_empty() || !self.pending_exits.is_empty() {
+        if !self.pending_steps.is_empty()
+            || !self.pending_exits.is_empty()
+            || !self.pending_people.is_empty()
+        {
             return Err(self.layout_error(format!(
-                "a state saved between frames ({} steps not yet written)",
-                self.pending_steps.len()
+                "a state saved between frames ({} steps, {} exits, {} people not yet written)",
+                self.pending_steps.len(),
+                self.pending_exits.len(),
+                self.pending_people.len()
             )));
         }
         let marks = StateMarks {
+            people: self.people,
             frames: self.frames,
             steps: self.step_rows,
             exits: self.exit_rows,
@@ -714,7 +744,7 @@ impl RunWriter {
                 ),
             });
         }
-        let header = crate::RunFile::open(&partial)?.header()?;
+        let mut header = crate::RunFile::open(&partial)?.header()?;
         let file = without_locking()
             .open_rw(&partial)
             .at(&partial, || "opening for writing".into())?;
@@ -748,6 +778,7 @@ impl RunWriter {
             file.dataset(name)
                 .at(&partial, || format!("opening '{name}'"))
         };
+        let (people_id, people_radius) = (open(PEOPLE_ID)?, open(PEOPLE_RADIUS)?);
         let (trajectory, frame_time, frame_count, positions, exits, steps) = (
             open(TRAJECTORY)?,
             open(FRAME_TIME)?,
@@ -767,7 +798,18 @@ impl RunWriter {
         } else {
             None
         };
-        let n = header.radii.len();
+        // The people of the saved frame (rows of people who entered after it are dropped).
+        let n = marks.people;
+        if n > header.radii.len() {
+            return Err(IoError::Layout {
+                path: partial,
+                what: format!(
+                    "the saved state marks {n} people, 'people/radius' holds {}",
+                    header.radii.len()
+                ),
+            });
+        }
+        header.radii.truncate(n);
         let exit_rows: Vec<ExitRow> = exits
             .read_slice_1d(0..marks.exits)
             .map(|a| a.to_vec())
@@ -785,6 +827,8 @@ impl RunWriter {
             lock: Some(lock),
             fail: None,
             file,
+            people_id,
+            people_radius,
             trajectory,
             frame_time,
             frame_count,
@@ -796,6 +840,7 @@ impl RunWriter {
             moving_segments: segments,
             state,
             people: n,
+            pending_people: Vec::new(),
             frames: marks.frames,
             trajectory_rows: marks.trajectory_rows,
             exit_rows: marks.exits,
@@ -832,15 +877,15 @@ impl RunWriter {
             )));
         }
         let frame = self.frames;
+        let people = self.people();
         self.rows.clear();
         self.dense.clear();
-        self.dense.resize(2 * self.people, f64::NAN);
+        self.dense.resize(2 * people, f64::NAN);
         for (k, &id) in ids.iter().enumerate() {
             let i = id as usize;
-            if i >= self.people {
+            if i >= people {
                 return Err(self.layout_error(format!(
-                    "frame at t = {t}: person {id}, but the file holds {} people",
-                    self.people
+                    "frame at t = {t}: person {id}, but the file holds {people} people"
                 )));
             }
             let (x, y) = (positions[2 * k], positions[2 * k + 1]);
@@ -853,9 +898,9 @@ impl RunWriter {
             self.dense[2 * i] = x;
             self.dense[2 * i + 1] = y;
         }
-        if self.pending_pressure.len() != self.people {
+        if self.pending_pressure.len() != people {
             self.pending_pressure.clear();
-            self.pending_pressure.resize(self.people, f64::NAN);
+            self.pending_pressure.resize(people, f64::NAN);
         }
         if self.pending_moving.len() != 4 * self.moving_segments {
             return Err(self.layout_error(format!(
@@ -889,6 +934,8 @@ impl RunWriter {
         self.pending_moving.clear();
         self.pending_steps.clear();
         self.pending_exits.clear();
+        self.pending_people.clear();
+        self.people = people;
         self.frames += 1;
         Ok(())
     }
@@ -907,6 +954,18 @@ impl RunWriter {
         ) -> Result<T, (&'static str, hdf5::Error)> {
             r.map_err(|e| (name, e))
         }
+        let people = self.people();
+        named(PEOPLE_ID, self.injected(frame, PEOPLE_ID))?;
+        named(PEOPLE_ID, self.append_people_ids())?;
+        named(PEOPLE_RADIUS, self.injected(frame, PEOPLE_RADIUS))?;
+        named(
+            PEOPLE_RADIUS,
+            append(
+                &self.people_radius,
+                &mut { self.people },
+                &self.pending_people,
+            ),
+        )?;
         let mut trajectory_rows = self.trajectory_rows;
         named(TRAJECTORY, self.injected(frame, TRAJECTORY))?;
         named(
@@ -916,13 +975,11 @@ impl RunWriter {
         named(FRAME_POSITIONS, self.injected(frame, FRAME_POSITIONS))?;
         named(
             FRAME_POSITIONS,
-            self.positions
-                .resize((frame + 1, self.people, 2))
-                .and_then(|_| {
-                    let view = ArrayView2::from_shape((self.people, 2), &self.dense)
-                        .expect("2 coordinates a person");
-                    self.positions.write_slice(view, (frame, .., ..))
-                }),
+            self.positions.resize((frame + 1, people, 2)).and_then(|_| {
+                let view = ArrayView2::from_shape((people, 2), &self.dense)
+                    .expect("2 coordinates a person");
+                self.positions.write_slice(view, (frame, .., ..))
+            }),
         )?;
         named(FRAME_TIME, self.injected(frame, FRAME_TIME))?;
         named(FRAME_TIME, append(&self.frame_time, &mut { frame }, &[t]))?;
@@ -941,7 +998,7 @@ impl RunWriter {
             named(FRAME_PRESSURE, self.injected(frame, FRAME_PRESSURE))?;
             named(
                 FRAME_PRESSURE,
-                pressure.resize((frame + 1, self.people)).and_then(|_| {
+                pressure.resize((frame + 1, people)).and_then(|_| {
                     pressure.write_slice(self.pending_pressure.as_slice(), (frame, ..))
                 }),
             )?;
@@ -990,6 +1047,8 @@ impl RunWriter {
                 first = r;
             }
         };
+        keep(self.people_id.resize(self.people));
+        keep(self.people_radius.resize(self.people));
         keep(self.trajectory.resize(self.trajectory_rows));
         keep(self.positions.resize((frames, self.people, 2)));
         keep(self.frame_time.resize(frames));
@@ -1006,21 +1065,44 @@ impl RunWriter {
         first
     }
 
-    /// Writes the pending steps and exits (at the end of a run), all or none.
+    /// Appends the ids of the people who entered since the last frame to `people/id`.
+    fn append_people_ids(&self) -> hdf5::Result<()> {
+        let ids: Vec<i64> = (self.people as i64..self.people() as i64).collect();
+        append(&self.people_id, &mut { self.people }, &ids)
+    }
+
+    /// Writes the pending steps, exits and people (at the end of a run), all or none: the
+    /// people who entered after the last frame get their `people` rows and a NaN column in the
+    /// per-frame arrays.
     fn flush_rows(&mut self) -> hdf5::Result<()> {
         let (mut steps, mut exits) = (self.step_rows, self.exit_rows);
+        let people = self.people();
         let written = append(&self.steps, &mut steps, &self.pending_steps)
-            .and_then(|_| append(&self.exits, &mut exits, &self.pending_exits));
+            .and_then(|_| append(&self.exits, &mut exits, &self.pending_exits))
+            .and_then(|_| self.append_people_ids())
+            .and_then(|_| {
+                append(
+                    &self.people_radius,
+                    &mut { self.people },
+                    &self.pending_people,
+                )
+            })
+            .and_then(|_| self.positions.resize((self.frames, people, 2)))
+            .and_then(|_| match &self.contacts {
+                Some((_, pressure)) => pressure.resize((self.frames, people)),
+                None => Ok(()),
+            });
         match written {
             Ok(()) => {
                 (self.step_rows, self.exit_rows) = (steps, exits);
                 self.pending_steps.clear();
                 self.pending_exits.clear();
+                self.pending_people.clear();
+                self.people = people;
                 Ok(())
             }
             Err(e) => {
-                let _ = self.steps.resize(self.step_rows);
-                let _ = self.exits.resize(self.exit_rows);
+                let _ = self.roll_back();
                 Err(e)
             }
         }
@@ -1050,7 +1132,7 @@ impl RunWriter {
         };
         keep(
             self.flush_rows()
-                .at(&path, || "writing 'steps' and 'exits'".into()),
+                .at(&path, || "writing 'steps', 'exits' and 'people'".into()),
         );
         keep(
             self.file
@@ -1074,6 +1156,8 @@ impl RunWriter {
             overwrite,
             lock,
             file,
+            people_id,
+            people_radius,
             trajectory,
             frame_time,
             frame_count,
@@ -1085,6 +1169,8 @@ impl RunWriter {
             ..
         } = self;
         drop((
+            people_id,
+            people_radius,
             trajectory,
             frame_time,
             frame_count,

@@ -66,7 +66,7 @@ fn write_frame(w: &mut RunWriter, k: usize, n: usize) -> Result<(), IoError> {
             b: 1,
             lambda: 0.5,
         };
-        w.contacts([row], &vec![0.5; n])?;
+        w.contacts([row], &vec![0.5; w.people()])?;
     }
     w.frame(0.1 * k as f64, &ids, &q)
 }
@@ -106,6 +106,8 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
     let n = 150;
     for contacts in [false, true] {
         for dataset in [
+            "people/id",
+            "people/radius",
             "trajectory",
             "frames/positions",
             "frames/time",
@@ -128,6 +130,8 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
             for k in 0..3 {
                 write_frame(&mut w, k, n).unwrap();
             }
+            // Somebody enters with frame 3: the per-person datasets grow with it.
+            w.enter(n as u32, 0.3).unwrap();
             let err = write_frame(&mut w, 3, n).unwrap_err().to_string();
             assert!(
                 err.contains("No space left on device")
@@ -138,6 +142,19 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
             assert_eq!(w.frames(), 3);
             w.finish("failed: disk full", "{}").unwrap();
             assert_whole_frames(&path, 3, n, contacts);
+            // The newcomer happened: the end of the run writes them, in every per-person
+            // dataset alike.
+            let mut open = hdf5::File::with_options();
+            open.with_fapl(|p| p.file_locking(false));
+            let f = open.open(&path).unwrap();
+            let rows = |name: &str| f.dataset(name).unwrap().shape()[0];
+            assert_eq!(rows("people/id"), n + 1, "{dataset}");
+            assert_eq!(rows("people/radius"), n + 1, "{dataset}");
+            assert_eq!(rows("people/exit_time"), n + 1, "{dataset}");
+            assert_eq!(
+                f.dataset("frames/positions").unwrap().shape(),
+                [3, n + 1, 2]
+            );
         }
     }
 }
@@ -340,4 +357,62 @@ fn a_background_writer_writes_the_same_file_and_reports_its_failures() {
         .or_else(|_| RunFile::open(&failing))
         .unwrap();
     assert_eq!(f.frame_times().unwrap().len(), 2, "whole frames only");
+}
+
+/// A run whose people enter as it goes, killed after a frame it wrote past its last saved
+/// state: resuming cuts the people back to those of the saved frame too, and the people who
+/// enter again get the same ids.
+#[test]
+fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state() {
+    let path = scratch("resume-entering.h5");
+    // Frame k has the 2 people of the start and k who entered (ids 2..2 + k).
+    let write = |w: &mut RunWriter, k: usize| -> Result<(), IoError> {
+        if k > 0 {
+            w.step(&report(k - 1));
+            w.enter((k + 1) as u32, k as f64 / 10.0)?;
+        }
+        let ids: Vec<u32> = (0..2 + k as u32).collect();
+        let q: Vec<f64> = (0..2 * ids.len()).map(|i| 1.0 + i as f64).collect();
+        w.frame(0.1 * k as f64, &ids, &q)
+    };
+    let h = header(2, false);
+    {
+        let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+        for k in 0..3 {
+            write(&mut w, k).unwrap();
+            w.save_state(format!("after {k}").as_bytes()).unwrap();
+        }
+        // People who entered since the last frame: not a state to save.
+        w.enter(4, 0.5).unwrap();
+        let err = w.save_state(b"between").unwrap_err().to_string();
+        assert!(err.contains("1 people not yet written"), "{err}");
+        w.step(&report(3));
+        w.frame(0.3, &[0, 1, 2, 3, 4], &[1.0; 10]).unwrap();
+        std::mem::forget(w); // killed: no finish
+    }
+    let _ = std::fs::remove_file(moreau_io::lock_path(&path));
+    assert_eq!(
+        RunFile::open(&partial_path(&path))
+            .unwrap()
+            .header()
+            .unwrap()
+            .radii
+            .len(),
+        5
+    );
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    assert_eq!(r.state, b"after 2");
+    assert_eq!(r.header.radii, [0.2, 0.2, 0.1, 0.2]);
+    let mut w = r.writer;
+    assert_eq!((w.frames(), w.people()), (3, 4));
+    for k in 3..5 {
+        write(&mut w, k).unwrap();
+    }
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.header().unwrap().radii, [0.2, 0.2, 0.1, 0.2, 0.3, 0.4]);
+    assert_eq!(f.frame_counts().unwrap(), vec![2, 3, 4, 5, 6]);
+    assert_eq!(f.positions(4).unwrap().len(), 12);
+    assert!(f.positions(0).unwrap()[4..].iter().all(|x| x.is_nan()));
+    assert_eq!(f.trajectory().unwrap().len(), 2 + 3 + 4 + 5 + 6);
 }

@@ -195,3 +195,69 @@ fn a_frame_with_an_unknown_person_is_refused() {
     assert!(err.to_string().contains("person 5"), "{err}");
     assert!(w.exit(7, 1.0).is_err());
 }
+
+/// `/people/id`, `/people/radius`, `/people/exit_time` and the people axis of
+/// `/frames/positions`, read with HDF5 directly.
+fn people_datasets(path: &std::path::Path) -> (Vec<i64>, Vec<f64>, Vec<f64>, Vec<usize>) {
+    // Without HDF5's file locking, as the crate opens files (a RunFile of it may be open).
+    let mut open = hdf5::File::with_options();
+    open.with_fapl(|p| p.file_locking(false));
+    let f = open.open(path).unwrap();
+    let read = |name: &str| f.dataset(name).unwrap();
+    (
+        read("people/id").read_raw().unwrap(),
+        read("people/radius").read_raw().unwrap(),
+        read("people/exit_time").read_raw().unwrap(),
+        read("frames/positions").shape(),
+    )
+}
+
+#[test]
+fn people_who_enter_during_the_run_extend_the_file() {
+    let path = scratch("entering.h5");
+    let h = header(2);
+    let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+    assert_eq!(w.people(), 2);
+    w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
+    w.step(&report(0, 0.05));
+    w.enter(2, 0.3).unwrap();
+    // Ids come in order: the next is 3, not 5.
+    let err = w.enter(5, 0.3).unwrap_err().to_string();
+    assert!(
+        err.contains("person 5") && err.contains("next id is 3"),
+        "{err}"
+    );
+    w.frame(0.1, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+        .unwrap();
+    // Person 3 enters and leaves between two frames: in the file all the same.
+    w.enter(3, 0.35).unwrap();
+    w.exit(3, 0.15).unwrap();
+    w.enter(4, 0.4).unwrap();
+    assert_eq!(w.people(), 5);
+    w.frame(0.2, &[0, 2, 4], &[0.11, 0.21, 0.51, 0.61, 0.7, 0.8])
+        .unwrap();
+    // Person 5 enters after the last frame: the end of the run writes them.
+    w.enter(5, 0.45).unwrap();
+    w.finish("complete", "{}").unwrap();
+
+    let f = RunFile::open(&path).unwrap();
+    let read = f.header().unwrap();
+    assert_eq!(read.radii, [0.1, 0.11, 0.3, 0.35, 0.4, 0.45]);
+    assert_eq!(f.frame_counts().unwrap(), vec![2, 3, 3]);
+    // Earlier frames hold NaN for those who came later.
+    let p0 = f.positions(0).unwrap();
+    assert_eq!(p0.len(), 12);
+    assert_eq!(p0[..4], [0.1, 0.2, 0.3, 0.4]);
+    assert!(p0[4..].iter().all(|x| x.is_nan()), "{p0:?}");
+    let p2 = f.positions(2).unwrap();
+    assert_eq!(p2[8..10], [0.7, 0.8]);
+    assert!(p2[2..4].iter().chain(&p2[6..8]).all(|x| x.is_nan()));
+    let ids: Vec<i64> = f.trajectory().unwrap().iter().map(|r| r.id).collect();
+    assert_eq!(ids, [0, 1, 0, 1, 2, 0, 2, 4]);
+    let (id, radius, exit_time, positions) = people_datasets(&path);
+    assert_eq!(id, [0, 1, 2, 3, 4, 5]);
+    assert_eq!(radius, read.radii);
+    assert_eq!(exit_time[3], 0.15);
+    assert_eq!(exit_time.iter().filter(|t| t.is_nan()).count(), 5);
+    assert_eq!(positions, [3, 6, 2]);
+}

@@ -3,7 +3,9 @@
 //! use, so that both write the same file.
 
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ContactKind, ExitRecord, Frame, Observer, ObserverError, SimState, Simulation};
+use moreau_crowd::{
+    ContactKind, EntryRecord, ExitRecord, Frame, Observer, ObserverError, SimState, Simulation,
+};
 use moreau_io::{ContactRow, RunHeader, RunSink};
 use serde::Serialize;
 
@@ -55,7 +57,7 @@ pub struct Summary {
     pub output: Option<String>,
     /// `complete` or `failed: …`.
     pub status: String,
-    /// People at the start.
+    /// Everyone in the run: the people at the start and those who entered.
     pub people: usize,
     /// People who passed an exit.
     pub passed_exit: usize,
@@ -168,6 +170,7 @@ pub struct Record<'a> {
     pub frames: usize,
     /// Exits seen.
     pub exits: usize,
+    /// Everyone so far: at the start, and every entry seen.
     people: usize,
     pressure: Vec<f64>,
     moving: Vec<[f64; 4]>,
@@ -183,7 +186,8 @@ impl std::fmt::Debug for Record<'_> {
 }
 
 impl<'a> Record<'a> {
-    /// Records a run of `people` people (everyone at the start) into `writer`, if any.
+    /// Records a run of `people` people so far (at the start, or in the state a resumed run
+    /// goes on from; those who enter are counted as they come) into `writer`, if any.
     pub fn new(writer: Option<&'a mut dyn RunSink>, people: usize) -> Self {
         Record {
             writer,
@@ -228,6 +232,14 @@ impl Observer for Record<'_> {
         self.exits += 1;
         if let Some(w) = self.writer.as_deref_mut() {
             w.exit(record.id, record.t)?;
+        }
+        Ok(())
+    }
+
+    fn enter(&mut self, record: &EntryRecord) -> Result<(), ObserverError> {
+        self.people += 1;
+        if let Some(w) = self.writer.as_deref_mut() {
+            w.enter(record.id, record.radius)?;
         }
         Ok(())
     }
