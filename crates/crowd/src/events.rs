@@ -445,8 +445,8 @@ impl Events {
     }
 
     /// After the step that ended at `t`: places the people due by then who fit (in each
-    /// source's order, the sources in turn), at the end of `people` with the next ids, and
-    /// returns how many entered.
+    /// source's order, the sources in turn; `blocked(p, r)` says a disk there touches a moving
+    /// body), at the end of `people` with the next ids, and returns how many entered.
     pub fn after_step(
         &mut self,
         t: f64,
@@ -454,6 +454,7 @@ impl Events {
         scene: &Scene,
         walls: &Walls,
         exits: &Exits,
+        blocked: &dyn Fn([f64; 2], f64) -> bool,
     ) -> usize {
         self.entered.clear();
         for s in 0..self.sources.len() {
@@ -477,7 +478,7 @@ impl Events {
                 }
             }
             while self.sources[s].emitted < due {
-                let Some((p, r)) = self.find_room(s, people, scene, walls, exits) else {
+                let Some((p, r)) = self.find_room(s, people, scene, walls, exits, blocked) else {
                     break;
                 };
                 let id = self.first_id + self.emitted() as u32;
@@ -509,6 +510,7 @@ impl Events {
         scene: &Scene,
         walls: &Walls,
         exits: &Exits,
+        blocked: &dyn Fn([f64; 2], f64) -> bool,
     ) -> Option<([f64; 2], f64)> {
         let source = &mut self.sources[s];
         let r = match source.waiting_radius {
@@ -535,6 +537,7 @@ impl Events {
             });
             if overlaps
                 || !self.clear(walls, p, r)
+                || blocked(p, r)
                 || !field.distance(p).is_finite()
                 || exit.reached(p, r)
             {

@@ -696,12 +696,16 @@ impl Simulation {
         let people = self.people.len();
         self.apply_exits();
         let left = self.people.len() != people;
+        let (moving, now, t) = (&self.moving, &self.moving_now, self.t);
+        let blocked =
+            |p: [f64; 2], r: f64| moving.inside(t, p) || now.iter().any(|s| s.distance(p) < r);
         let entered = self.events.after_step(
             self.t,
             &mut self.people,
             &self.scene,
             &self.walls,
             &self.exits,
+            &blocked,
         );
         if left || entered > 0 {
             self.stepping.state_resized();
