@@ -14,29 +14,29 @@ pub(crate) struct ExitRuntime {
     pub action: ExitAction,
     pub target: Option<Polygon>,
     pub open: bool,
+    /// The segment (in `MovingBodies` order) of the panel that closes the exit on schedule.
+    pub panel: Option<usize>,
+    /// How much of the exit its panel leaves open.
+    pub passage: Passage,
+}
+
+/// How much of an exit with a panel is open: an exit line counts people only along the part
+/// the panel leaves uncovered; an exit area only while the panel is fully out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Passage {
+    /// No panel, or fully out.
+    Whole,
+    /// The uncovered part of the exit line.
+    Part(Segment),
+    /// Covered.
+    Shut,
 }
 
 impl ExitRuntime {
     /// The wall that closes the exit: its segment, or for an area the mid-line of the area's
     /// bounding box along its longer side.
     pub fn closure(&self) -> Segment {
-        if let Some(s) = self.segment {
-            return s;
-        }
-        let (lo, hi) = self.area.as_ref().expect("an area or a segment").bounds();
-        if hi[1] - lo[1] >= hi[0] - lo[0] {
-            let x = 0.5 * (lo[0] + hi[0]);
-            Segment {
-                a: [x, lo[1]],
-                b: [x, hi[1]],
-            }
-        } else {
-            let y = 0.5 * (lo[1] + hi[1]);
-            Segment {
-                a: [lo[0], y],
-                b: [hi[0], y],
-            }
-        }
+        closure(self.area.as_ref(), self.segment)
     }
 
     /// How near a person's edge must come to an exit line to pass it (m): the wall slide's
@@ -52,10 +52,54 @@ impl ExitRuntime {
         if !self.open {
             return false;
         }
-        match (&self.area, &self.segment) {
-            (Some(a), _) => a.contains(p),
-            (None, Some(s)) => s.distance(p) <= r + Self::LINE_REACH,
+        match (&self.area, &self.segment, self.passage) {
+            (_, _, Passage::Shut) => false,
+            (Some(a), _, Passage::Whole) => a.contains(p),
+            (None, Some(s), Passage::Whole) => s.distance(p) <= r + Self::LINE_REACH,
+            (None, Some(_), Passage::Part(s)) => s.distance(p) <= r + Self::LINE_REACH,
             _ => false,
+        }
+    }
+
+    /// Reads the panel's position from the moving segments where they are now: the panel is
+    /// the closing line `a → b` shifted by `s (a − b)`, fully out at `s = 1`, across at `s = 0`;
+    /// its tip `b + s (a − b)` leaves `[tip, b]` open.
+    pub fn update_passage(&mut self, segments: &[Segment]) {
+        let Some(k) = self.panel else {
+            return;
+        };
+        let (line, tip) = (self.closure(), segments[k].b);
+        let d = [line.a[0] - line.b[0], line.a[1] - line.b[1]];
+        let out = ((tip[0] - line.b[0]) * d[0] + (tip[1] - line.b[1]) * d[1])
+            / (d[0] * d[0] + d[1] * d[1]);
+        self.passage = if out >= 1.0 - 1e-9 {
+            Passage::Whole
+        } else if out <= 1e-9 || self.segment.is_none() {
+            Passage::Shut
+        } else {
+            Passage::Part(Segment { a: tip, b: line.b })
+        };
+    }
+}
+
+/// The wall that closes an exit: its segment, or for an area the mid-line of the area's
+/// bounding box along its longer side.
+pub(crate) fn closure(area: Option<&Polygon>, segment: Option<Segment>) -> Segment {
+    if let Some(s) = segment {
+        return s;
+    }
+    let (lo, hi) = area.expect("an area or a segment").bounds();
+    if hi[1] - lo[1] >= hi[0] - lo[0] {
+        let x = 0.5 * (lo[0] + hi[0]);
+        Segment {
+            a: [x, lo[1]],
+            b: [x, hi[1]],
+        }
+    } else {
+        let y = 0.5 * (lo[1] + hi[1]);
+        Segment {
+            a: [lo[0], y],
+            b: [hi[0], y],
         }
     }
 }
@@ -163,6 +207,8 @@ impl Exits {
                 action: exit.action,
                 target: target.map(|t| t.0),
                 open: true,
+                panel: None,
+                passage: Passage::Whole,
             });
         }
         Ok(out)

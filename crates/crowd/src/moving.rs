@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::contacts::{ContactKind, ContactQuery, ContactSource};
 use crate::geometry::{Polygon, Segment, ring_contains};
-use crate::scene::{MovingBody, Scene};
+use crate::scene::{Exit, Keyframe, MovingBody, Scene};
 use crate::walls::Walls;
 
 /// One body: its segments where the scene file draws them, the pivot its rotation turns about,
@@ -157,12 +157,19 @@ pub struct MovingBodies {
 }
 
 impl MovingBodies {
-    /// The bodies of `scene` (validated).
+    /// The bodies of `scene` (validated): its `[[moving]]` ones, then a panel for every exit
+    /// that `closes` or `opens` (see [`exit_panel`]).
     pub fn new(scene: &Scene) -> Self {
+        let all: Vec<MovingBody> = scene
+            .moving
+            .iter()
+            .cloned()
+            .chain(scene.exits.iter().filter_map(exit_panel))
+            .collect();
         Self {
-            bodies: scene.moving.iter().map(Body::new).collect(),
-            names: scene.moving.iter().map(|b| b.name.clone()).collect(),
-            drives: vec![None; scene.moving.len()],
+            bodies: all.iter().map(Body::new).collect(),
+            names: all.iter().map(|b| b.name.clone()).collect(),
+            drives: vec![None; all.len()],
         }
     }
 
@@ -274,6 +281,50 @@ impl MovingBodies {
         t.dedup();
         t
     }
+}
+
+/// The panel of an exit that `closes` or `opens` over an interval: a body `exit:NAME` along the
+/// exit's closing line `a → b`, which is the line itself when closed and shifted by `a − b`
+/// (beyond `a`, into the wall of a door) when open.
+pub fn exit_panel(exit: &Exit) -> Option<MovingBody> {
+    if exit.closes.is_none() && exit.opens.is_none() {
+        return None;
+    }
+    let area = exit.area.as_ref().map(|a| Polygon {
+        vertices: a.clone(),
+    });
+    let line = crate::exits::closure(
+        area.as_ref(),
+        exit.segment.map(|s| Segment { a: s[0], b: s[1] }),
+    );
+    let open = [line.a[0] - line.b[0], line.a[1] - line.b[1]];
+    let key = |t: f64, offset: [f64; 2]| Keyframe {
+        t,
+        offset,
+        angle: 0.0,
+    };
+    let mut moves: Vec<(f64, f64, [f64; 2], [f64; 2])> = Vec::new();
+    if let Some([t0, t1]) = exit.closes {
+        moves.push((t0, t1, open, [0.0; 2]));
+    }
+    if let Some([t0, t1]) = exit.opens {
+        moves.push((t0, t1, [0.0; 2], open));
+    }
+    moves.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut keyframes: Vec<Keyframe> = Vec::new();
+    for (t0, t1, from, to) in moves {
+        if keyframes.last().is_none_or(|k| k.t < t0) {
+            keyframes.push(key(t0, from));
+        }
+        keyframes.push(key(t1, to));
+    }
+    Some(MovingBody {
+        name: format!("exit:{}", exit.name),
+        line: Some(vec![line.a, line.b]),
+        polygon: None,
+        pivot: None,
+        keyframes,
+    })
 }
 
 /// People against the moving bodies' segments at the query's time: `g(t, q) = dist(q_i,

@@ -148,6 +148,14 @@ pub struct Exit {
     /// For `continue`: the area to walk to afterwards (people stop inside it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<Vec<[f64; 2]>>,
+    /// `[t0, t1]`: a panel slides across the exit between these times and stays (a moving
+    /// body named `exit:NAME` along the exit's line, or the mid-line of its area).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub closes: Option<[f64; 2]>,
+    /// `[t0, t1]`: the panel slides back out between these times (an exit that only opens
+    /// starts closed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opens: Option<[f64; 2]>,
 }
 
 /// A group of people.
@@ -640,6 +648,27 @@ impl Scene {
                         "give exactly one of `area` and `segment`",
                     ));
                 }
+            }
+            for (name, interval) in [("closes", exit.closes), ("opens", exit.opens)] {
+                if let Some([t0, t1]) = interval
+                    && !(t0 >= 0.0 && t0.is_finite() && t1 > t0 && t1.is_finite())
+                {
+                    return Err(CrowdError::invalid(
+                        format!("{f}.{name}"),
+                        format!("[{}, {}]", Num(t0), Num(t1)),
+                        "give [t0, t1] with 0 ≤ t0 < t1, finite (seconds)",
+                    ));
+                }
+            }
+            if let (Some(c), Some(o)) = (exit.closes, exit.opens)
+                && c[0] < o[1]
+                && o[0] < c[1]
+            {
+                return Err(CrowdError::invalid(
+                    format!("{f}.opens"),
+                    format!("{o:?}"),
+                    format!("overlaps closes = {c:?}: the panel cannot move both ways at once"),
+                ));
             }
             match (exit.action, &exit.target) {
                 (ExitAction::Continue, Some(t)) => {

@@ -239,6 +239,21 @@ impl Simulation {
             None => Exits::build(&scene, &|p| scene.walkable(p))?,
             Some(t) => Exits::build(&scene, &walkable_at(&scene, &moving, &moving_now, t))?,
         };
+        let mut exits = exits;
+        // Exit panels follow the scene's own moving bodies, one segment each.
+        let mut panel = moving.segment_count()
+            - scene
+                .exits
+                .iter()
+                .filter(|e| e.closes.is_some() || e.opens.is_some())
+                .count();
+        for (x, e) in exits.exits.iter_mut().zip(&scene.exits) {
+            if e.closes.is_some() || e.opens.is_some() {
+                x.panel = Some(panel);
+                x.update_passage(&moving_now);
+                panel += 1;
+            }
+        }
         let people = if moving.is_empty() {
             place_people(&scene, &walls, &moving, &exits)?
         } else {
@@ -693,6 +708,9 @@ impl Simulation {
         self.t = report.t;
         self.steps += 1;
         self.moving.segments_at(self.t, &mut self.moving_now);
+        for x in &mut self.exits.exits {
+            x.update_passage(&self.moving_now);
+        }
         let people = self.people.len();
         self.apply_exits();
         let left = self.people.len() != people;
@@ -947,6 +965,9 @@ impl Simulation {
             self.build_fields_at(built);
         }
         self.moving.segments_at(self.t, &mut self.moving_now);
+        for x in &mut self.exits.exits {
+            x.update_passage(&self.moving_now);
+        }
         self.events.restore(&state.inflow);
         self.speed_factor = state.speed_factor;
         self.scheme

@@ -371,6 +371,16 @@ fn moving_bodies_with_bad_values_are_refused_naming_the_field() {
             "offset = [8.0, nan]",
             "moving[0].keyframes[1].offset",
         ),
+        (
+            "action = \"remove\"",
+            "action = \"remove\"\ncloses = [3.0, 1.0]",
+            "exits[0].closes",
+        ),
+        (
+            "action = \"remove\"",
+            "action = \"remove\"\ncloses = [1.0, 3.0]\nopens = [2.0, 4.0]",
+            "exits[0].opens",
+        ),
     ] {
         let text = base.replacen(from, to, 1);
         assert_ne!(text, base, "{from} not in the scene:\n{base}");
@@ -614,4 +624,68 @@ output_interval = 0.5
         seen = seen.max(people.ids().iter().copied().max().map_or(0, |m| m + 1));
     }
     assert!(seen >= 30, "only {seen} people entered");
+}
+
+#[test]
+fn an_exit_closes_and_opens_again_over_its_intervals_with_a_sliding_panel() {
+    let text = r#"
+name = "scheduled-door"
+seed = 4
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 1.4], [6.2, 1.4], [6.2, 0.0], [10.0, 0.0], [10.0, 4.0],
+         [6.2, 4.0], [6.2, 2.6], [6.0, 2.6], [6.0, 4.0], [0.0, 4.0]]
+[[exits]]
+name = "door"
+segment = [[6.1, 1.4], [6.1, 2.6]]
+action = "remove"
+closes = [2.0, 2.5]
+opens = [8.0, 8.5]
+[[groups]]
+name = "room"
+count = 40
+spawn = [[0.5, 0.5], [5.0, 0.5], [5.0, 3.5], [0.5, 3.5]]
+radius = 0.2
+speed = 1.2
+destination = "door"
+[time]
+horizon = 20.0
+step = 0.05
+output_interval = 0.5
+"#;
+    let mut sim = Simulation::new(scene(text)).unwrap();
+    assert_eq!(sim.moving().names(), ["exit:door"]);
+    let bound = sim.scene().solver.max_violation;
+    let mut segments = Vec::new();
+    while sim.advance_step(20.0, &mut ()).unwrap().is_some() {
+        assert!(sim.min_gap(1.0) >= -bound - 1e-12, "t = {}", sim.time());
+        sim.moving().segments_at(sim.time(), &mut segments);
+        let panel = segments[0];
+        let t = sim.time();
+        // Retracted into the wall below the door before 2 s and after 8.5 s, across it
+        // between 2.5 s and 8 s.
+        let bottom = if t <= 2.0 || t >= 8.5 {
+            0.2
+        } else if (2.5..=8.0).contains(&t) {
+            1.4
+        } else {
+            f64::NAN
+        };
+        if bottom.is_finite() {
+            assert!((panel.a[1] - bottom).abs() < 1e-12, "t = {t}: {panel:?}");
+        }
+    }
+    let times: Vec<f64> = sim.exit_records().iter().map(|r| r.t).collect();
+    assert!(
+        times.iter().all(|&t| t <= 2.5 || t > 8.0),
+        "passed while closed: {times:?}"
+    );
+    assert!(
+        times.iter().any(|&t| t <= 2.5),
+        "nobody passed before it closed"
+    );
+    assert!(
+        times.iter().any(|&t| t > 8.0),
+        "nobody passed after it opened"
+    );
+    assert_eq!(sim.exit_records().len(), 40, "{times:?}");
 }
