@@ -293,6 +293,12 @@ impl Simulation {
         self.total + self.events.emitted()
     }
 
+    /// The most people the run can hold: those at the start and all its sources can bring
+    /// (the solver, and its fallback, are chosen for this many).
+    pub fn max_people(&self) -> usize {
+        self.total + self.events.capacity()
+    }
+
     /// The people present.
     pub fn people(&self) -> &People {
         &self.people
