@@ -8,6 +8,13 @@ five on one figure) into the output directory.
 
     .venv/bin/python python/plot_run.py out/room-150.h5 --animate out/room-150.mp4
 
+    .venv/bin/python python/plot_run.py out/barrier-sweep.h5 --snapshots 0,5,10,15 -o out/sweep.png
+
+draws the people (to scale, coloured by speed) and the walls, the moving ones in red, at those
+times side by side.
+
+    .venv/bin/python python/plot_run.py out/room-150.h5 --animate out/room-150.mp4
+
 animates the run instead (MP4 through ffmpeg, GIF through Pillow): people to scale,
 coloured by speed (viridis) or, with ``--color pressure`` on a run that recorded contacts,
 by pressure Σλ (plasma); both scaled from 0 to the 99.5th percentile over the run, as in
@@ -149,19 +156,10 @@ def animate(run, out: pathlib.Path, color: str = "speed", fps: float | None = No
     with h5py.File(run.path, "r") as f:
         walls = f["walls"][...] if "walls" in f else np.zeros((0, 4))
     fig, ax = plt.subplots(figsize=(8, 6), constrained_layout=True)
-    ax.set_aspect("equal")
-    outer = np.asarray(run.scene["area"]["outer"], dtype=float)
-    pad = 0.5
-    ax.set_xlim(outer[:, 0].min() - pad, outer[:, 0].max() + pad)
-    ax.set_ylim(outer[:, 1].min() - pad, outer[:, 1].max() + pad)
-    for exit_ in run.scene.get("exits", []):
-        if exit_.get("area"):
-            pts = np.asarray(exit_["area"], dtype=float)
-            ax.fill(pts[:, 0], pts[:, 1], color="tab:green", alpha=0.25, lw=0)
-        elif exit_.get("segment"):
-            pts = np.asarray(exit_["segment"], dtype=float)
-            ax.plot(pts[:, 0], pts[:, 1], color="tab:green", lw=3, alpha=0.8)
-    ax.add_collection(LineCollection(walls.reshape(-1, 2, 2), colors="0.2", linewidths=1.5))
+    draw_scene(ax, run, walls)
+    moving = moving_walls(run)
+    bodies = LineCollection(moving[0].reshape(-1, 2, 2), colors="tab:red", linewidths=2.5)
+    ax.add_collection(bodies)
     disks = EllipseCollection(widths=[], heights=[], angles=[], units="xy", offsets=np.zeros((0, 2)),
                               offset_transform=ax.transData, cmap=cmap)
     disks.set_clim(0.0, top)
@@ -177,6 +175,7 @@ def animate(run, out: pathlib.Path, color: str = "speed", fps: float | None = No
         disks.set_heights(d)
         disks.set_angles(np.zeros_like(d))
         disks.set_array(np.nan_to_num(values[k, present]))
+        bodies.set_segments(moving[k].reshape(-1, 2, 2))
         title.set_text(f"{run.attrs['scene_name']}  t = {run.time[k]:.2f} s  "
                        f"{int(present.sum())} people")
         return disks, title
@@ -194,6 +193,77 @@ def animate(run, out: pathlib.Path, color: str = "speed", fps: float | None = No
     anim.save(out, writer=writer, dpi=dpi)
     plt.close(fig)
     return len(frames)
+
+
+def moving_walls(run) -> np.ndarray:
+    """The segments of the moving bodies at every frame, ``(frames, segments, 4)`` (no
+    segments for a run without moving bodies)."""
+    import h5py
+
+    with h5py.File(run.path, "r") as f:
+        if "frames/moving_walls" in f:
+            return f["frames/moving_walls"][...]
+    return np.zeros((len(run.time), 0, 4))
+
+
+def draw_scene(ax, run, walls: np.ndarray, pad: float = 0.5):
+    """The area's box, the exits (green) and the fixed walls on `ax`."""
+    from matplotlib.collections import LineCollection
+
+    ax.set_aspect("equal")
+    outer = np.asarray(run.scene["area"]["outer"], dtype=float)
+    ax.set_xlim(outer[:, 0].min() - pad, outer[:, 0].max() + pad)
+    ax.set_ylim(outer[:, 1].min() - pad, outer[:, 1].max() + pad)
+    for exit_ in run.scene.get("exits", []):
+        if exit_.get("area"):
+            pts = np.asarray(exit_["area"], dtype=float)
+            ax.fill(pts[:, 0], pts[:, 1], color="tab:green", alpha=0.25, lw=0)
+        elif exit_.get("segment"):
+            pts = np.asarray(exit_["segment"], dtype=float)
+            ax.plot(pts[:, 0], pts[:, 1], color="tab:green", lw=3, alpha=0.8)
+    ax.add_collection(LineCollection(walls.reshape(-1, 2, 2), colors="0.2", linewidths=1.5))
+
+
+def snapshots(run, times: list[float], out: pathlib.Path, dpi: int = 110) -> list[float]:
+    """Draws the run at the frames nearest `times`, side by side (stacked for wide areas):
+    people to scale coloured by speed, fixed walls in grey, moving walls in red. Returns the
+    frame times drawn."""
+    import h5py
+    from matplotlib.collections import EllipseCollection, LineCollection
+
+    with h5py.File(run.path, "r") as f:
+        walls = f["walls"][...] if "walls" in f else np.zeros((0, 4))
+    moving = moving_walls(run)
+    speeds = frame_speeds(run)
+    top = colour_scale(speeds)
+    outer = np.asarray(run.scene["area"]["outer"], dtype=float)
+    span = outer.max(axis=0) - outer.min(axis=0)
+    wide = span[0] > 2.5 * span[1]
+    n = len(times)
+    shape = (n, 1) if wide else (1, n)
+    size = (9, 1.0 + n * 9 * span[1] / span[0]) if wide else (4.2 * n, 4.2 * span[1] / span[0] + 1)
+    fig, axes = plt.subplots(*shape, figsize=size, constrained_layout=True, squeeze=False)
+    drawn = []
+    for ax, t in zip(axes.flat, times):
+        k = int(np.argmin(np.abs(run.time - t)))
+        draw_scene(ax, run, walls)
+        ax.add_collection(LineCollection(moving[k].reshape(-1, 2, 2), colors="tab:red",
+                                         linewidths=2.5))
+        present = np.isfinite(run.positions[k, :, 0])
+        d = 2.0 * run.radius[present]
+        disks = EllipseCollection(widths=d, heights=d, angles=np.zeros_like(d), units="xy",
+                                  offsets=run.positions[k, present],
+                                  offset_transform=ax.transData, cmap="viridis")
+        disks.set_array(np.nan_to_num(speeds[k, present]))
+        disks.set_clim(0.0, top)
+        ax.add_collection(disks)
+        ax.set_title(f"t = {run.time[k]:.1f} s, {int(present.sum())} people", fontsize=10)
+        drawn.append(float(run.time[k]))
+    fig.colorbar(disks, ax=axes, label="speed (m/s)", shrink=0.8)
+    fig.suptitle(run.attrs["scene_name"])
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
+    return drawn
 
 
 def load_or_explain(path: pathlib.Path):
@@ -223,6 +293,8 @@ def main(argv=None) -> int:
                         help="what colours the people in the animation (default: speed)")
     parser.add_argument("--fps", type=float,
                         help="frames per second of the animation (default: real time)")
+    parser.add_argument("--snapshots", metavar="T1,T2,...",
+                        help="draw the run at these times side by side into -o (a .png)")
     parser.add_argument("--max-frames", type=int,
                         help="at most this many frames in the animation (every k-th frame)")
     args = parser.parse_args(argv)
@@ -231,6 +303,15 @@ def main(argv=None) -> int:
     if not args.run.is_file():
         parser.error(f"no such run file: {args.run}")
     run = load_or_explain(args.run)
+    if args.snapshots:
+        try:
+            times = [float(t) for t in args.snapshots.split(",")]
+        except ValueError:
+            parser.error(f"--snapshots {args.snapshots}: give times in seconds, e.g. 0,5,10")
+        out = args.out or args.run.with_name(args.run.stem + "-snapshots.png")
+        drawn = snapshots(run, times, out)
+        print(f"wrote {out} (t = {', '.join(f'{t:g}' for t in drawn)} s)")
+        return 0
     if args.animate:
         n = animate(run, args.animate, args.color, args.fps, args.max_frames)
         print(f"wrote {args.animate} ({n} frames)")

@@ -221,6 +221,9 @@ fn status_of(outcome: &Result<(), moreau_crowd::CrowdError>) -> (String, Option<
                 e.downcast_ref::<Interrupted>().copied(),
             )
         }
+        // The moving geometry left no room: an answer about the scene, not a failure of the
+        // program (the error names the people and bodies; the file keeps every frame so far).
+        Err(moreau_crowd::CrowdError::Infeasible(_)) => ("infeasible".into(), None),
         Err(e) => (failed_status(&format!("{e:#}")), None),
     }
 }

@@ -46,7 +46,10 @@ pub struct StageTimings {
     pub solve_factorize: f64,
     /// The check after the step that nothing outside the assembled set was crossed.
     pub verify: f64,
-    /// The whole step.
+    /// Before the step, rebuilding what the field `F` reads after the geometry changed (a
+    /// crowd's distance fields when walls moved); 0 for most steps.
+    pub field: f64,
+    /// The whole step (including `field`).
     pub total: f64,
 }
 
@@ -59,6 +62,7 @@ impl StageTimings {
         self.solve_analyse += other.solve_analyse;
         self.solve_factorize += other.solve_factorize;
         self.verify += other.verify;
+        self.field += other.field;
         self.total += other.total;
     }
 }

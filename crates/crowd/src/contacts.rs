@@ -5,6 +5,7 @@
 use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet, count_outside};
 
 use crate::broad::BroadPhase;
+use crate::moving::MovingBodies;
 use crate::people::PeopleView;
 use crate::walls::Walls;
 
@@ -16,6 +17,8 @@ pub enum ContactKind {
     PersonPerson = 0,
     /// A person and a wall segment: `g = dist(q_i, wall) − r_i`.
     PersonWall = 1,
+    /// A person and a segment of a moving body: `g = dist(q_i, segment(t)) − r_i`.
+    MovingWall = 2,
 }
 
 impl ContactKind {
@@ -31,6 +34,7 @@ impl ContactKind {
         let kind = match key >> 62 {
             0 => Some(ContactKind::PersonPerson),
             1 => Some(ContactKind::PersonWall),
+            2 => Some(ContactKind::MovingWall),
             _ => None,
         };
         (
@@ -53,6 +57,8 @@ pub struct ContactQuery<'a> {
     pub people: PeopleView<'a>,
     /// The walls.
     pub walls: &'a Walls,
+    /// The walls, panels and obstacles that move.
+    pub moving: &'a MovingBodies,
     /// The margin (m).
     pub margin: f64,
 }
@@ -187,6 +193,7 @@ impl ContactSources {
         q: &[f64],
         people: PeopleView<'_>,
         walls: &Walls,
+        moving: &MovingBodies,
         margin: f64,
         rows: &mut ConstraintRows,
     ) {
@@ -195,6 +202,7 @@ impl ContactSources {
             q,
             people,
             walls,
+            moving,
             margin,
         };
         for s in &mut self.sources {
@@ -211,6 +219,8 @@ pub struct CrowdContacts<'a> {
     pub people: PeopleView<'a>,
     /// The walls.
     pub walls: &'a Walls,
+    /// The walls, panels and obstacles that move.
+    pub moving: &'a MovingBodies,
     /// The sources and their scratch.
     pub sources: &'a mut ContactSources,
 }
@@ -222,7 +232,7 @@ impl ConstraintSet for CrowdContacts<'_> {
 
     fn assemble(&mut self, t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {
         self.sources
-            .assemble(t, q, self.people, self.walls, margin, rows);
+            .assemble(t, q, self.people, self.walls, self.moving, margin, rows);
     }
 
     /// Two disks close by at most `|v_i| + |v_j|` per unit time and a disk closes on a wall at
@@ -269,7 +279,9 @@ mod tests {
         for (a, b) in [(0, 0), (1, 2), (max, max), (max, 0)] {
             let pp = ContactKind::PersonPerson.key(a, b);
             let pw = ContactKind::PersonWall.key(a, b);
-            assert_ne!(pp, pw);
+            let mw = ContactKind::MovingWall.key(a, b);
+            assert!(pp != pw && pw != mw && mw != pp);
+            assert_eq!(ContactKind::of(mw), (Some(ContactKind::MovingWall), a, b));
             assert_eq!(ContactKind::of(pp), (Some(ContactKind::PersonPerson), a, b));
             assert_eq!(ContactKind::of(pw), (Some(ContactKind::PersonWall), a, b));
         }

@@ -35,6 +35,43 @@ pub enum CrowdError {
     /// The time stepping failed.
     #[error(transparent)]
     Integrate(#[from] moreau_integrate::IntegrateError),
+    /// The feasible set left no room: the constraints of a step cannot all hold (a moving wall
+    /// crushing people against another, say).
+    #[error("{0}")]
+    Infeasible(Box<Infeasibility>),
+}
+
+/// Why a step had no feasible configuration: the constraints of a Farkas certificate (a
+/// nonnegative combination of them that no velocity can meet), and who they involve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Infeasibility {
+    /// The end of the step that failed (s).
+    pub t: f64,
+    /// The constraints of the certificate, heaviest first: kind, person, other person or wall
+    /// or moving segment, and the certificate's weight (the largest is 1).
+    pub contacts: Vec<(crate::ContactKind, u32, u32, f64)>,
+    /// The people in them, by id, increasing.
+    pub people: Vec<u32>,
+    /// The moving bodies in them, by name.
+    pub moving: Vec<String>,
+}
+
+impl std::fmt::Display for Infeasibility {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "infeasible: no room for everyone at t = {} s: {} constraints cannot all hold, \
+             between people {:?}",
+            self.t,
+            self.contacts.len(),
+            self.people
+        )?;
+        if self.moving.is_empty() {
+            Ok(())
+        } else {
+            write!(f, " and moving bodies {:?}", self.moving)
+        }
+    }
 }
 
 impl CrowdError {

@@ -155,6 +155,19 @@ impl DistanceField {
         })
     }
 
+    /// A field over the same grid with no way to the goal: infinite distance and no direction
+    /// everywhere (people heading there stand, and can be pushed).
+    pub fn unreachable(&self) -> Self {
+        Self {
+            origin: self.origin,
+            cell: self.cell,
+            nx: self.nx,
+            ny: self.ny,
+            dist: vec![f64::INFINITY; self.dist.len()],
+            dir: vec![[0.0; 2]; self.dir.len()],
+        }
+    }
+
     fn cell_of(&self, p: [f64; 2]) -> Option<(usize, usize)> {
         let fx = ((p[0] - self.origin[0]) / self.cell).floor();
         let fy = ((p[1] - self.origin[1]) / self.cell).floor();

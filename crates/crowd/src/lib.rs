@@ -17,12 +17,14 @@ mod exits;
 mod field;
 mod geometry;
 mod hall;
+mod moving;
 mod people;
 mod scene;
 mod sim;
 mod spawn;
 mod state;
 mod walls;
+mod wkt;
 
 pub use broad::{
     BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, choose_broad_phase,
@@ -31,15 +33,16 @@ pub use contacts::{
     ContactKind, ContactQuery, ContactSource, ContactSources, CrowdContacts, PersonPairs,
     PersonWalls,
 };
-pub use error::CrowdError;
+pub use error::{CrowdError, Infeasibility};
 pub use events::{EntryRecord, Inflow, InflowState};
 pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};
+pub use moving::{Drive, MovingBodies, PersonMovingWalls};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{
-    BroadPhaseChoice, DesiredVelocityKind, ExitAction, Model, Output, Scene, SolverKind,
-    SolverSettings, limits,
+    BroadPhaseChoice, DesiredVelocityKind, ExitAction, Keyframe, Model, MovingBody, Output, Scene,
+    SolverKind, SolverSettings, limits,
 };
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;

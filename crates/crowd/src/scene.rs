@@ -105,15 +105,19 @@ impl Quantity {
     }
 }
 
-/// The walkable area: an outer polygon with holes (obstacles); walls are their edges.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The walkable area: an outer polygon with holes (obstacles); walls are their edges. A
+/// scene file gives it by its rings (`[area] outer = ..., holes = ...`) or as WKT
+/// (`area = "POLYGON (...)"`, `[area] wkt_file = "room.wkt"`: see `crate::wkt`); read, it is
+/// its rings, and it is written back as them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Area {
     /// Outer boundary.
     pub outer: Vec<[f64; 2]>,
     /// Obstacles inside it.
-    #[serde(default)]
     pub holes: Vec<Vec<[f64; 2]>>,
+    /// The WKT the scene file gave, until [`Scene::from_toml`] reads it into the rings.
+    #[serde(skip)]
+    pub(crate) wkt_source: Option<crate::wkt::WktSource>,
 }
 
 /// What happens to a person who reaches an exit.
@@ -135,7 +139,8 @@ pub struct Exit {
     /// The exit area: reaching it (center inside) counts as passing the exit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub area: Option<Vec<[f64; 2]>>,
-    /// Or the exit line: coming within one radius of it counts as passing.
+    /// Or the exit line: a person whose edge comes within 6 cm of it has passed (the wall
+    /// slide's 5 cm and 1 cm: so a line on a wall is reached by people walking to it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub segment: Option<[[f64; 2]; 2]>,
     /// What happens there.
@@ -169,6 +174,42 @@ pub struct Group {
     /// When they start walking (s; absent: at once): before it they stand, and can be pushed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub release: Option<f64>,
+}
+
+/// One pose of a moving body: at time `t` its points are turned by `angle` about its pivot,
+/// then shifted by `offset`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Keyframe {
+    /// Time (s).
+    pub t: f64,
+    /// Translation from where the scene draws the body (m).
+    #[serde(default)]
+    pub offset: [f64; 2],
+    /// Rotation about the pivot, counter-clockwise (degrees).
+    #[serde(default)]
+    pub angle: f64,
+}
+
+/// A wall, door panel or obstacle with a prescribed motion: the feasible set moves with it (a
+/// sweeping process, seeds/000). Its pose is linear in time between keyframes and held before
+/// the first and after the last, so it moves continuously.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MovingBody {
+    /// Its name (in reports and the run file).
+    pub name: String,
+    /// An open polyline (a wall or a panel: people keep off both sides)…
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub line: Option<Vec<[f64; 2]>>,
+    /// …or a closed polygon (an obstacle: nobody inside).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub polygon: Option<Vec<[f64; 2]>>,
+    /// The point rotations turn about (default: the first vertex).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pivot: Option<[f64; 2]>,
+    /// Poses at increasing times.
+    pub keyframes: Vec<Keyframe>,
 }
 
 /// Time stepping.
@@ -290,12 +331,18 @@ pub enum DesiredVelocityKind {
 }
 
 /// The model's choices that the papers leave open.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
     /// The desired velocity (`classic` or `lipschitz`).
     #[serde(default)]
     pub desired_velocity: DesiredVelocityKind,
+    /// With moving bodies: every this many seconds (at the first step from then on), the
+    /// distance fields are solved again around the bodies where they are, if any moved since
+    /// (the cost is the step report's `field` time). Absent: the fields see the fixed walls
+    /// only, and people walk into a closed door as if it were open.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field_update: Option<f64>,
 }
 
 impl Model {
@@ -350,6 +397,9 @@ pub struct Scene {
     /// What a run records (absent: positions, exits and steps only).
     #[serde(default, skip_serializing_if = "Output::is_default")]
     pub output: Output,
+    /// Walls, panels and obstacles that move (absent: the geometry is fixed).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moving: Vec<MovingBody>,
 }
 
 pub(crate) fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, CrowdError> {
@@ -421,15 +471,24 @@ impl Scene {
             path: path.display().to_string(),
             source,
         })?;
-        Self::from_toml(&text, &path.display().to_string())
+        let dir = path.parent().unwrap_or(Path::new(""));
+        Self::from_toml_in(&text, &path.display().to_string(), dir)
     }
 
-    /// Parses and validates a scene from TOML text; `origin` names it in errors.
+    /// Parses and validates a scene from TOML text; `origin` names it in errors. An
+    /// `[area] wkt_file` is read relative to the current directory.
     pub fn from_toml(text: &str, origin: &str) -> Result<Self, CrowdError> {
-        let scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
+        Self::from_toml_in(text, origin, Path::new(""))
+    }
+
+    /// [`Scene::from_toml`], with an `[area] wkt_file` read relative to `dir` (what
+    /// [`Scene::from_file`] gives: the scene file's directory).
+    pub fn from_toml_in(text: &str, origin: &str, dir: &Path) -> Result<Self, CrowdError> {
+        let mut scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
             path: origin.to_string(),
             message: e.to_string(),
         })?;
+        scene.area.read_wkt(dir)?;
         scene.validate()?;
         Ok(scene)
     }
@@ -441,6 +500,7 @@ impl Scene {
 
     /// Checks every value that can be checked without building the scene.
     pub fn validate(&self) -> Result<(), CrowdError> {
+        self.area.check_read()?;
         let outer = check_polygon("area.outer", &self.area.outer)?;
         for (h, hole) in self.area.holes.iter().enumerate() {
             let poly = check_polygon(&format!("area.holes[{h}]"), hole)?;
@@ -602,6 +662,16 @@ impl Scene {
                 _ => {}
             }
         }
+        self.validate_moving()?;
+        if let Some(dt) = self.model.field_update
+            && !(dt > 0.0 && dt.is_finite())
+        {
+            return Err(CrowdError::invalid(
+                "model.field_update",
+                Num(dt),
+                "must be finite and > 0 (seconds between rebuilds of the distance fields)",
+            ));
+        }
         if self.groups.is_empty() && self.sources.is_empty() {
             return Err(CrowdError::invalid(
                 "groups",
@@ -671,6 +741,89 @@ impl Scene {
             }
         }
         crate::events::validate(self)
+    }
+
+    fn validate_moving(&self) -> Result<(), CrowdError> {
+        for (b, body) in self.moving.iter().enumerate() {
+            let f = format!("moving[{b}]");
+            if self.moving[..b].iter().any(|x| x.name == body.name) {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    &body.name,
+                    "duplicate moving body name",
+                ));
+            }
+            match (&body.line, &body.polygon) {
+                (Some(line), None) => {
+                    if line.len() < 2 {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.line"),
+                            format!("{line:?}"),
+                            "a line needs at least 2 points",
+                        ));
+                    }
+                    for (i, p) in line.iter().enumerate() {
+                        check_point(&format!("{f}.line[{i}]"), *p)?;
+                    }
+                    if let Some(i) = (1..line.len()).find(|&i| line[i] == line[i - 1]) {
+                        return Err(CrowdError::invalid(
+                            format!("{f}.line[{i}]"),
+                            format!("{:?}", line[i]),
+                            "repeats the point before it (a segment of zero length)",
+                        ));
+                    }
+                }
+                (None, Some(polygon)) => {
+                    check_polygon(&format!("{f}.polygon"), polygon)?;
+                }
+                _ => {
+                    return Err(CrowdError::invalid(
+                        &f,
+                        &body.name,
+                        "give exactly one of `line` and `polygon`",
+                    ));
+                }
+            }
+            if let Some(p) = body.pivot {
+                check_point(&format!("{f}.pivot"), p)?;
+            }
+            if body.keyframes.is_empty() {
+                return Err(CrowdError::invalid(
+                    format!("{f}.keyframes"),
+                    "[]",
+                    "a moving body needs at least one keyframe",
+                ));
+            }
+            for (k, key) in body.keyframes.iter().enumerate() {
+                let kf = format!("{f}.keyframes[{k}]");
+                if !(key.t >= 0.0 && key.t.is_finite()) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.t"),
+                        Num(key.t),
+                        "must be finite and ≥ 0",
+                    ));
+                }
+                if k > 0 && !(key.t > body.keyframes[k - 1].t) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.t"),
+                        Num(key.t),
+                        format!(
+                            "keyframe times must increase (the one before is at {})",
+                            Num(body.keyframes[k - 1].t)
+                        ),
+                    ));
+                }
+                check_point(&format!("{kf}.offset"), key.offset)?;
+                if !(key.angle.is_finite() && key.angle.abs() <= 1e6) {
+                    return Err(CrowdError::invalid(
+                        format!("{kf}.angle"),
+                        Num(key.angle),
+                        "must be finite, within ±1e6 degrees",
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The walls: edges of the outer polygon (counter-clockwise) and of the holes (clockwise),

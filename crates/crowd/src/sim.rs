@@ -14,6 +14,8 @@ use crate::error::CrowdError;
 use crate::events::{EntryRecord, Events};
 use crate::exits::Exits;
 use crate::field::DesiredVelocity;
+use crate::geometry::Segment;
+use crate::moving::{MovingBodies, PersonMovingWalls};
 use crate::people::{ExitRecord, People, Place};
 use crate::scene::{BroadPhaseChoice, ExitAction, Scene, SolverKind};
 use crate::spawn::place_people;
@@ -34,6 +36,8 @@ pub struct Frame<'a> {
     /// The multipliers of the step that ended here, by contact key (every row it assembled,
     /// `λ = 0` for those not in contact; empty before the first step).
     pub multipliers: &'a [(ConstraintKey, f64)],
+    /// The segments of the moving bodies at `t`, in [`MovingBodies`] order (empty without).
+    pub moving_walls: &'a [Segment],
 }
 
 /// A contact that pushed in the step that ended at a frame.
@@ -172,6 +176,13 @@ pub struct Simulation {
     exits: Exits,
     /// The scene's walls, and those of closed exits.
     walls: Walls,
+    /// Walls, panels and obstacles that move.
+    moving: MovingBodies,
+    /// Their segments at `t`.
+    moving_now: Vec<Segment>,
+    /// When the distance fields were last solved around the moving bodies (`None`: they see
+    /// the fixed walls only).
+    fields_built: Option<f64>,
     people: People,
     exit_log: Vec<ExitRecord>,
     /// Release times and inflow sources.
@@ -219,8 +230,28 @@ impl Simulation {
             ));
         }
         let walls = Walls::new(scene.walls());
-        let exits = Exits::build(&scene)?;
-        let people = place_people(&scene, &walls, &exits)?;
+        let moving = MovingBodies::new(&scene);
+        let mut moving_now = Vec::new();
+        moving.segments_at(0.0, &mut moving_now);
+        let fields_built =
+            (!moving.is_empty() && scene.model.field_update.is_some()).then_some(0.0);
+        let exits = match fields_built {
+            None => Exits::build(&scene, &|p| scene.walkable(p))?,
+            Some(t) => Exits::build(&scene, &walkable_at(&scene, &moving, &moving_now, t))?,
+        };
+        let people = if moving.is_empty() {
+            place_people(&scene, &walls, &moving, &exits)?
+        } else {
+            let all = Walls::new(
+                walls
+                    .segments()
+                    .iter()
+                    .chain(&moving_now)
+                    .copied()
+                    .collect(),
+            );
+            place_people(&scene, &all, &moving, &exits)?
+        };
         let events = Events::build(&scene, &walls, &exits, &people)?;
         let n = people.len();
         let broad = match scene.solver.broad_phase {
@@ -228,10 +259,14 @@ impl Simulation {
             BroadPhaseChoice::Bvh => BroadPhaseKind::Bvh,
             BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
         };
-        let sources = ContactSources::new(vec![
+        let mut sources: Vec<Box<dyn crate::contacts::ContactSource>> = vec![
             Box::new(PersonPairs::new(broad.build())),
             Box::new(PersonWalls::default()),
-        ]);
+        ];
+        if !moving.is_empty() {
+            sources.push(Box::new(PersonMovingWalls::default()));
+        }
+        let sources = ContactSources::new(sources);
         let solver = scene
             .solver
             .kind
@@ -254,6 +289,9 @@ impl Simulation {
             scene,
             exits,
             walls,
+            moving,
+            moving_now,
+            fields_built,
             people,
             exit_log: Vec::new(),
             events,
@@ -312,7 +350,37 @@ impl Simulation {
             positions: self.people.positions(),
             radii: self.people.radii(),
             multipliers: self.scheme.correction().warm_start(),
+            moving_walls: &self.moving_now,
         }
+    }
+
+    /// The moving bodies (walls, panels, obstacles with a prescribed motion).
+    pub fn moving(&self) -> &MovingBodies {
+        &self.moving
+    }
+
+    /// Drives moving body `body` from outside (a co-simulation input): its keyframe parameter
+    /// goes linearly from where it is now to `param` at time `t_end`, then stays (the body
+    /// moves continuously, so the sweeping stays a sweeping). Until the first call a body
+    /// follows its keyframes in time.
+    pub fn drive_moving(&mut self, body: usize, param: f64, t_end: f64) -> Result<(), CrowdError> {
+        let count = self.moving.names().len();
+        if body >= count {
+            return Err(CrowdError::invalid(
+                "moving",
+                body,
+                format!("the scene has {count} moving bodies"),
+            ));
+        }
+        if !(param.is_finite() && t_end.is_finite() && t_end >= self.t) {
+            return Err(CrowdError::invalid(
+                format!("moving[{body}] position"),
+                format!("{param} at t = {t_end}"),
+                format!("must be finite, at a time ≥ the current {}", self.t),
+            ));
+        }
+        self.moving.drive(body, self.t, t_end, param);
+        Ok(())
     }
 
     /// Everyone who passed an exit so far, in order.
@@ -375,6 +443,7 @@ impl Simulation {
             self.people.positions(),
             view,
             &self.walls,
+            &self.moving,
             margin,
             rows,
         );
@@ -480,6 +549,7 @@ impl Simulation {
             contacts: CrowdContacts {
                 people,
                 walls: &self.walls,
+                moving: &self.moving,
                 sources: &mut self.sources,
             },
             q,
@@ -489,31 +559,146 @@ impl Simulation {
     /// One step of size `mu` (whatever the scene's stepping says); then applies exits. For
     /// tests and tools that choose each step; runs call [`advance_to`](Self::advance_to).
     pub fn step(&mut self, mu: f64) -> Result<StepReport, CrowdError> {
+        let field = self.update_fields();
         let (k, t) = (self.steps, self.t);
         let p = self.parts();
-        let report = p
+        let mut report = p
             .scheme
-            .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)?;
+            .step(&p.field, &mut { p.contacts }, k, t, p.q, mu)
+            .map_err(|e| self.diagnose(e.into()))?;
+        report.timings.field = field;
+        report.timings.total += field;
         self.accept(&report);
         Ok(report)
     }
 
+    /// The end of the next step towards `t_stop` allowed by the moving bodies: none may move
+    /// more than half the smallest radius in one step, so none passes a person's centre within
+    /// a step (the linearization at `t_{k+1}` would put the person on the wrong side).
+    fn moving_stop(&self, t_stop: f64) -> f64 {
+        if self.moving.is_empty() {
+            return t_stop;
+        }
+        let beta = self.moving.max_speed(self.t, t_stop);
+        if beta == 0.0 {
+            return t_stop;
+        }
+        let r_min = self
+            .people
+            .radii()
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let largest = 0.5 * r_min / beta;
+        let fixed_within = matches!(self.stepping, Stepping::Fixed { step } if step <= largest);
+        if fixed_within || self.t + largest >= t_stop {
+            t_stop
+        } else {
+            // Whole fractions of the way to t_stop: the steps stay equal.
+            let parts = ((t_stop - self.t) / largest).ceil();
+            self.t + (t_stop - self.t) / parts
+        }
+    }
+
+    /// Solves the distance fields again around the moving bodies where they are now, when
+    /// `model.field_update` seconds have passed since the last time and a body moved since;
+    /// returns the seconds it took.
+    fn update_fields(&mut self) -> f64 {
+        let (Some(built), Some(every)) = (self.fields_built, self.scene.model.field_update) else {
+            return 0.0;
+        };
+        if self.t < built + every * (1.0 - 1e-9) || self.moving.max_speed(built, self.t) == 0.0 {
+            return 0.0;
+        }
+        let start = std::time::Instant::now();
+        self.build_fields_at(self.t);
+        start.elapsed().as_secs_f64()
+    }
+
+    /// The distance fields around the moving bodies at `t` (their segments at `t` are in
+    /// `moving_now`).
+    fn build_fields_at(&mut self, t: f64) {
+        let walkable = walkable_at(&self.scene, &self.moving, &self.moving_now, t);
+        self.exits.rebuild_fields(&self.scene, &walkable);
+        self.fields_built = Some(t);
+    }
+
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
     fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
+        let t_stop = self.moving_stop(t_stop);
+        if self.stepping.reached(self.t, t_stop) {
+            return Ok(None);
+        }
+        let field = self.update_fields();
         let (k, t) = (self.steps, self.t);
         let p = self.parts();
         let report = p
             .stepping
-            .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)?;
-        if let Some(r) = &report {
-            self.accept(r);
-        }
-        Ok(report)
+            .step(p.scheme, &p.field, &mut { p.contacts }, k, t, p.q, t_stop)
+            .map_err(|e| self.diagnose(e.into()))?;
+        Ok(report.map(|mut r| {
+            r.timings.field = field;
+            r.timings.total += field;
+            self.accept(&r);
+            r
+        }))
+    }
+
+    /// A step that failed to certify: when its constraints admit no velocity at all (checked by
+    /// a Farkas certificate, [`moreau_solve::infeasibility_certificate`]), the error names the
+    /// constraints, people and moving bodies at fault; otherwise `error` as it was.
+    fn diagnose(&self, error: CrowdError) -> CrowdError {
+        use moreau_integrate::IntegrateError;
+        let CrowdError::Integrate(IntegrateError::NotCertified { t, .. }) = &error else {
+            return error;
+        };
+        let problem = self.last_projection();
+        let Ok(Some(y)) = moreau_solve::infeasibility_certificate(&problem) else {
+            return error;
+        };
+        let mut contacts: Vec<(ContactKind, u32, u32, f64)> = problem
+            .jacobian
+            .keys()
+            .iter()
+            .zip(&y)
+            .filter(|(_, y)| **y > 1e-6)
+            .filter_map(|(&key, &y)| match ContactKind::of(key) {
+                (Some(kind), a, b) => Some((kind, a, b, y)),
+                _ => None,
+            })
+            .collect();
+        contacts.sort_by(|x, y| y.3.total_cmp(&x.3));
+        let mut people: Vec<u32> = contacts
+            .iter()
+            .flat_map(|&(kind, a, b, _)| {
+                std::iter::once(a).chain((kind == ContactKind::PersonPerson).then_some(b))
+            })
+            .collect();
+        people.sort_unstable();
+        people.dedup();
+        let bodies: Vec<u32> = self.moving.segment_bodies().collect();
+        let mut moving: Vec<u32> = contacts
+            .iter()
+            .filter(|c| c.0 == ContactKind::MovingWall)
+            .filter_map(|c| bodies.get(c.2 as usize).copied())
+            .collect();
+        moving.sort_unstable();
+        moving.dedup();
+        CrowdError::Infeasible(Box::new(crate::error::Infeasibility {
+            t: *t,
+            contacts,
+            people,
+            moving: moving
+                .iter()
+                .map(|&b| self.moving.names()[b as usize].clone())
+                .collect(),
+        }))
     }
 
     fn accept(&mut self, report: &StepReport) {
         self.t = report.t;
         self.steps += 1;
+        self.moving.segments_at(self.t, &mut self.moving_now);
         let people = self.people.len();
         self.apply_exits();
         let left = self.people.len() != people;
@@ -683,6 +868,8 @@ impl Simulation {
             exits_open: self.exits.exits.iter().map(|x| x.open).collect(),
             inflow: self.events.state(),
             speed_factor: self.speed_factor,
+            moving: self.moving.drives().to_vec(),
+            fields_built: self.fields_built,
             stepping: self.stepping.state(),
             multipliers: self.scheme.correction().warm_start().to_vec(),
         }
@@ -731,6 +918,13 @@ impl Simulation {
                 format!("the scene has {} exits", self.exits.exits.len()),
             );
         }
+        if state.moving.len() != self.moving.names().len() {
+            return refuse(
+                "moving",
+                format!("{} drives", state.moving.len()),
+                format!("the scene has {} moving bodies", self.moving.names().len()),
+            );
+        }
         if let Err((field, value, reason)) = self.events.check(&state.inflow, &state.people) {
             return refuse(field, value, reason);
         }
@@ -749,11 +943,32 @@ impl Simulation {
             x.open = open;
         }
         self.rebuild_walls();
+        self.moving.set_drives(&state.moving);
+        if let Some(built) = state.fields_built.filter(|_| self.fields_built.is_some()) {
+            self.moving.segments_at(built, &mut self.moving_now);
+            self.build_fields_at(built);
+        }
+        self.moving.segments_at(self.t, &mut self.moving_now);
         self.events.restore(&state.inflow);
         self.speed_factor = state.speed_factor;
         self.scheme
             .correction_mut()
             .set_warm_start(&state.multipliers);
         Ok(())
+    }
+}
+
+/// Whether the grid cell centred at `p` is walkable at time `t`: in the scene's area, outside
+/// every closed moving body, and not crossed by a moving segment (`segments`, where the bodies
+/// are at `t`: within half a cell diagonal).
+fn walkable_at<'a>(
+    scene: &'a Scene,
+    moving: &'a MovingBodies,
+    segments: &'a [Segment],
+    t: f64,
+) -> impl Fn([f64; 2]) -> bool + 'a {
+    let reach = 0.5 * std::f64::consts::SQRT_2 * scene.solver.grid_cell;
+    move |p| {
+        scene.walkable(p) && !moving.inside(t, p) && segments.iter().all(|s| s.distance(p) > reach)
     }
 }

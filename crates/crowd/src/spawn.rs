@@ -9,6 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::geometry::Polygon;
+use crate::moving::MovingBodies;
 use crate::people::{People, Place};
 use crate::scene::{Quantity, Scene};
 use crate::walls::Walls;
@@ -68,13 +69,16 @@ impl Placed {
     }
 }
 
-/// The people of `scene`, placed among `walls`, each able to reach its destination on the
+/// The people of `scene`, placed among `walls` (the moving bodies' included, where they are at
+/// the start) and outside the closed moving bodies, each able to reach its destination on the
 /// exits' distance fields. Every failure names the scene field at fault.
 pub(crate) fn place_people(
     scene: &Scene,
     walls: &Walls,
+    moving: &MovingBodies,
     exits: &Exits,
 ) -> Result<People, CrowdError> {
+    let walkable = |p: [f64; 2]| scene.walkable(p) && !moving.inside(0.0, p);
     // People.
     let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
     let mut placed = Placed {
@@ -102,7 +106,7 @@ pub(crate) fn place_people(
                 for (k, &p) in list.iter().enumerate() {
                     let r = draw(&group.radius, &mut rng);
                     let field = format!("groups[{g}].positions[{k}]");
-                    if !scene.walkable(p) || !clear_of_walls(p, r) {
+                    if !walkable(p) || !clear_of_walls(p, r) {
                         return Err(CrowdError::invalid(
                             field,
                             format!("{p:?}"),
@@ -156,7 +160,7 @@ pub(crate) fn place_people(
                         rng.random_range(rlo[1]..=rhi[1]),
                     ];
                     if region.contains(p)
-                        && scene.walkable(p)
+                        && walkable(p)
                         && clear_of_walls(p, r)
                         && placed.overlaps(p, r).is_none()
                     {

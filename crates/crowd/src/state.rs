@@ -40,6 +40,11 @@ pub struct SimState {
     pub inflow: Vec<InflowState>,
     /// The factor on every desired speed.
     pub speed_factor: f64,
+    /// How each moving body is driven (`None`: by its keyframes in time).
+    pub moving: Vec<Option<crate::moving::Drive>>,
+    /// When the distance fields were last solved around the moving bodies (`None`: never,
+    /// the scene does not ask for it).
+    pub fields_built: Option<f64>,
     /// The step controller's memory (adaptive steps).
     pub stepping: SteppingState,
     /// The last step's multipliers by contact key: the next step's warm start.
@@ -47,7 +52,8 @@ pub struct SimState {
 }
 
 impl SimState {
-    /// The layout version; bumped whenever a field changes meaning (2: `inflow`).
+    /// The layout version; bumped whenever a field changes meaning (2: `inflow`, `moving`,
+    /// `fields_built`).
     pub const FORMAT: u32 = 2;
 
     /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of

@@ -94,6 +94,13 @@ impl Walls {
         &self.segments
     }
 
+    /// Hands the segments back (the index is left empty), to reuse their memory.
+    pub fn take_segments(&mut self) -> Vec<Segment> {
+        let segments = std::mem::take(&mut self.segments);
+        *self = Self::default();
+        segments
+    }
+
     /// How many walls.
     pub fn len(&self) -> usize {
         self.segments.len()

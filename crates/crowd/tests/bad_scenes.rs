@@ -58,6 +58,29 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ("unknown-key.toml", &["unknown field", "colour"]),
         ("empty-polygon.toml", &["area.outer", "0 vertices"]),
         ("no-groups.toml", &["groups", "no people"]),
+        (
+            "wkt-unclosed-parenthesis.toml",
+            &[
+                "at area = POLYGON ((0 0, 6 0, 6 6, 0 6, 0 0)",
+                "not valid WKT",
+                "Missing closing parenthesis",
+            ],
+        ),
+        (
+            "wkt-file-missing.toml",
+            &[
+                "at area.wkt_file = no-such-room.wkt",
+                "cannot read",
+                "bad-scenes/no-such-room.wkt",
+            ],
+        ),
+        (
+            "wkt-linestring.toml",
+            &[
+                "at area = LINESTRING (0 0, 6 0, 6 6, 0 6)",
+                "a LINESTRING: the walkable area is a POLYGON",
+            ],
+        ),
         ("negative-release.toml", &["groups[0].release", "-1", "≥ 0"]),
         ("source-rate-zero.toml", &["sources[0].rate", "0", "> 0"]),
         (

@@ -67,6 +67,7 @@ fn contact_forces_balance_every_persons_change_of_velocity() {
                     }
                     walls += 1;
                 }
+                ContactKind::MovingWall => panic!("the room has no moving bodies"),
             }
         }
         // ½|v − w − Jᵀλ|² ≤ gap = ε/(2μ²) for the certified pair (the gap is that plus

@@ -30,6 +30,8 @@ pub trait RunSink: Send {
         rows: &mut dyn Iterator<Item = ContactRow>,
         pressure_by_id: &[f64],
     ) -> Result<(), IoError>;
+    /// The segments of the moving bodies at the next frame.
+    fn moving_walls(&mut self, segments: &[[f64; 4]]) -> Result<(), IoError>;
     /// One output frame.
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError>;
     /// The run's state after the last frame (its bytes, handed over: a writer on another
@@ -57,6 +59,9 @@ impl RunSink for RunWriter {
     ) -> Result<(), IoError> {
         RunWriter::contacts(self, rows, pressure_by_id)
     }
+    fn moving_walls(&mut self, segments: &[[f64; 4]]) -> Result<(), IoError> {
+        RunWriter::moving_walls(self, segments)
+    }
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
         RunWriter::frame(self, t, ids, positions)
     }
@@ -73,6 +78,7 @@ struct Batch {
     entries: Vec<(u32, f64)>,
     exits: Vec<(u32, f64)>,
     contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
+    moving: Option<Vec<[f64; 4]>>,
     t: f64,
     ids: Vec<u32>,
     positions: Vec<f64>,
@@ -259,6 +265,9 @@ fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
     if let Some((rows, pressure)) = batch.contacts {
         writer.contacts(rows, &pressure)?;
     }
+    if let Some(segments) = &batch.moving {
+        writer.moving_walls(segments)?;
+    }
     writer.frame(batch.t, &batch.ids, &batch.positions)
 }
 
@@ -304,6 +313,10 @@ impl RunSink for BackgroundWriter {
         if self.contacts {
             self.pending.contacts = Some((rows.collect(), pressure_by_id.to_vec()));
         }
+        Ok(())
+    }
+    fn moving_walls(&mut self, segments: &[[f64; 4]]) -> Result<(), IoError> {
+        self.pending.moving = Some(segments.to_vec());
         Ok(())
     }
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {

@@ -23,6 +23,12 @@ pub(crate) const STEPS: &str = "steps";
 pub(crate) const WALLS: &str = "walls";
 pub(crate) const CONTACTS: &str = "contacts";
 pub(crate) const FRAME_PRESSURE: &str = "frames/pressure";
+/// The segments of the moving bodies at every frame: `(frames, segments, 4)`, `[x0, y0, x1, y1]`.
+pub(crate) const FRAME_MOVING_WALLS: &str = "frames/moving_walls";
+/// The names of the moving bodies.
+pub(crate) const MOVING_NAME: &str = "moving/name";
+/// The body of each moving segment (its row in `moving/name`).
+pub(crate) const MOVING_BODY: &str = "moving/body";
 /// The group of the saved run state (two slots written in turn, `a` and `b`).
 pub(crate) const STATE: &str = "state";
 /// Bytes per chunk of a state slot (64 KiB: a small run's state takes one).
@@ -72,11 +78,12 @@ pub struct ExitRow {
 pub struct ContactRow {
     /// Output frame, from 0.
     pub frame: i64,
-    /// 0: person–person; 1: person–wall.
+    /// 0: person–person; 1: person–wall; 2: person–moving wall.
     pub kind: i64,
     /// Person id (the smaller of a pair).
     pub a: i64,
-    /// The other person's id, or the wall's row in `/walls`.
+    /// The other person's id, the wall's row in `/walls`, or the moving segment's column in
+    /// `/frames/moving_walls`.
     pub b: i64,
     /// The multiplier `λ` (m/s): the speed the contact removed along its normal.
     pub lambda: f64,
@@ -87,6 +94,8 @@ impl ContactRow {
     pub const PERSON_PERSON: i64 = 0;
     /// `kind` of a contact between a person and a wall.
     pub const PERSON_WALL: i64 = 1;
+    /// `kind` of a contact between a person and a segment of a moving body.
+    pub const PERSON_MOVING_WALL: i64 = 2;
 }
 
 /// One row of `/steps`: a [`StepReport`] as stored.
@@ -190,4 +199,9 @@ pub struct RunHeader {
     pub walls: Vec<[f64; 4]>,
     /// Whether the file records contact forces (`/contacts`, `/frames/pressure`).
     pub contacts: bool,
+    /// `moving/name`: the names of the moving bodies (none: no `/moving`, no
+    /// `/frames/moving_walls`).
+    pub moving_names: Vec<String>,
+    /// `moving/body`: for each moving segment (a column of `/frames/moving_walls`), its body.
+    pub moving_body: Vec<u32>,
 }

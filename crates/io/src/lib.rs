@@ -13,8 +13,10 @@
 //! | `/exits` | compound rows `id`, `t`, appended as people pass exits (complete up to the last frame) |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |
 //! | `/walls` | float64 `[segments, 4]`: the wall segments `x0, y0, x1, y1` at the start |
-//! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall), `a`, `b` (person ids; for a wall, its row in `/walls`), `lambda` (float64, m/s): the contacts with `λ > 10⁻⁶ m/s` of the step that ended at each frame; attribute `units` |
+//! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall, 2 person–moving wall), `a`, `b` (person ids; for a wall, its row in `/walls`; for a moving wall, its column in `/frames/moving_walls`), `lambda` (float64, m/s): the contacts with `λ > 10⁻⁶ m/s` of the step that ended at each frame; attribute `units` |
 //! | `/frames/pressure` | only with contacts: float64 `[frames, people]`, each person's `Σ λ` over its contacts (m/s), NaN when absent |
+//! | `/frames/moving_walls` | only with moving bodies: float64 `[frames, segments, 4]`, each moving segment `x0, y0, x1, y1` where it is at the frame |
+//! | `/moving/name`, `/moving/body` | only with moving bodies: the bodies' names (strings), and each segment's body (int64, its row in `/moving/name`) |
 //!
 //! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `people`, `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
 //!

@@ -131,6 +131,22 @@ impl RunFile {
             radii: self.read(PEOPLE_RADIUS)?,
             walls: self.walls()?,
             contacts: self.has_contacts(),
+            moving_names: if self.file.dataset(MOVING_NAME).is_ok() {
+                self.read::<VarLenUnicode>(MOVING_NAME)?
+                    .iter()
+                    .map(|s| s.as_str().to_string())
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            moving_body: if self.file.dataset(MOVING_BODY).is_ok() {
+                self.read::<i64>(MOVING_BODY)?
+                    .iter()
+                    .map(|&b| b as u32)
+                    .collect()
+            } else {
+                Vec::new()
+            },
         })
     }
 
@@ -188,6 +204,28 @@ impl RunFile {
         Ok(flat
             .chunks_exact(4)
             .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect())
+    }
+
+    /// The segments `[x0, y0, x1, y1]` of the moving bodies at output frame `frame` (empty for
+    /// a run without moving bodies).
+    pub fn moving_walls(&self, frame: usize) -> Result<Vec<[f64; 4]>, IoError> {
+        if self.file.dataset(FRAME_MOVING_WALLS).is_err() {
+            return Ok(Vec::new());
+        }
+        let ds = self.dataset(FRAME_MOVING_WALLS)?;
+        let frames = ds.shape().first().copied().unwrap_or(0);
+        if frame >= frames {
+            return Err(self.layout(format!("moving walls of frame {frame} of {frames}")));
+        }
+        let a = ds
+            .read_slice::<f64, _, ndarray::Ix2>((frame, .., ..))
+            .at(&self.path, || {
+                format!("reading the moving walls of frame {frame}")
+            })?;
+        Ok(a.rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2], r[3]])
             .collect())
     }
 

@@ -261,6 +261,10 @@ pub struct RunWriter {
     steps: Dataset,
     /// `/contacts` and `/frames/pressure`, when the run records contact forces.
     contacts: Option<(Dataset, Dataset)>,
+    /// `/frames/moving_walls`, when the scene has moving bodies.
+    moving: Option<Dataset>,
+    /// Segments of the moving bodies.
+    moving_segments: usize,
     /// `/state` and its two slots.
     state: StateSlots,
     /// People in the whole frames written (ids `0..people`).
@@ -279,6 +283,7 @@ pub struct RunWriter {
     dense: Vec<f64>,
     pending_contacts: Vec<ContactRow>,
     pending_pressure: Vec<f64>,
+    pending_moving: Vec<f64>,
 }
 
 fn text(s: &str) -> VarLenUnicode {
@@ -515,6 +520,30 @@ impl RunWriter {
             None
         };
         // The people at the start; those who enter later are appended with the frame after.
+        let segments = header.moving_body.len();
+        let moving = if segments > 0 {
+            file.create_group("moving")
+                .at(path, at("creating group 'moving'"))?;
+            let names: Vec<VarLenUnicode> = header.moving_names.iter().map(|n| text(n)).collect();
+            file.new_dataset_builder()
+                .with_data(&names)
+                .create(MOVING_NAME)
+                .at(path, at("writing 'moving/name'"))?;
+            let body: Vec<i64> = header.moving_body.iter().map(|&b| b.into()).collect();
+            file.new_dataset_builder()
+                .with_data(&body)
+                .create(MOVING_BODY)
+                .at(path, at("writing 'moving/body'"))?;
+            Some(
+                file.new_dataset::<f64>()
+                    .chunk((1, segments, 4))
+                    .shape((0.., segments, 4))
+                    .create(FRAME_MOVING_WALLS)
+                    .at(path, at("creating 'frames/moving_walls'"))?,
+            )
+        } else {
+            None
+        };
         let ids: Vec<i64> = (0..n as i64).collect();
         let people_id = table::<i64>(&file, PEOPLE_ID, ROWS_PER_CHUNK)
             .and_then(|ds| append(&ds, &mut 0, &ids).map(|()| ds))
@@ -540,6 +569,8 @@ impl RunWriter {
             exits,
             steps,
             contacts,
+            moving,
+            moving_segments: segments,
             state,
             people: n,
             pending_people: Vec::new(),
@@ -555,6 +586,7 @@ impl RunWriter {
             dense: Vec::new(),
             pending_contacts: Vec::new(),
             pending_pressure: Vec::new(),
+            pending_moving: Vec::new(),
         })
     }
 
@@ -641,6 +673,22 @@ impl RunWriter {
             .extend(rows.into_iter().map(|r| ContactRow { frame, ..r }));
         self.pending_pressure.clear();
         self.pending_pressure.extend_from_slice(pressure_by_id);
+        Ok(())
+    }
+
+    /// Records the segments of the moving bodies at the next frame (written with it), one
+    /// `[x0, y0, x1, y1]` each in `moving/body` order. Required before every frame of a file
+    /// with moving bodies; an error for a file without.
+    pub fn moving_walls(&mut self, segments: &[[f64; 4]]) -> Result<(), IoError> {
+        if segments.len() != self.moving_segments {
+            return Err(self.layout_error(format!(
+                "{} moving segments, but the file holds {}",
+                segments.len(),
+                self.moving_segments
+            )));
+        }
+        self.pending_moving.clear();
+        self.pending_moving.extend(segments.iter().flatten());
         Ok(())
     }
 
@@ -744,6 +792,12 @@ impl RunWriter {
         } else {
             None
         };
+        let segments = header.moving_body.len();
+        let moving = if segments > 0 {
+            Some(open(FRAME_MOVING_WALLS)?)
+        } else {
+            None
+        };
         // The people of the saved frame (rows of people who entered after it are dropped).
         let n = marks.people;
         if n > header.radii.len() {
@@ -782,6 +836,8 @@ impl RunWriter {
             exits,
             steps,
             contacts,
+            moving,
+            moving_segments: segments,
             state,
             people: n,
             pending_people: Vec::new(),
@@ -797,6 +853,7 @@ impl RunWriter {
             dense: Vec::new(),
             pending_contacts: Vec::new(),
             pending_pressure: Vec::new(),
+            pending_moving: Vec::new(),
         };
         writer
             .roll_back()
@@ -845,6 +902,13 @@ impl RunWriter {
             self.pending_pressure.clear();
             self.pending_pressure.resize(people, f64::NAN);
         }
+        if self.pending_moving.len() != 4 * self.moving_segments {
+            return Err(self.layout_error(format!(
+                "frame at t = {t}: the moving walls were not given (the file holds {} moving \
+                 segments)",
+                self.moving_segments
+            )));
+        }
         // Every dataset of the frame is extended and written before any count moves; if one
         // fails, every extent goes back to the last whole frame, so no reader sees a row of a
         // frame that was not written whole (HDF5 fills a chunk it could not write with zeros).
@@ -867,6 +931,7 @@ impl RunWriter {
         }
         self.pending_contacts.clear();
         self.pending_pressure.clear();
+        self.pending_moving.clear();
         self.pending_steps.clear();
         self.pending_exits.clear();
         self.pending_people.clear();
@@ -938,6 +1003,20 @@ impl RunWriter {
                 }),
             )?;
         }
+        if let Some(moving) = &self.moving {
+            named(FRAME_MOVING_WALLS, self.injected(frame, FRAME_MOVING_WALLS))?;
+            named(
+                FRAME_MOVING_WALLS,
+                moving
+                    .resize((frame + 1, self.moving_segments, 4))
+                    .and_then(|_| {
+                        let view =
+                            ArrayView2::from_shape((self.moving_segments, 4), &self.pending_moving)
+                                .expect("4 numbers a segment");
+                        moving.write_slice(view, (frame, .., ..))
+                    }),
+            )?;
+        }
         let mut step_rows = self.step_rows;
         named(STEPS, self.injected(frame, STEPS))?;
         named(
@@ -977,6 +1056,9 @@ impl RunWriter {
         if let Some((rows, pressure)) = &self.contacts {
             keep(rows.resize(self.contact_rows));
             keep(pressure.resize((frames, self.people)));
+        }
+        if let Some(moving) = &self.moving {
+            keep(moving.resize((frames, self.moving_segments, 4)));
         }
         keep(self.steps.resize(self.step_rows));
         keep(self.exits.resize(self.exit_rows));

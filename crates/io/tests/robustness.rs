@@ -31,6 +31,8 @@ fn header(n: usize, contacts: bool) -> RunHeader {
         radii: vec![0.2; n],
         walls: vec![[0.0, 0.0, 9.0, 0.0]],
         contacts,
+        moving_names: Vec::new(),
+        moving_body: Vec::new(),
     }
 }
 

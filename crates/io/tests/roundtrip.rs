@@ -29,6 +29,8 @@ fn header(n: usize) -> RunHeader {
         radii: (0..n).map(|i| 0.1 + 0.01 * i as f64).collect(),
         walls: vec![[0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 1.0, 1.0]],
         contacts: false,
+        moving_names: Vec::new(),
+        moving_body: Vec::new(),
     }
 }
 

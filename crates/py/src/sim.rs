@@ -365,6 +365,7 @@ impl PySimulation {
             kind.push(match c.kind {
                 ContactKind::PersonPerson => 0u8,
                 ContactKind::PersonWall => 1u8,
+                ContactKind::MovingWall => 2u8,
             });
             a.push(c.a);
             b.push(c.b);

@@ -43,6 +43,8 @@ pub fn header(sim: &Simulation, command: String) -> RunHeader {
             .map(|w| [w.a[0], w.a[1], w.b[0], w.b[1]])
             .collect(),
         contacts: sim.scene().output.contacts,
+        moving_names: sim.moving().names().to_vec(),
+        moving_body: sim.moving().segment_bodies().collect(),
     }
 }
 
@@ -171,6 +173,7 @@ pub struct Record<'a> {
     /// Everyone so far: at the start, and every entry seen.
     people: usize,
     pressure: Vec<f64>,
+    moving: Vec<[f64; 4]>,
 }
 
 impl std::fmt::Debug for Record<'_> {
@@ -194,6 +197,7 @@ impl<'a> Record<'a> {
             exits: 0,
             people,
             pressure: Vec::new(),
+            moving: Vec::new(),
         }
     }
 
@@ -250,12 +254,22 @@ impl Observer for Record<'_> {
                     kind: match c.kind {
                         ContactKind::PersonPerson => ContactRow::PERSON_PERSON,
                         ContactKind::PersonWall => ContactRow::PERSON_WALL,
+                        ContactKind::MovingWall => ContactRow::PERSON_MOVING_WALL,
                     },
                     a: c.a.into(),
                     b: c.b.into(),
                     lambda: c.lambda,
                 });
                 w.contact_rows(&mut rows, &self.pressure)?;
+            }
+            if !f.moving_walls.is_empty() {
+                self.moving.clear();
+                self.moving.extend(
+                    f.moving_walls
+                        .iter()
+                        .map(|s| [s.a[0], s.a[1], s.b[0], s.b[1]]),
+                );
+                w.moving_walls(&self.moving)?;
             }
             w.frame(f.t, f.ids, f.positions)?;
         }

@@ -68,43 +68,7 @@ impl ProjectionSolver for ClarabelReference {
                 ..SolveReport::default()
             });
         }
-        // −J in compressed columns.
-        let mut count = vec![0usize; n + 1];
-        for i in 0..m {
-            for &c in p.jacobian.row(i).0 {
-                count[c + 1] += 1;
-            }
-        }
-        for c in 0..n {
-            count[c + 1] += count[c];
-        }
-        let nnz = count[n];
-        let mut next = count.clone();
-        let (mut rowval, mut nzval) = (vec![0usize; nnz], vec![0.0; nnz]);
-        for i in 0..m {
-            let (cols, coefs) = p.jacobian.row(i);
-            for (&c, &a) in cols.iter().zip(coefs) {
-                rowval[next[c]] = i;
-                nzval[next[c]] = -a;
-                next[c] += 1;
-            }
-        }
-        let a = CscMatrix::new(m, n, count, rowval, nzval);
-        let identity = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), vec![1.0; n]);
-        let q: Vec<f64> = p.w.iter().map(|w| -w).collect();
-        let tol = self.settings.tolerance;
-        let settings = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .max_iter(self.settings.max_iterations)
-            .tol_gap_abs(tol)
-            .tol_gap_rel(tol)
-            .tol_feas(tol)
-            .presolve_enable(false)
-            .build()
-            .map_err(|e| SolveError::Clarabel(e.to_string()))?;
-        let cones = [SupportedConeT::NonnegativeConeT(m)];
-        let mut solver = DefaultSolver::new(&identity, &q, &a, p.b, &cones, settings)
-            .map_err(|e| SolveError::Clarabel(e.to_string()))?;
+        let mut solver = clarabel_on(p, self.settings)?;
         solver.solve();
         let out = &solver.solution;
         sol.v.copy_from_slice(&out.x);
@@ -132,5 +96,91 @@ impl ProjectionSolver for ClarabelReference {
             active: cert.active,
             ..SolveReport::default()
         })
+    }
+}
+
+/// Clarabel set up on `p` (not yet solved): `min ½vᵀv − wᵀv  s.t. (−J)v + s = b, s ≥ 0`.
+fn clarabel_on(
+    p: &ProjectionProblem<'_>,
+    settings: ClarabelSettings,
+) -> Result<DefaultSolver, SolveError> {
+    let (m, n) = (p.rows(), p.dim());
+    // −J in compressed columns.
+    let mut count = vec![0usize; n + 1];
+    for i in 0..m {
+        for &c in p.jacobian.row(i).0 {
+            count[c + 1] += 1;
+        }
+    }
+    for c in 0..n {
+        count[c + 1] += count[c];
+    }
+    let nnz = count[n];
+    let mut next = count.clone();
+    let (mut rowval, mut nzval) = (vec![0usize; nnz], vec![0.0; nnz]);
+    for i in 0..m {
+        let (cols, coefs) = p.jacobian.row(i);
+        for (&c, &a) in cols.iter().zip(coefs) {
+            rowval[next[c]] = i;
+            nzval[next[c]] = -a;
+            next[c] += 1;
+        }
+    }
+    let a = CscMatrix::new(m, n, count, rowval, nzval);
+    let identity = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), vec![1.0; n]);
+    let q: Vec<f64> = p.w.iter().map(|w| -w).collect();
+    let tol = settings.tolerance;
+    let settings = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(settings.max_iterations)
+        .tol_gap_abs(tol)
+        .tol_gap_rel(tol)
+        .tol_feas(tol)
+        .presolve_enable(false)
+        .build()
+        .map_err(|e| SolveError::Clarabel(e.to_string()))?;
+    let cones = [SupportedConeT::NonnegativeConeT(m)];
+    DefaultSolver::new(&identity, &q, &a, p.b, &cones, settings)
+        .map_err(|e| SolveError::Clarabel(e.to_string()))
+}
+
+/// Why the rows of `p` admit no `v`: a Farkas certificate `y ≥ 0` with `Jᵀy = 0` and
+/// `bᵀy < 0` (then `yᵀ(Jv + b) = bᵀy < 0` for every `v`: some row with `y_i > 0` is violated
+/// whatever `v` is), scaled to `max y = 1`; `None` when Clarabel finds no such certificate.
+/// The certificate is checked here, not taken from Clarabel's status: with `s = max(1, |w|∞,
+/// |b|∞)`, it is returned only when `bᵀy < 0` and `n |Jᵀy|∞ s ≤ −bᵀy / 2`, so that no `v` with
+/// `|v|∞ ≤ s` meets every row.
+pub fn infeasibility_certificate(
+    p: &ProjectionProblem<'_>,
+) -> Result<Option<Vec<f64>>, SolveError> {
+    p.validate()?;
+    let (m, n) = (p.rows(), p.dim());
+    if m == 0 {
+        return Ok(None);
+    }
+    let mut solver = clarabel_on(p, ClarabelSettings::default())?;
+    solver.solve();
+    if !matches!(
+        solver.solution.status,
+        SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible
+    ) {
+        return Ok(None);
+    }
+    let mut y: Vec<f64> = solver.solution.z.iter().map(|z| z.max(0.0)).collect();
+    let top = y.iter().copied().fold(0.0, f64::max);
+    if !(top > 0.0 && top.is_finite()) {
+        return Ok(None);
+    }
+    y.iter_mut().for_each(|v| *v /= top);
+    let mut jty = vec![0.0; n];
+    p.jacobian.mul_transpose_add(&y, &mut jty);
+    let residual = jty.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let by: f64 = p.b.iter().zip(&y).map(|(b, y)| b * y).sum();
+    // yᵀ(Jv + b) ≤ n |Jᵀy|∞ |v|∞ + bᵀy < 0 for every |v|∞ ≤ scale.
+    let scale = p.w.iter().chain(p.b).fold(1.0f64, |a, v| a.max(v.abs()));
+    if by < 0.0 && residual * n as f64 * scale <= -0.5 * by {
+        Ok(Some(y))
+    } else {
+        Ok(None)
     }
 }

@@ -26,7 +26,7 @@ pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
 pub use auto::{AutoSettings, AutoSolver};
 pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
-pub use clarabel_ref::{ClarabelReference, ClarabelSettings};
+pub use clarabel_ref::{ClarabelReference, ClarabelSettings, infeasibility_certificate};
 pub use error::SolveError;
 pub use interior::{InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder};
 pub use newton::{Newton, NewtonSettings, NewtonSettingsBuilder};
