@@ -11,7 +11,7 @@ use moreau_core::Num;
 
 use crate::error::CrowdError;
 use crate::exits::Exits;
-use crate::geometry::Polygon;
+use crate::geometry::{Polygon, Segment};
 use crate::people::{People, Place};
 use crate::scene::{Quantity, Scene, check_polygon, limits};
 use crate::spawn::draw;
@@ -20,9 +20,10 @@ use crate::walls::Walls;
 /// An inflow source (`[[sources]]`): people enter its `area` at `rate` a second, person `k`
 /// (from 1) due at `start + k / rate`, until `stop` or the horizon (whichever comes first) and
 /// at most `count` in all. After every accepted step each person due is placed at a uniformly
-/// random point of the area where their disk overlaps nobody and no wall (at most
-/// [`Inflow::TRIES`] tries a person a step); when there is no room, they wait in a queue, in
-/// order, and enter at later steps.
+/// random point of the area where their disk overlaps nobody and no wall (moving walls where
+/// they are then included, and never inside a closed moving body; at most [`Inflow::TRIES`]
+/// tries a person a step); when there is no room, they wait in a queue, in order, and enter at
+/// later steps.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Inflow {
@@ -222,6 +223,14 @@ pub(crate) fn validate(scene: &Scene) -> Result<(), CrowdError> {
         }
     }
     Ok(())
+}
+
+/// What a newcomer keeps clear of: the walls (the scene's and closed exits'), the moving
+/// walls' segments where they are, and the inside of the closed moving bodies.
+struct Obstacles<'a> {
+    walls: &'a Walls,
+    moving: &'a [Segment],
+    inside_moving: &'a dyn Fn([f64; 2]) -> bool,
 }
 
 /// One source as a run uses it.
@@ -446,13 +455,17 @@ impl Events {
 
     /// After the step that ended at `t`: places the people due by then who fit (in each
     /// source's order, the sources in turn), at the end of `people` with the next ids, and
-    /// returns how many entered.
+    /// returns how many entered. Newcomers keep clear of `walls` and of the moving walls'
+    /// segments at `t`, `moving`, and out of the moving bodies (`inside_moving`).
+    #[allow(clippy::too_many_arguments)]
     pub fn after_step(
         &mut self,
         t: f64,
         people: &mut People,
         scene: &Scene,
         walls: &Walls,
+        moving: &[Segment],
+        inside_moving: impl Fn([f64; 2]) -> bool,
         exits: &Exits,
     ) -> usize {
         self.entered.clear();
@@ -477,7 +490,12 @@ impl Events {
                 }
             }
             while self.sources[s].emitted < due {
-                let Some((p, r)) = self.find_room(s, people, scene, walls, exits) else {
+                let obstacles = Obstacles {
+                    walls,
+                    moving,
+                    inside_moving: &inside_moving,
+                };
+                let Some((p, r)) = self.find_room(s, people, scene, &obstacles, exits) else {
                     break;
                 };
                 let id = self.first_id + self.emitted() as u32;
@@ -500,14 +518,14 @@ impl Events {
 
     /// A place for the first person waiting at source `s` (drawing their radius if not yet
     /// drawn): at most [`Inflow::TRIES`] uniform points of the area's bounding box, the first
-    /// inside the area and the walkable area where the disk touches no wall and nobody near,
-    /// with a walkable path to the exit and not already through it.
+    /// inside the area and the walkable area where the disk touches no wall, no moving body
+    /// and nobody near, with a walkable path to the exit and not already through it.
     fn find_room(
         &mut self,
         s: usize,
         people: &People,
         scene: &Scene,
-        walls: &Walls,
+        obstacles: &Obstacles<'_>,
         exits: &Exits,
     ) -> Option<([f64; 2], f64)> {
         let source = &mut self.sources[s];
@@ -526,7 +544,7 @@ impl Events {
                 source.rng.random_range(source.lo[0]..=source.hi[0]),
                 source.rng.random_range(source.lo[1]..=source.hi[1]),
             ];
-            if !(source.area.contains(p) && scene.walkable(p)) {
+            if !(source.area.contains(p) && scene.walkable(p)) || (obstacles.inside_moving)(p) {
                 continue;
             }
             let overlaps = self.near_people.iter().any(|&j| {
@@ -534,7 +552,8 @@ impl Events {
                 (dx * dx + dy * dy).sqrt() - r - radii[j] < 0.0
             });
             if overlaps
-                || !self.clear(walls, p, r)
+                || !self.clear(obstacles.walls, p, r)
+                || obstacles.moving.iter().any(|w| w.distance(p) < r)
                 || !field.distance(p).is_finite()
                 || exit.reached(p, r)
             {

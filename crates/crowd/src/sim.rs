@@ -702,11 +702,14 @@ impl Simulation {
         let people = self.people.len();
         self.apply_exits();
         let left = self.people.len() != people;
+        let (moving, t) = (&self.moving, self.t);
         let entered = self.events.after_step(
-            self.t,
+            t,
             &mut self.people,
             &self.scene,
             &self.walls,
+            &self.moving_now,
+            |p| moving.inside(t, p),
             &self.exits,
         );
         if left || entered > 0 {
