@@ -457,7 +457,6 @@ impl Events {
     /// source's order, the sources in turn), at the end of `people` with the next ids, and
     /// returns how many entered. Newcomers keep clear of `walls` and of the moving walls'
     /// segments at `t`, `moving`, and out of the moving bodies (`inside_moving`).
-    #[allow(clippy::too_many_arguments)]
     pub fn after_step(
         &mut self,
         t: f64,
