@@ -346,6 +346,12 @@ impl Simulation {
         self.total + self.events.emitted()
     }
 
+    /// The most people the run can hold: those at the start and all its sources can bring
+    /// (the solver, and its fallback, are chosen for this many).
+    pub fn max_people(&self) -> usize {
+        self.total + self.events.capacity()
+    }
+
     /// The people present.
     pub fn people(&self) -> &People {
         &self.people
@@ -718,7 +724,7 @@ impl Simulation {
         let blocked =
             |p: [f64; 2], r: f64| moving.inside(t, p) || now.iter().any(|s| s.distance(p) < r);
         let entered = self.events.after_step(
-            self.t,
+            t,
             &mut self.people,
             &self.scene,
             &self.walls,

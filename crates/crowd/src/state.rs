@@ -52,9 +52,9 @@ pub struct SimState {
 }
 
 impl SimState {
-    /// The layout version; bumped whenever a field changes meaning (2: `inflow`, `moving`,
-    /// `fields_built`).
-    pub const FORMAT: u32 = 2;
+    /// The layout version; bumped whenever a field changes meaning (3: `inflow`, `moving`,
+    /// `fields_built`; 2 was written by builds with only some of them).
+    pub const FORMAT: u32 = 3;
 
     /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of
     /// the scene it was saved from.

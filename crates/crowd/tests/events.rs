@@ -44,12 +44,13 @@ impl Observer for Entries {
 }
 
 /// Steps `sim` to `t_end` one step at a time, checking after each that nobody overlaps beyond
-/// the certified violation and that ids increase; `each` sees the simulation after every step.
+/// the certified violation and that ids increase; `each` sees the simulation and who entered
+/// so far after every step.
 fn run_checked(
     sim: &mut Simulation,
     t_end: f64,
     entries: &mut Entries,
-    mut each: impl FnMut(&Simulation),
+    mut each: impl FnMut(&Simulation, &[EntryRecord]),
 ) -> usize {
     let bound = sim.scene().solver.max_violation;
     let mut steps = 0;
@@ -64,7 +65,7 @@ fn run_checked(
         let ids = sim.people().ids();
         assert!(ids.windows(2).all(|w| w[0] < w[1]), "ids do not increase");
         assert!(ids.iter().all(|&id| (id as usize) < sim.total_people()));
-        each(sim);
+        each(sim, &entries.0);
     }
     steps
 }
@@ -189,7 +190,7 @@ destination = "end"
     let mut sim = Simulation::new(scene).unwrap();
     assert_eq!(sim.total_people(), 0);
     let mut entries = Entries::default();
-    let steps = run_checked(&mut sim, 10.0, &mut entries, |_| {});
+    let steps = run_checked(&mut sim, 10.0, &mut entries, |_, _| {});
     assert_eq!(steps, 200);
     assert_eq!(sim.total_people(), 20);
     assert_eq!(sim.people().len(), 20);
@@ -231,7 +232,7 @@ destination = "end"
     let mut sim = Simulation::new(scene).unwrap();
     let mut entries = Entries::default();
     let (mut most_inside, mut waited) = (0, false);
-    run_checked(&mut sim, 20.0, &mut entries, |sim| {
+    run_checked(&mut sim, 20.0, &mut entries, |sim, _| {
         let people = sim.people();
         let inside = (0..people.len())
             .filter(|&i| {
@@ -278,7 +279,7 @@ destination = "end"
     );
     let mut sim = Simulation::new(scene).unwrap();
     let mut entries = Entries::default();
-    run_checked(&mut sim, 6.0, &mut entries, |_| {});
+    run_checked(&mut sim, 6.0, &mut entries, |_, _| {});
     assert_eq!(sim.total_people(), 7);
     assert!(
         entries.0[0].t >= 2.75 - 1e-9 && entries.0[0].t < 2.8,
@@ -326,4 +327,49 @@ destination = "end"
     let (beside, n_beside) = entered(&format!("{gate}{other}"));
     assert_eq!((n_alone, n_beside), (3, 3 + 9));
     assert_eq!(alone, beside);
+}
+
+#[test]
+fn newcomers_keep_clear_of_moving_bodies() {
+    // A 1 m box drifting through the gate's area while people enter there, 4 a second.
+    let scene = corridor(
+        30.0,
+        6.0,
+        r#"
+[[sources]]
+name = "gate"
+area = [[0.0, 0.0], [3.0, 0.0], [3.0, 4.0], [0.0, 4.0]]
+rate = 4.0
+radius = 0.2
+speed = 0.8
+destination = "end"
+[[moving]]
+name = "box"
+polygon = [[0.5, 1.5], [1.5, 1.5], [1.5, 2.5], [0.5, 2.5]]
+keyframes = [{ t = 0.0 }, { t = 6.0, offset = [1.2, 0.0] }]
+"#,
+    );
+    let mut sim = Simulation::new(scene).unwrap();
+    let mut entries = Entries::default();
+    let mut segments = Vec::new();
+    let mut near_the_box = 0;
+    run_checked(&mut sim, 6.0, &mut entries, |sim, entered| {
+        let t = sim.time();
+        sim.moving().segments_at(t, &mut segments);
+        for e in entered.iter().filter(|e| e.t == t) {
+            let p = sim.people().position(sim.people().index_of(e.id).unwrap());
+            assert!(!sim.moving().inside(t, p), "t = {t}: {p:?} in the box");
+            let gap = segments
+                .iter()
+                .map(|s| s.distance(p) - e.radius)
+                .fold(f64::INFINITY, f64::min);
+            assert!(gap >= 0.0, "t = {t}: {p:?} overlaps the box by {}", -gap);
+            near_the_box += usize::from(gap < 0.5);
+        }
+    });
+    assert_eq!(sim.total_people(), 24);
+    assert!(
+        near_the_box > 0,
+        "nobody entered near the box: the test would not see it"
+    );
 }

@@ -31,7 +31,9 @@ pub fn to_py(py: Python<'_>, e: CrowdError) -> PyErr {
             PyFileNotFoundError::new_err(message)
         }
         CrowdError::Io { .. } => PyOSError::new_err(message),
-        CrowdError::Observer(_) | CrowdError::Integrate(_) => PyRuntimeError::new_err(message),
+        CrowdError::Observer(_) | CrowdError::Integrate(_) | CrowdError::Infeasible(_) => {
+            PyRuntimeError::new_err(message)
+        }
     }
 }
 

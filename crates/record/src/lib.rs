@@ -15,7 +15,7 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 /// The solver settings in force, as the run file's `solver` attribute says them.
 pub fn solver_text(sim: &Simulation) -> String {
     let settings = toml::to_string(&sim.scene().solver).unwrap_or_default();
-    let solver = sim.solver_kind().describe(2 * sim.total_people());
+    let solver = sim.solver_kind().describe(2 * sim.max_people());
     format!(
         "{settings}# in force: ε_k = eps_kappa · μ³ (or tied to --tol), projection by {solver}, \
          broad phase {:?}, up to 8 redone steps per step\n",
