@@ -222,11 +222,26 @@ impl MovingBodies {
             .flat_map(|(k, b)| std::iter::repeat_n(k as u32, b.segments.len()))
     }
 
+    /// Each body's keyframe parameter at time `t` into `out` (cleared first).
+    pub fn params_at(&self, t: f64, out: &mut Vec<f64>) {
+        out.clear();
+        out.extend((0..self.bodies.len()).map(|k| self.param(k, t)));
+    }
+
     /// Every segment at time `t` into `out` (cleared first), in segment order.
     pub fn segments_at(&self, t: f64, out: &mut Vec<Segment>) {
+        self.place_segments(|k| self.param(k, t), out);
+    }
+
+    /// Every segment with body `k` at keyframe parameter `params[k]` into `out`.
+    pub fn segments_with(&self, params: &[f64], out: &mut Vec<Segment>) {
+        self.place_segments(|k| params[k], out);
+    }
+
+    fn place_segments(&self, param: impl Fn(usize) -> f64, out: &mut Vec<Segment>) {
         out.clear();
         for (k, b) in self.bodies.iter().enumerate() {
-            let pose = b.pose(self.param(k, t));
+            let pose = b.pose(param(k));
             out.extend(b.segments.iter().map(|s| Segment {
                 a: b.place(pose, s.a),
                 b: b.place(pose, s.b),
@@ -236,10 +251,19 @@ impl MovingBodies {
 
     /// True when `p` is inside a closed body at time `t`.
     pub fn inside(&self, t: f64, p: [f64; 2]) -> bool {
+        self.inside_placed(|k| self.param(k, t), p)
+    }
+
+    /// True when `p` is inside a closed body, body `k` at keyframe parameter `params[k]`.
+    pub fn inside_with(&self, params: &[f64], p: [f64; 2]) -> bool {
+        self.inside_placed(|k| params[k], p)
+    }
+
+    fn inside_placed(&self, param: impl Fn(usize) -> f64, p: [f64; 2]) -> bool {
         self.bodies.iter().enumerate().any(|(k, b)| {
             b.ring.as_ref().is_some_and(|ring| {
                 // Move the point back into the body's own frame instead of moving the ring.
-                let (offset, angle) = b.pose(self.param(k, t));
+                let (offset, angle) = b.pose(param(k));
                 let (s, c) = angle.sin_cos();
                 let d = [p[0] - b.pivot[0] - offset[0], p[1] - b.pivot[1] - offset[1]];
                 let x = [

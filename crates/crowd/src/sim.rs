@@ -180,9 +180,13 @@ pub struct Simulation {
     moving: MovingBodies,
     /// Their segments at `t`.
     moving_now: Vec<Segment>,
-    /// When the distance fields were last solved around the moving bodies (`None`: they see
-    /// the fixed walls only).
-    fields_built: Option<f64>,
+    /// Where the moving bodies were (their keyframe parameters) when the distance fields were
+    /// last solved around them (`None`: the fields see the fixed walls only).
+    fields_built: Option<Vec<f64>>,
+    /// How many `model.field_update` intervals had begun at the last check.
+    fields_due: f64,
+    /// Scratch: the bodies' parameters now.
+    params: Vec<f64>,
     people: People,
     exit_log: Vec<ExitRecord>,
     /// Release times and inflow sources.
@@ -233,11 +237,13 @@ impl Simulation {
         let moving = MovingBodies::new(&scene);
         let mut moving_now = Vec::new();
         moving.segments_at(0.0, &mut moving_now);
+        let mut params = Vec::new();
+        moving.params_at(0.0, &mut params);
         let fields_built =
-            (!moving.is_empty() && scene.model.field_update.is_some()).then_some(0.0);
-        let exits = match fields_built {
+            (!moving.is_empty() && scene.model.field_update.is_some()).then(|| params.clone());
+        let exits = match &fields_built {
             None => Exits::build(&scene, &|p| scene.walkable(p))?,
-            Some(t) => Exits::build(&scene, &walkable_at(&scene, &moving, &moving_now, t))?,
+            Some(at) => Exits::build(&scene, &walkable_with(&scene, &moving, &moving_now, at))?,
         };
         let mut exits = exits;
         // Exit panels follow the scene's own moving bodies, one segment each.
@@ -307,6 +313,8 @@ impl Simulation {
             moving,
             moving_now,
             fields_built,
+            fields_due: 0.0,
+            params,
             people,
             exit_log: Vec::new(),
             events,
@@ -615,27 +623,37 @@ impl Simulation {
         }
     }
 
-    /// Solves the distance fields again around the moving bodies where they are now, when
-    /// `model.field_update` seconds have passed since the last time and a body moved since;
-    /// returns the seconds it took.
+    /// At the first step from every `model.field_update` seconds on, solves the distance
+    /// fields again around the moving bodies where they are now, if any is elsewhere than at
+    /// the last solve; returns the seconds it took.
     fn update_fields(&mut self) -> f64 {
-        let (Some(built), Some(every)) = (self.fields_built, self.scene.model.field_update) else {
+        let (Some(built), Some(every)) = (&self.fields_built, self.scene.model.field_update) else {
             return 0.0;
         };
-        if self.t < built + every * (1.0 - 1e-9) || self.moving.max_speed(built, self.t) == 0.0 {
+        let due = (self.t / every * (1.0 + 1e-9)).floor() > self.fields_due;
+        if !due {
+            return 0.0;
+        }
+        self.fields_due = (self.t / every * (1.0 + 1e-9)).floor();
+        self.moving.params_at(self.t, &mut self.params);
+        if self.params == *built {
             return 0.0;
         }
         let start = std::time::Instant::now();
-        self.build_fields_at(self.t);
+        let params = std::mem::take(&mut self.params);
+        self.build_fields_with(params);
         start.elapsed().as_secs_f64()
     }
 
-    /// The distance fields around the moving bodies at `t` (their segments at `t` are in
-    /// `moving_now`).
-    fn build_fields_at(&mut self, t: f64) {
-        let walkable = walkable_at(&self.scene, &self.moving, &self.moving_now, t);
-        self.exits.rebuild_fields(&self.scene, &walkable);
-        self.fields_built = Some(t);
+    /// The distance fields around the moving bodies at keyframe parameters `params`.
+    fn build_fields_with(&mut self, params: Vec<f64>) {
+        let mut segments = Vec::new();
+        self.moving.segments_with(&params, &mut segments);
+        {
+            let walkable = walkable_with(&self.scene, &self.moving, &segments, &params);
+            self.exits.rebuild_fields(&self.scene, &walkable);
+        }
+        self.fields_built = Some(params);
     }
 
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
@@ -891,7 +909,8 @@ impl Simulation {
             inflow: self.events.state(),
             speed_factor: self.speed_factor,
             moving: self.moving.drives().to_vec(),
-            fields_built: self.fields_built,
+            fields_built: self.fields_built.clone(),
+            fields_due: self.fields_due,
             stepping: self.stepping.state(),
             multipliers: self.scheme.correction().warm_start().to_vec(),
         }
@@ -966,10 +985,14 @@ impl Simulation {
         }
         self.rebuild_walls();
         self.moving.set_drives(&state.moving);
-        if let Some(built) = state.fields_built.filter(|_| self.fields_built.is_some()) {
-            self.moving.segments_at(built, &mut self.moving_now);
-            self.build_fields_at(built);
+        if let Some(built) = state
+            .fields_built
+            .clone()
+            .filter(|_| self.fields_built.is_some())
+        {
+            self.build_fields_with(built);
         }
+        self.fields_due = state.fields_due;
         self.moving.segments_at(self.t, &mut self.moving_now);
         for x in &mut self.exits.exits {
             x.update_passage(&self.moving_now);
@@ -983,17 +1006,20 @@ impl Simulation {
     }
 }
 
-/// Whether the grid cell centred at `p` is walkable at time `t`: in the scene's area, outside
-/// every closed moving body, and not crossed by a moving segment (`segments`, where the bodies
-/// are at `t`: within half a cell diagonal).
-fn walkable_at<'a>(
+/// Whether the grid cell centred at `p` is walkable with the moving bodies at keyframe
+/// parameters `params`: in the scene's area, outside every closed moving body, and not
+/// crossed by a moving segment (`segments`, where the bodies are then: within half a cell
+/// diagonal).
+fn walkable_with<'a>(
     scene: &'a Scene,
     moving: &'a MovingBodies,
     segments: &'a [Segment],
-    t: f64,
+    params: &'a [f64],
 ) -> impl Fn([f64; 2]) -> bool + 'a {
     let reach = 0.5 * std::f64::consts::SQRT_2 * scene.solver.grid_cell;
     move |p| {
-        scene.walkable(p) && !moving.inside(t, p) && segments.iter().all(|s| s.distance(p) > reach)
+        scene.walkable(p)
+            && !moving.inside_with(params, p)
+            && segments.iter().all(|s| s.distance(p) > reach)
     }
 }

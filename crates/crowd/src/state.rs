@@ -42,9 +42,11 @@ pub struct SimState {
     pub speed_factor: f64,
     /// How each moving body is driven (`None`: by its keyframes in time).
     pub moving: Vec<Option<crate::moving::Drive>>,
-    /// When the distance fields were last solved around the moving bodies (`None`: never,
-    /// the scene does not ask for it).
-    pub fields_built: Option<f64>,
+    /// Where the moving bodies were (keyframe parameters) when the distance fields were last
+    /// solved around them (`None`: the scene does not ask for it).
+    pub fields_built: Option<Vec<f64>>,
+    /// How many `model.field_update` intervals had begun at the last check.
+    pub fields_due: f64,
     /// The step controller's memory (adaptive steps).
     pub stepping: SteppingState,
     /// The last step's multipliers by contact key: the next step's warm start.
