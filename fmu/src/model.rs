@@ -563,10 +563,18 @@ impl CrowdModel {
         self.min_gap = None;
         // The moving bodies follow their inputs, not the clock: each goes linearly from where
         // it is to its input's value at the end of this communication step (the FMU
-        // translates the input into a drive; the simulation moves the body).
+        // translates the input into a drive; the simulation moves the body). A body is driven
+        // at the first step (never driven, it would follow its keyframes in time) and then
+        // only when its input moved: a drive to where the body already is would hold it just
+        // the same, but would replace the drive that last moved it, and the simulation tells
+        // from that one whether the body moved since it last solved the distance fields
+        // around the bodies (`model.field_update`).
         let t_end = self.sim.time() + h;
         for (b, &target) in self.targets.iter().enumerate() {
-            self.sim.drive_moving(b, target, t_end)?;
+            let bodies = self.sim.moving();
+            if bodies.drives()[b].is_none() || bodies.param(b, self.sim.time()) != target {
+                self.sim.drive_moving(b, target, t_end)?;
+            }
         }
         self.sim.advance_to(t_end, &mut LastEps(&mut self.eps))?;
         self.time = t + h;

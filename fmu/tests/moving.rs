@@ -372,17 +372,28 @@ fn door(k: usize) -> f64 {
     if k as f64 * H >= 2.0 { 1.0 } else { 0.0 }
 }
 
-/// The native run of the corridor, its door driven as the FMU drives it from `door`: held at
-/// its start (it would follow its keyframes in time, closing during the first second,
-/// without a drive), then to each value at the end of each communication step. The outputs
-/// after each step, as [`Fmu::outputs`] reads them.
-fn native(door: impl Fn(usize) -> f64, drive: bool) -> Vec<Outputs> {
-    let mut sim = Simulation::new(Scene::from_file(corridor()).unwrap()).unwrap();
+/// How a native run drives the door.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Drive {
+    /// Not at all: it follows its keyframes in time (and closes during the first second).
+    Never,
+    /// To the value for each communication step, before every step.
+    EveryStep,
+    /// Held at the start, then again only when the value changes.
+    OnChange,
+}
+
+/// The native run of `scene`, its door driven with `door(k)` for the communication step `k`
+/// (to that value at the end of the step). The outputs after each step, as [`Fmu::outputs`]
+/// reads them.
+fn native_of(scene: Scene, door: impl Fn(usize) -> f64, drive: Drive) -> Vec<Outputs> {
+    let mut sim = Simulation::new(scene).unwrap();
     let mut out = Vec::new();
     let mut q = vec![0.0; 2 * PEOPLE];
     for k in 0..STEPS {
         let t_end = sim.time() + H;
-        if drive {
+        let changed = k == 0 || door(k) != door(k - 1);
+        if drive == Drive::EveryStep || (drive == Drive::OnChange && changed) {
             sim.drive_moving(0, door(k), t_end).unwrap();
         }
         sim.advance_to(t_end, &mut ()).unwrap();
@@ -398,9 +409,25 @@ fn native(door: impl Fn(usize) -> f64, drive: bool) -> Vec<Outputs> {
     out
 }
 
+/// The native run of the corridor, its door driven before every communication step.
+fn native(door: impl Fn(usize) -> f64, drive: bool) -> Vec<Outputs> {
+    let drive = if drive {
+        Drive::EveryStep
+    } else {
+        Drive::Never
+    };
+    native_of(Scene::from_file(corridor()).unwrap(), door, drive)
+}
+
 /// The FMU run with the door's input from `door` (set before each step; `None`: never set).
 fn fmu_run(v3: bool, door: impl Fn(usize) -> Option<f64>) -> Vec<Outputs> {
-    let mut fmu = Fmu::stepping(v3);
+    fmu_run_of(v3, &corridor().display().to_string(), door)
+}
+
+/// [`fmu_run`] on the scene file `scene`.
+fn fmu_run_of(v3: bool, scene: &str, door: impl Fn(usize) -> Option<f64>) -> Vec<Outputs> {
+    let mut fmu = Fmu::instantiate(v3, Some(scene));
+    fmu.initialize();
     (0..STEPS)
         .map(|k| {
             if let Some(x) = door(k) {
@@ -469,6 +496,47 @@ fn without_its_input_the_door_stays_open_and_without_the_drive_the_runs_differ()
     assert_eq!(clock.last().unwrap().evacuated, AHEAD);
     // And the door closed at 2 s is another run than the open one.
     assert_ne!(open, native(door, true));
+}
+
+#[test]
+fn with_field_update_the_fields_see_the_door_the_fmu_closed() {
+    // The corridor with its distance fields solved again every 0.5 s around the bodies that
+    // moved: once the door is closed, the people behind it have no way to the exit and stand
+    // where they are instead of pressing against the door.
+    let mut scene = Scene::from_file(corridor()).unwrap();
+    scene.model.field_update = Some(0.5);
+    let dir = std::env::temp_dir().join(format!("moreau-fmu-moving-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("corridor-door-fields.toml");
+    std::fs::write(&path, scene.to_toml()).unwrap();
+
+    let run = fmu_run_of(true, &path.display().to_string(), |k| Some(door(k)));
+    // The simulation, driven as a user of the crate drives it (once at the start to hold the
+    // door, once to close it), is the FMU's run, field updates included.
+    assert_eq!(run, native_of(scene.clone(), door, Drive::OnChange));
+    let x = |o: &Outputs, id: usize| f64::from_bits(o.positions[2 * id]);
+    let behind: Vec<usize> = (0..PEOPLE).filter(|&id| x(&run[7], id) < PANEL_X).collect();
+    let front = behind
+        .iter()
+        .map(|&id| x(run.last().unwrap(), id))
+        .fold(0.0, f64::max);
+    assert!(
+        front < PANEL_X - 1.0,
+        "the front stands at {front}, not at the door"
+    );
+    assert_eq!(run.last().unwrap().evacuated, AHEAD);
+    // A drive before every step holds the door just the same, but each replaces the drive
+    // that closed it, and the simulation, which looks at the current drive to tell whether a
+    // body moved since the fields were solved, never solves them around the closed door: the
+    // front walks up to the door as if it were open. (Hence the FMU drives on change only.)
+    let every = native_of(scene, door, Drive::EveryStep);
+    assert_ne!(run, every);
+    let front = behind
+        .iter()
+        .map(|&id| x(every.last().unwrap(), id))
+        .fold(0.0, f64::max);
+    assert!(front > PANEL_X - RADIUS - 0.01, "{front}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
