@@ -701,3 +701,48 @@ fn a_value_set_before_the_first_step_is_reached_at_its_end() {
     assert_eq!(sim.moving().param(0, 0.25), 0.5);
     assert_eq!(sim.moving().param(0, 0.0), 0.0);
 }
+
+/// Known to fail, in the crowd crate: `Simulation::restore` solves the distance fields again
+/// at the time they were last solved (`SimState::fields_built`) with the bodies placed by the
+/// drive current at the save. When the drive changed since that time (here the fields are
+/// solved at about 2.01 s during the drive 0 → 0.25 over [2, 2.25], and the state is taken at
+/// 2.5 s under the drive 0.25 → 0.5 over [2.25, 2.5]), the door is put at 0.25 instead of
+/// about 0.01, the restored fields differ, and so does the continuation, from its first step.
+/// Without `model.field_update` (the other tests) states round-trip exactly.
+#[test]
+#[ignore = "crowd crate: Simulation::restore places driven bodies by the current drive when it re-solves the fields"]
+fn with_field_update_a_state_taken_during_a_ramp_gives_the_same_continuation() {
+    let mut scene = Scene::from_file(corridor()).unwrap();
+    scene.model.field_update = Some(0.5);
+    let dir = std::env::temp_dir().join(format!("moreau-fmu-ramp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("corridor-door-fields.toml");
+    std::fs::write(&path, scene.to_toml()).unwrap();
+    let ramp = |k: usize| (0.25 * (k as f64 - 7.0)).clamp(0.0, 1.0);
+    let mut fmu = Fmu::instantiate(true, Some(&path.display().to_string()));
+    fmu.initialize();
+    for k in 0..10 {
+        fmu.set_ok(DOOR, ramp(k));
+        fmu.do_step(k as f64 * H, H);
+    }
+    let state = fmu.get_state();
+    let go_on = |fmu: &mut Fmu| -> Vec<Outputs> {
+        (10..30)
+            .map(|k| {
+                fmu.set_ok(DOOR, ramp(k));
+                fmu.do_step(k as f64 * H, H);
+                fmu.outputs()
+            })
+            .collect()
+    };
+    let straight = go_on(&mut fmu);
+    fmu.set_state(state);
+    let again = go_on(&mut fmu);
+    fmu.free_state(state);
+    std::fs::remove_dir_all(&dir).unwrap();
+    let first = straight.iter().zip(&again).position(|(a, b)| a != b);
+    assert_eq!(
+        first, None,
+        "the continuations differ from step {first:?} on"
+    );
+}
