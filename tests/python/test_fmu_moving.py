@@ -27,9 +27,12 @@ STOP, H = 12.0, 0.25
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     out = tmp_path_factory.mktemp("corridor-fmus")
-    subprocess.run([sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build",
-                    "--scene", str(SCENE), "--out", str(out)], check=True, capture_output=True)
-    return {v: out / f"moreau-crowd-corridor-door-fmi{v}.fmu" for v in ("2", "3")}
+    package = [sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build", "--out", str(out)]
+    subprocess.run(package + ["--scene", str(SCENE)], check=True, capture_output=True)
+    subprocess.run(package, check=True, capture_output=True)  # the room's, for comparison
+    fmus = {v: out / f"moreau-crowd-corridor-door-fmi{v}.fmu" for v in ("2", "3")}
+    fmus.update({f"room{v}": out / f"moreau-crowd-fmi{v}.fmu" for v in ("2", "3")})
+    return fmus
 
 
 @pytest.mark.parametrize("version", ["2", "3"])
@@ -49,7 +52,7 @@ def test_the_door_is_a_continuous_real_input_and_fmpy_validates_the_fmu(fmus, ve
     if version == "3":
         assert next(v for v in md.modelVariables if v.name == "n_people").start == str(PEOPLE)
     # The room's FMU has no moving body, hence no such input.
-    room = read_model_description(str(ROOT / "target" / "fmu" / f"moreau-crowd-fmi{version}.fmu"))
+    room = read_model_description(str(fmus[f"room{version}"]))
     assert moreau_fmi.moving_inputs(room) == {}
 
 
