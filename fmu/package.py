@@ -8,6 +8,18 @@ of the FMU library and writes
 each a zip of modelDescription.xml (from fmu/fmi2 or fmu/fmi3, the same text the binary
 embeds, so GUID and instantiation token agree), binaries/<platform>/moreau_fmu.so and
 resources/room-150.toml (the default scene). Standard library only.
+
+With `--scene FILE` it builds the FMUs of that scene instead,
+
+    target/fmu/moreau-crowd-<scene>-fmi2.fmu, target/fmu/moreau-crowd-<scene>-fmi3.fmu
+
+with the scene as resources/<scene>.toml (the FMU's default scene: the one scene file in its
+resources) and a model description generated from the shipped one for the scene: n_people
+starts at the scene's count (FMI 3), the default experiment stops at its horizon, and every
+moving body (`[[moving]]`) is a continuous Real input `moving.<name>` with value reference
+1000 + its index in the scene: the body's keyframe parameter, from its first keyframe's time
+(the start value) to its last. The binary is the same (it serves the inputs of whatever scene
+it runs), and so is the GUID / instantiation token it checks.
 """
 
 import argparse
@@ -17,30 +29,97 @@ import subprocess
 import sys
 import tomllib
 import zipfile
+from xml.sax.saxutils import escape, quoteattr
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 IDENTIFIER = "moreau_fmu"
 PLATFORMS = {"2": "linux64", "3": "x86_64-linux"}
+ROOM = ROOT / "data" / "scenes" / "room-150.toml"
+# The value reference of the first moving body's position (fmu/src/model.rs, vr::MOVING).
+MOVING = 1000
 
 
-def package(version: str, library: pathlib.Path, out: pathlib.Path) -> pathlib.Path:
+def people_of(scene: dict) -> int:
+    """The people a scene places: its groups' counts (or listed positions)."""
+    return sum(g.get("count", len(g.get("positions", []))) for g in scene["groups"])
+
+
+def substitute(text: str, pattern: str, replacement: str, where: pathlib.Path) -> str:
+    """`text` with the one match of `pattern` replaced; a template that changed stops the build."""
+    out, n = re.subn(pattern, lambda _: replacement, text)
+    if n != 1:
+        sys.exit(f"{where}: {n} matches of {pattern!r} (expected 1): the template changed")
+    return out
+
+
+def for_scene(version: str, text: str, path: pathlib.Path, where: pathlib.Path) -> str:
+    """The shipped model description `text` made the description of the FMU of scene `path`."""
+    scene = tomllib.loads(path.read_text())
+    file = path.name
+    text = substitute(text, r"Default scene: [^\"]*?\(resources/room-150\.toml\)\.",
+                      escape(f"Default scene: {scene.get('name', path.stem)} (resources/{file}).",
+                             {'"': "&quot;"}), where)
+    text = substitute(text, r"empty: resources/room-150\.toml", escape(f"empty: resources/{file}"),
+                      where)
+    horizon = scene.get("time", {}).get("horizon")
+    if horizon is not None:
+        text = substitute(text, r'stopTime="[^"]*"', f'stopTime="{float(horizon)!r}"', where)
+    if version == "3":
+        start = re.search(r'<UInt64 name="n_people"[^>]* start="\d+"', text)
+        if start is None:
+            sys.exit(f"{where}: no start value of n_people: the template changed")
+        text = text.replace(start.group(0), re.sub(r'start="\d+"', f'start="{people_of(scene)}"',
+                                                   start.group(0)))
+    variables = []
+    index = len(re.findall(r"<ScalarVariable ", text))
+    for b, body in enumerate(scene.get("moving", [])):
+        keys = body["keyframes"]
+        first, last = float(keys[0]["t"]), float(keys[-1]["t"])
+        name = quoteattr(f"moving.{body['name']}")
+        description = quoteattr(
+            f"Position of the moving body '{body['name']}': its keyframe parameter, from "
+            f"{first!r} to {last!r} (the scene's keyframe times). The value set at a "
+            f"communication point t is where the body is at t + h: it moves there linearly "
+            f"during the step. Never set: held at {first!r}, where the scene puts it at the start")
+        vr = MOVING + b
+        if version == "2":
+            index += 1
+            variables.append(
+                f'    <!-- {index} --><ScalarVariable name={name} valueReference="{vr}" '
+                f'causality="input" variability="continuous" description={description}>\n'
+                f'      <Real start="{first!r}" min="{first!r}" max="{last!r}"/>\n'
+                f'    </ScalarVariable>\n')
+        else:
+            variables.append(
+                f'    <Float64 name={name} valueReference="{vr}" causality="input" '
+                f'variability="continuous" start="{first!r}" min="{first!r}" max="{last!r}" '
+                f'description={description}/>\n')
+    return substitute(text, r"  </ModelVariables>", "".join(variables) + "  </ModelVariables>",
+                      where)
+
+
+def package(version: str, library: pathlib.Path, out: pathlib.Path,
+            scene: pathlib.Path | None = None) -> pathlib.Path:
     description = ROOT / "fmu" / f"fmi{version}" / "modelDescription.xml"
     text = description.read_text()
     if f'modelIdentifier="{IDENTIFIER}"' not in text:
         sys.exit(f"{description}: modelIdentifier is not {IDENTIFIER}")
     # FMI 3 sizes its arrays by the structural parameter n_people, whose start value (what
     # importers that read only the XML size the arrays with) is the shipped scene's count.
-    scene = tomllib.loads((ROOT / "data" / "scenes" / "room-150.toml").read_text())
-    people = sum(g.get("count", len(g.get("positions", []))) for g in scene["groups"])
+    people = people_of(tomllib.loads(ROOM.read_text()))
     for start in re.findall(r'<UInt64 name="n_people"[^>]* start="(\d+)"', text):
         if int(start) != people:
             sys.exit(f"{description}: n_people starts at {start}, the scene has {people} people")
-    target = out / f"moreau-crowd-fmi{version}.fmu"
+    if scene is None:
+        target, shipped = out / f"moreau-crowd-fmi{version}.fmu", ROOM
+    else:
+        text = for_scene(version, text, scene, description)
+        target, shipped = out / f"moreau-crowd-{scene.stem}-fmi{version}.fmu", scene
     tmp = target.with_suffix(".fmu.partial")
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("modelDescription.xml", text)
         z.write(library, f"binaries/{PLATFORMS[version]}/{IDENTIFIER}.so")
-        z.write(ROOT / "data" / "scenes" / "room-150.toml", "resources/room-150.toml")
+        z.write(shipped, f"resources/{shipped.name}")
         z.writestr("documentation/index.html",
                    "<html><body><p>moreau crowd FMU: see README.md of the moreau repository, "
                    "section 'The FMU'.</p></body></html>\n")
@@ -53,7 +132,11 @@ def main() -> int:
     parser.add_argument("--fmi", choices=["2", "3", "all"], default="all")
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "target" / "fmu")
     parser.add_argument("--no-build", action="store_true", help="use the library as built")
+    parser.add_argument("--scene", type=pathlib.Path,
+                        help="build the FMUs of this scene (its moving bodies become inputs)")
     args = parser.parse_args()
+    if args.scene is not None and not args.scene.is_file():
+        sys.exit(f"{args.scene}: no such scene file")
     if not args.no_build:
         subprocess.run(["cargo", "build", "--release", "--locked", "-p", "moreau-fmu"],
                        cwd=ROOT, check=True)
@@ -63,7 +146,7 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     versions = ["2", "3"] if args.fmi == "all" else [args.fmi]
     for v in versions:
-        print(f"wrote {package(v, library, args.out)}")
+        print(f"wrote {package(v, library, args.out, args.scene)}")
     return 0
 
 

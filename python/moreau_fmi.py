@@ -15,6 +15,15 @@ scene and returns fmpy's model description with the arrays sized for it; give it
     r["positions"].shape   # (11, 60, 2)
 
 The FMI 2 FMU has scalar outputs only: nothing to size.
+
+An FMU built for a scene with moving bodies (`fmu/package.py --scene FILE`) has one
+continuous Real input per body, `moving.<name>`: the body's keyframe parameter (its position).
+`moving_inputs(md)` lists them and `signal(md, time, {...})` makes the input array of
+`simulate_fmu` for them (and the other inputs), typed from the model description:
+
+    md = read_model_description("target/fmu/moreau-crowd-corridor-door-fmi3.fmu")
+    door = moreau_fmi.signal(md, [0, 2, 2.25, 12], {"moving.door": [0, 0, 1, 1]})
+    r = simulate_fmu(fmu, stop_time=12, output_interval=0.25, input=door)
 """
 
 from __future__ import annotations
@@ -26,6 +35,8 @@ from fmpy import extract, read_model_description
 from fmpy.model_description import ModelDescription
 
 N_PEOPLE = "n_people"
+# The value reference of the first moving body's position input (fmu/src/model.rs, vr::MOVING).
+MOVING = 1000
 
 
 def people(fmu: str | os.PathLike, scene: str | os.PathLike | None = None,
@@ -68,3 +79,38 @@ def model_description(fmu: str | os.PathLike,
             v.shape = tuple(int(d.start) if d.start is not None
                             else int(by_vr[d.valueReference].start) for d in v.dimensions)
     return md
+
+
+def moving_inputs(md: ModelDescription) -> dict:
+    """The moving bodies' position inputs of `md` by body name (`door` for `moving.door`):
+    fmpy's variables, continuous Real inputs with value references 1000, 1001, ... in the
+    scene's order."""
+    return {v.name.removeprefix("moving."): v for v in md.modelVariables
+            if v.causality == "input" and v.name.startswith("moving.")
+            and v.valueReference >= MOVING}
+
+
+def signal(md: ModelDescription, time, values: dict):
+    """The structured array `simulate_fmu(..., input=...)` takes: a column `time` and one per
+    input named in `values` (e.g. `{"moving.door": [0, 0, 1, 1]}`), each as long as `time`.
+    Real inputs are floats, Boolean ones bools; a name that is not an input of `md` is
+    refused, naming the inputs there are."""
+    import numpy as np
+
+    inputs = {v.name: v for v in md.modelVariables if v.causality == "input"}
+    columns = [("time", np.float64)]
+    for name in values:
+        if name not in inputs:
+            raise ValueError(f"{name!r} is not an input of {md.modelName} "
+                             f"(its inputs: {', '.join(sorted(inputs))})")
+        columns.append((name, np.bool_ if inputs[name].type == "Boolean" else np.float64))
+    time = np.asarray(time, dtype=np.float64)
+    out = np.zeros(len(time), dtype=columns)
+    out["time"] = time
+    for name, column in values.items():
+        column = np.asarray(column)
+        if column.shape != time.shape:
+            raise ValueError(f"{name}: {column.shape[0] if column.ndim else 1} values for "
+                             f"{len(time)} times")
+        out[name] = column
+    return out

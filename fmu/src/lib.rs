@@ -43,7 +43,7 @@ pub enum FmuError {
         /// The value reference.
         vr: u32,
         /// The variable's name.
-        name: &'static str,
+        name: String,
     },
     /// A value or setting out of its domain.
     #[error("{0}")]

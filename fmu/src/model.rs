@@ -1,6 +1,7 @@
 //! The model behind the FMU: a crowd scene stepped by the catching-up scheme between
 //! communication points, its variables, parameters, inputs and outputs. No FMI here.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use moreau_core::{Num, StepReport};
@@ -84,6 +85,21 @@ pub mod vr {
     pub const POSITIONS: u32 = 31;
     /// Radii `[nPeople]` (FMI 3).
     pub const RADII: u32 = 32;
+    /// The position of the scene's moving body `b` (its keyframe parameter) is the input
+    /// `MOVING + b`, named `moving.<name>`, for the bodies in the order the scene lists them
+    /// (see [`moving_body`](super::moving_body)).
+    pub const MOVING: u32 = 1000;
+}
+
+/// The moving body whose position input has value reference `vr` (`vr::MOVING + b`), if `vr`
+/// is in that range; whether the scene has body `b` is the model's to say.
+pub fn moving_body(vr: u32) -> Option<usize> {
+    vr.checked_sub(vr::MOVING).map(|b| b as usize)
+}
+
+/// The name of the position input of the moving body `name`.
+pub fn moving_name(name: &str) -> String {
+    format!("moving.{name}")
 }
 
 /// Every variable, in the order of the model descriptions.
@@ -202,6 +218,9 @@ pub struct Settings {
     pub speed_factor: f64,
     /// `door_open`.
     pub door_open: bool,
+    /// `moving.<name>`: the positions (keyframe parameters) the master set, by body; a body
+    /// not in it is held at its start value, its first keyframe's time.
+    pub moving: BTreeMap<usize, f64>,
     /// The start time the master set up (not a variable).
     pub start_time: f64,
 }
@@ -216,13 +235,81 @@ impl Default for Settings {
             desired_speed_factor: 1.0,
             speed_factor: 1.0,
             door_open: true,
+            moving: BTreeMap::new(),
             start_time: 0.0,
         }
     }
 }
 
-/// The scene the FMU runs when the `scene` parameter is empty.
+/// The scene the FMU runs when the `scene` parameter is empty: the room, in the FMU built for
+/// it (see [`default_scene`]).
 pub const DEFAULT_SCENE: &str = "room-150.toml";
+
+/// The scene file the FMU runs when the `scene` parameter is empty: `resources/room-150.toml`
+/// when it is there (the room's FMU), else the one scene file (`*.toml`) in `resources/` (an
+/// FMU that `fmu/package.py --scene` built for its scene).
+pub fn default_scene(resources: &Path) -> Result<PathBuf, FmuError> {
+    let room = resources.join(DEFAULT_SCENE);
+    if room.is_file() {
+        return Ok(room);
+    }
+    let mut scenes: Vec<PathBuf> = std::fs::read_dir(resources)
+        .map_err(|e| {
+            FmuError::Setting(format!(
+                "scene: empty, and the resources {} cannot be read ({e})",
+                resources.display()
+            ))
+        })?
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml") && p.is_file())
+        .collect();
+    scenes.sort();
+    match scenes.as_slice() {
+        [one] => Ok(one.clone()),
+        _ => Err(FmuError::Setting(format!(
+            "scene: empty, and the resources {} hold {} scene files but no {DEFAULT_SCENE} (one \
+             is the default; set scene to choose)",
+            resources.display(),
+            scenes.len()
+        ))),
+    }
+}
+
+/// The position input of one moving body: the body's keyframe parameter, between its first
+/// and last keyframe times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MovingInput {
+    /// The variable's name, `moving.<name>`.
+    pub name: String,
+    /// The first keyframe's time: the start value (the body where the scene puts it at the
+    /// start, since keyframe times are ≥ 0 and a pose is held before the first) and the least
+    /// value.
+    pub min: f64,
+    /// The last keyframe's time: the largest value.
+    pub max: f64,
+}
+
+impl MovingInput {
+    /// The start value: the first keyframe's time.
+    pub fn start(&self) -> f64 {
+        self.min
+    }
+
+    /// Why `value` is no position of this body, if it is not.
+    pub fn refuse(&self, value: f64) -> Option<String> {
+        if !value.is_finite() {
+            Some("not a finite number".into())
+        } else if !(self.min..=self.max).contains(&value) {
+            Some(format!(
+                "outside the body's keyframe times [{}, {}]",
+                Num(self.min),
+                Num(self.max)
+            ))
+        } else {
+            None
+        }
+    }
+}
 
 /// A crowd stepped between communication points.
 #[derive(Debug)]
@@ -233,6 +320,10 @@ pub struct CrowdModel {
     mean_speed: f64,
     min_gap: Option<f64>,
     people: usize,
+    /// The position inputs of the moving bodies, in the scene's order.
+    moving: Vec<MovingInput>,
+    /// Where each body is driven to at the end of the next communication step.
+    targets: Vec<f64>,
     before: Vec<f64>,
     after: Vec<f64>,
 }
@@ -276,7 +367,7 @@ impl CrowdModel {
             let dir = resources.ok_or_else(|| {
                 FmuError::Setting("scene: empty, and the FMU was given no resource location".into())
             })?;
-            dir.join(DEFAULT_SCENE)
+            default_scene(dir)?
         } else {
             PathBuf::from(&settings.scene)
         };
@@ -313,6 +404,17 @@ impl CrowdModel {
                 path.display()
             )));
         }
+        let moving: Vec<MovingInput> = sim
+            .scene()
+            .moving
+            .iter()
+            .map(|body| MovingInput {
+                name: moving_name(&body.name),
+                min: body.keyframes.first().map_or(0.0, |k| k.t),
+                max: body.keyframes.last().map_or(0.0, |k| k.t),
+            })
+            .collect();
+        let targets = moving.iter().map(MovingInput::start).collect();
         let mut model = Self {
             sim,
             time: settings.start_time,
@@ -320,6 +422,8 @@ impl CrowdModel {
             mean_speed: 0.0,
             min_gap: None,
             people,
+            moving,
+            targets,
             before: Vec::new(),
             after: Vec::new(),
         };
@@ -335,6 +439,23 @@ impl CrowdModel {
     /// The model's time.
     pub fn time(&self) -> f64 {
         self.time
+    }
+
+    /// The position inputs of the scene's moving bodies, in the scene's order (body `b`'s at
+    /// value reference `vr::MOVING + b`).
+    pub fn moving(&self) -> &[MovingInput] {
+        &self.moving
+    }
+
+    /// Where moving body `b` is now: its keyframe parameter at the model's time (the input's
+    /// value set before the last communication step, or the start value).
+    pub fn moving_position(&self, b: usize) -> f64 {
+        self.sim.moving().param(b, self.sim.time())
+    }
+
+    /// The simulation the model steps (read only: the FMU translates, the simulation runs).
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
     }
 
     /// The hash of the scene the model runs (with the `step` and `eps_kappa` it was built
@@ -380,10 +501,30 @@ impl CrowdModel {
                 Num(settings.speed_factor)
             )));
         }
+        let mut targets: Vec<f64> = self.moving.iter().map(MovingInput::start).collect();
+        for (&b, &value) in &settings.moving {
+            let input = self.moving.get(b).ok_or_else(|| {
+                FmuError::Setting(format!(
+                    "value reference {} set to {}: the scene has {} moving bodies",
+                    vr::MOVING as usize + b,
+                    Num(value),
+                    self.moving.len()
+                ))
+            })?;
+            if let Some(why) = input.refuse(value) {
+                return Err(FmuError::Setting(format!(
+                    "{} = {}: {why}",
+                    input.name,
+                    Num(value)
+                )));
+            }
+            targets[b] = value;
+        }
         self.sim.set_speed_factor(factor);
         if self.sim.exit_open(0).is_some() {
             self.sim.set_exit_open(0, settings.door_open)?;
         }
+        self.targets = targets;
         self.min_gap = None;
         Ok(())
     }
@@ -420,8 +561,22 @@ impl CrowdModel {
         self.before.resize(2 * self.people, 0.0);
         self.sim.frame().positions_by_id(&mut self.before);
         self.min_gap = None;
-        self.sim
-            .advance_to(self.sim.time() + h, &mut LastEps(&mut self.eps))?;
+        // The moving bodies follow their inputs, not the clock: each goes linearly from where
+        // it is to its input's value at the end of this communication step (the FMU
+        // translates the input into a drive; the simulation moves the body). A body is driven
+        // at the first step (never driven, it would follow its keyframes in time) and then
+        // only when its input moved: a drive to where the body already is would hold it just
+        // the same, but would replace the drive that last moved it, and the simulation tells
+        // from that one whether the body moved since it last solved the distance fields
+        // around the bodies (`model.field_update`).
+        let t_end = self.sim.time() + h;
+        for (b, &target) in self.targets.iter().enumerate() {
+            let bodies = self.sim.moving();
+            if bodies.drives()[b].is_none() || bodies.param(b, self.sim.time()) != target {
+                self.sim.drive_moving(b, target, t_end)?;
+            }
+        }
+        self.sim.advance_to(t_end, &mut LastEps(&mut self.eps))?;
         self.time = t + h;
         // Mean speed of the people present before and after the communication step.
         self.after.resize(2 * self.people, 0.0);

@@ -8,8 +8,20 @@ use moreau_core::Num;
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
-use crate::model::{Causality, CrowdModel, Kind, Settings, variable, vr};
+use crate::model::{Causality, CrowdModel, Kind, Settings, moving_body, variable, vr};
 use crate::snapshot::Snapshot;
+
+/// What the runtime checks a value reference against: the variable's name, type and role. The
+/// model's variables are fixed ([`crate::model::VARIABLES`]); the moving bodies' position
+/// inputs are the scene's (`moving.<name>`, Real inputs).
+#[derive(Debug, Clone)]
+struct Described {
+    name: String,
+    kind: Kind,
+    causality: Causality,
+    /// The moving body, for a position input.
+    body: Option<usize>,
+}
 
 /// The states of a co-simulation instance (FMI 2 names in brackets).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -108,11 +120,16 @@ impl Instance {
 
     /// The scene the instance runs, as a user names it.
     pub fn scene_name(&self) -> String {
-        if self.settings.scene.is_empty() {
-            format!("resources/{}", crate::model::DEFAULT_SCENE)
-        } else {
-            self.settings.scene.clone()
+        if !self.settings.scene.is_empty() {
+            return self.settings.scene.clone();
         }
+        let file = self
+            .resources
+            .as_deref()
+            .and_then(|dir| crate::model::default_scene(dir).ok())
+            .and_then(|p| p.file_name().map(|f| f.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| crate::model::DEFAULT_SCENE.to_string());
+        format!("resources/{file}")
     }
 
     /// The model, built from the settings on first use (again after a parameter changed).
@@ -125,8 +142,38 @@ impl Instance {
         Ok(self.model.as_mut().expect("just built"))
     }
 
-    fn settable(&self, vr: u32, kind: Kind) -> Result<Causality, FmuError> {
-        let v = variable(vr).ok_or(FmuError::UnknownReference(vr))?;
+    /// The variable `vr`: one of the model's, or the position input of a moving body of the
+    /// scene (the model is built to know the scene's bodies).
+    fn describe(&mut self, vr: u32) -> Result<Described, FmuError> {
+        if let Some(v) = variable(vr) {
+            return Ok(Described {
+                name: v.name.to_string(),
+                kind: v.kind,
+                causality: v.causality,
+                body: None,
+            });
+        }
+        let b = moving_body(vr).ok_or(FmuError::UnknownReference(vr))?;
+        let scene = self.scene_name();
+        let model = self.model()?;
+        let count = model.moving().len();
+        let input = model.moving().get(b).ok_or_else(|| {
+            FmuError::Setting(format!(
+                "unknown value reference {vr}: the scene {scene} has {count} moving bodies \
+                 (value references {} and up, one per body)",
+                vr::MOVING
+            ))
+        })?;
+        Ok(Described {
+            name: input.name.clone(),
+            kind: Kind::Real,
+            causality: Causality::Input,
+            body: Some(b),
+        })
+    }
+
+    fn settable(&mut self, vr: u32, kind: Kind) -> Result<Described, FmuError> {
+        let v = self.describe(vr)?;
         if v.kind != kind {
             return Err(FmuError::WrongType { vr, name: v.name });
         }
@@ -147,7 +194,7 @@ impl Instance {
                 )));
             }
         }
-        Ok(v.causality)
+        Ok(v)
     }
 
     fn changed(&mut self, causality: Causality) -> Result<(), FmuError> {
@@ -164,8 +211,11 @@ impl Instance {
 
     /// Sets a Real.
     pub fn set_real(&mut self, vr: u32, value: f64) -> Result<(), FmuError> {
-        let causality = self.settable(vr, Kind::Real)?;
-        let name = variable(vr).map_or("?", |v| v.name);
+        let v = self.settable(vr, Kind::Real)?;
+        if let Some(b) = v.body {
+            return self.set_moving(b, &v.name, value);
+        }
+        let (causality, name) = (v.causality, v.name.as_str());
         let old = *self.real_slot(vr).ok_or(FmuError::UnknownReference(vr))?;
         if !value.is_finite() {
             return Err(FmuError::Setting(format!(
@@ -192,6 +242,37 @@ impl Instance {
         Ok(())
     }
 
+    /// Sets the position input `name` of moving body `b`: a keyframe parameter of the body
+    /// (finite, between its first and last keyframe times); a refused value is not kept.
+    fn set_moving(&mut self, b: usize, name: &str, value: f64) -> Result<(), FmuError> {
+        let old = self.get_moving(b)?;
+        let input = self.model()?.moving()[b].clone();
+        if let Some(why) = input.refuse(value) {
+            return Err(FmuError::Setting(format!(
+                "{name} = {}: {why} (it keeps its value {})",
+                Num(value),
+                Num(old)
+            )));
+        }
+        let before = self.settings.moving.insert(b, value);
+        if let Err(e) = self.changed(Causality::Input) {
+            match before {
+                Some(x) => self.settings.moving.insert(b, x),
+                None => self.settings.moving.remove(&b),
+            };
+            let _ = self.changed(Causality::Input);
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// The position input of moving body `b`: as set, or its start value.
+    fn get_moving(&mut self, b: usize) -> Result<f64, FmuError> {
+        let set = self.settings.moving.get(&b).copied();
+        let model = self.model()?;
+        Ok(set.unwrap_or_else(|| model.moving()[b].start()))
+    }
+
     /// The settable Real `vr`.
     fn real_slot(&mut self, vr: u32) -> Option<&mut f64> {
         Some(match vr {
@@ -205,7 +286,7 @@ impl Instance {
 
     /// Sets a Boolean.
     pub fn set_boolean(&mut self, vr: u32, value: bool) -> Result<(), FmuError> {
-        let causality = self.settable(vr, Kind::Boolean)?;
+        let causality = self.settable(vr, Kind::Boolean)?.causality;
         match vr {
             vr::DOOR_OPEN => self.settings.door_open = value,
             _ => return Err(FmuError::UnknownReference(vr)),
@@ -215,7 +296,7 @@ impl Instance {
 
     /// Sets a String.
     pub fn set_string(&mut self, vr: u32, value: &str) -> Result<(), FmuError> {
-        let causality = self.settable(vr, Kind::String)?;
+        let causality = self.settable(vr, Kind::String)?.causality;
         match vr {
             vr::SCENE => self.settings.scene = value.to_string(),
             _ => return Err(FmuError::UnknownReference(vr)),
@@ -230,7 +311,7 @@ impl Instance {
 
     /// Sets a UInt64 (`n_people`: checked against the scene when the model is built).
     pub fn set_uint64(&mut self, vr: u32, value: u64) -> Result<(), FmuError> {
-        let causality = self.settable(vr, Kind::UInt64)?;
+        let causality = self.settable(vr, Kind::UInt64)?.causality;
         match vr {
             vr::N_PEOPLE => self.settings.people = Some(value),
             _ => return Err(FmuError::UnknownReference(vr)),
@@ -238,8 +319,8 @@ impl Instance {
         self.changed(causality)
     }
 
-    fn readable(&self, vr: u32, kind: Kind) -> Result<(), FmuError> {
-        let v = variable(vr).ok_or(FmuError::UnknownReference(vr))?;
+    fn readable(&mut self, vr: u32, kind: Kind) -> Result<Described, FmuError> {
+        let v = self.describe(vr)?;
         if v.kind != kind {
             return Err(FmuError::WrongType { vr, name: v.name });
         }
@@ -251,12 +332,14 @@ impl Instance {
                 v.name
             )));
         }
-        Ok(())
+        Ok(v)
     }
 
     /// Gets a Real.
     pub fn get_real(&mut self, vr: u32) -> Result<f64, FmuError> {
-        self.readable(vr, Kind::Real)?;
+        if let Some(b) = self.readable(vr, Kind::Real)?.body {
+            return self.get_moving(b);
+        }
         Ok(match vr {
             vr::STEP => self.settings.step,
             vr::EPS_KAPPA => self.settings.eps_kappa,
@@ -396,6 +479,7 @@ impl Instance {
             start_time: self.settings.start_time,
             speed_factor: self.settings.speed_factor,
             door_open: self.settings.door_open,
+            moving: self.settings.moving.clone(),
             desired_speed_factor: self.settings.desired_speed_factor,
             model,
         })
@@ -425,10 +509,29 @@ impl Instance {
                 snapshot.desired_speed_factor, self.settings.desired_speed_factor
             )));
         }
-        self.model()?.load(&snapshot.model)?;
+        let model = self.model()?;
+        for (&b, &value) in &snapshot.moving {
+            let why = match model.moving().get(b) {
+                None => Some(format!(
+                    "the scene has {} moving bodies",
+                    model.moving().len()
+                )),
+                Some(input) => input
+                    .refuse(value)
+                    .map(|why| format!("{}: {why}", input.name)),
+            };
+            if let Some(why) = why {
+                return Err(FmuError::Setting(format!(
+                    "FMUstate: moving body {b} at {}: {why}: refused",
+                    Num(value)
+                )));
+            }
+        }
+        model.load(&snapshot.model)?;
         self.settings.start_time = snapshot.start_time;
         self.settings.speed_factor = snapshot.speed_factor;
         self.settings.door_open = snapshot.door_open;
+        self.settings.moving = snapshot.moving.clone();
         self.state = snapshot.state;
         Ok(())
     }

@@ -2,6 +2,8 @@
 //! of an instance and its serialized form, which carries a format version and the scene's
 //! hash in a fixed header so that a state of another scene or build is refused by name.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
@@ -22,6 +24,10 @@ pub struct Snapshot {
     pub speed_factor: f64,
     /// The input `door_open`.
     pub door_open: bool,
+    /// The moving bodies' position inputs the master set, by body (the others are at their
+    /// start values); where the bodies are, and the drive they follow, is in the model's
+    /// `SimState`.
+    pub moving: BTreeMap<usize, f64>,
     /// The parameter `desired_speed_factor` (a restore checks it).
     pub desired_speed_factor: f64,
     /// The model.
@@ -35,8 +41,8 @@ const HEADER: usize = 8 + 4 + 8;
 
 impl Snapshot {
     /// The layout version of the serialized form (of the header and of what follows it);
-    /// bumped whenever a field changes meaning.
-    pub const FORMAT: u32 = 1;
+    /// bumped whenever a field changes meaning (2: the moving bodies' inputs).
+    pub const FORMAT: u32 = 2;
 
     /// The hash of the scene the state was taken from.
     pub fn scene_hash(&self) -> u64 {

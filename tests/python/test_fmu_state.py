@@ -221,10 +221,10 @@ def test_a_state_of_another_scene_is_refused_with_a_log_line(fmus, unzipped, whi
         b.s.deserializeFMUState(blob[:-5])
     assert "serializedState:" in capfd.readouterr().out
     damaged = bytearray(blob)
-    damaged[8:12] = (2).to_bytes(4, "little")
+    damaged[8:12] = (1).to_bytes(4, "little")  # a state of a build before the moving inputs
     with pytest.raises(Exception, match="status 3"):
         b.s.deserializeFMUState(bytes(damaged))
-    assert "format 2; this FMU reads format 1" in capfd.readouterr().out
+    assert "format 1; this FMU reads format 2" in capfd.readouterr().out
     b.free()
 
 
