@@ -66,6 +66,9 @@ struct PlayerData {
     radius: String,
     positions: String,
     pressure: Option<String>,
+    /// The moving walls per frame shown, `[frames][segments][4]` (absent without).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    moving: Option<String>,
 }
 
 /// Which frames and people a page of at most `max_values` numbers shows: strides
@@ -156,6 +159,13 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
             pressure.extend(shown.iter().map(|&i| p[i] as f32));
         }
     }
+    let segments = header.moving_body.len();
+    let mut moving = Vec::with_capacity(frames.len() * segments * 4);
+    if segments > 0 {
+        for &k in &frames {
+            moving.extend(f.moving_walls(k)?.iter().flatten().map(|&x| x as f32));
+        }
+    }
     // Per frame: the last step that ended at or before it.
     let (mut eps, mut violation) = (Vec::new(), Vec::new());
     for &k in &frames {
@@ -226,6 +236,7 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         radius: base64_f32(&radius),
         positions: base64_f32(&positions),
         pressure: contacts.then(|| base64_f32(&pressure)),
+        moving: (segments > 0).then(|| base64_f32(&moving)),
     })
 }
 
