@@ -257,7 +257,7 @@ impl SourceRuntime {
             while k > 0 && !reached(time, self.due_at(k)) {
                 k -= 1;
             }
-            while reached(time, self.due_at(k + 1)) {
+            while k < self.count && reached(time, self.due_at(k + 1)) {
                 k += 1;
             }
             k
@@ -300,7 +300,10 @@ impl Events {
         exits: &Exits,
         people: &People,
     ) -> Result<Self, CrowdError> {
-        let tolerance = 1e-9 * scene.time.step;
+        // A billionth of the longest step a run takes (`time.step` may be far longer than the
+        // horizon: a tolerance of 2e292 s counted people due forever, found by the fuzzer).
+        let t = &scene.time;
+        let tolerance = 1e-9 * t.step.min(t.output_interval).min(t.horizon);
         let mut stand_until: Vec<f64> = scene
             .groups
             .iter()

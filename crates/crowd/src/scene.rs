@@ -850,6 +850,40 @@ impl Scene {
                         "must be finite, within ±1e6 degrees",
                     ));
                 }
+                if k > 0 {
+                    // The speed bound β of this interval must be a number.
+                    let before = &body.keyframes[k - 1];
+                    let points = body.line.iter().chain(&body.polygon).flatten();
+                    let pivot = body
+                        .pivot
+                        .or(body
+                            .line
+                            .iter()
+                            .chain(&body.polygon)
+                            .flatten()
+                            .next()
+                            .copied())
+                        .unwrap_or([0.0; 2]);
+                    let reach = points
+                        .map(|p| (p[0] - pivot[0]).hypot(p[1] - pivot[1]))
+                        .fold(0.0, f64::max);
+                    let dt = key.t - before.t;
+                    let beta = ((key.offset[0] - before.offset[0])
+                        .hypot(key.offset[1] - before.offset[1])
+                        + (key.angle - before.angle).to_radians().abs() * reach)
+                        / dt;
+                    if !beta.is_finite() {
+                        return Err(CrowdError::invalid(
+                            format!("{kf}.t"),
+                            Num(key.t),
+                            format!(
+                                "the body would move at {beta} m/s between t = {} and {}",
+                                Num(before.t),
+                                Num(key.t)
+                            ),
+                        ));
+                    }
+                }
             }
         }
         Ok(())

@@ -22,6 +22,10 @@ use crate::spawn::place_people;
 use crate::state::SimState;
 use crate::walls::Walls;
 
+/// The shortest step moving bodies may ask for (s): a body whose speed `β` needs shorter steps
+/// (`β μ ≤ r_min / 2`) stops the run with an error.
+pub const MIN_MOVING_STEP: f64 = 1e-9;
+
 /// One recorded configuration, borrowed from the people.
 #[derive(Debug, Clone, Copy)]
 pub struct Frame<'a> {
@@ -598,13 +602,16 @@ impl Simulation {
     /// The end of the next step towards `t_stop` allowed by the moving bodies: none may move
     /// more than half the smallest radius in one step, so none passes a person's centre within
     /// a step (the linearization at `t_{k+1}` would put the person on the wrong side).
-    fn moving_stop(&self, t_stop: f64) -> f64 {
+    ///
+    /// A step that would have to be shorter than [`MIN_MOVING_STEP`] (a body far faster than
+    /// the people are small) is an error naming the speed, not a run that never ends.
+    fn moving_stop(&self, t_stop: f64) -> Result<f64, CrowdError> {
         if self.moving.is_empty() {
-            return t_stop;
+            return Ok(t_stop);
         }
         let beta = self.moving.max_speed(self.t, t_stop);
         if beta == 0.0 {
-            return t_stop;
+            return Ok(t_stop);
         }
         let r_min = self
             .people
@@ -615,12 +622,22 @@ impl Simulation {
         let largest = 0.5 * r_min / beta;
         let fixed_within = matches!(self.stepping, Stepping::Fixed { step } if step <= largest);
         if fixed_within || self.t + largest >= t_stop {
-            t_stop
-        } else {
-            // Whole fractions of the way to t_stop: the steps stay equal.
-            let parts = ((t_stop - self.t) / largest).ceil();
-            self.t + (t_stop - self.t) / parts
+            return Ok(t_stop);
         }
+        if !(largest >= MIN_MOVING_STEP) {
+            return Err(CrowdError::invalid(
+                "moving",
+                format!("β = {beta:e} m/s at t = {}", self.t),
+                format!(
+                    "a moving body this fast would need steps of {largest:.3e} s (half the \
+                     smallest radius, {r_min} m, per step), below the {MIN_MOVING_STEP:e} s \
+                     a run allows"
+                ),
+            ));
+        }
+        // Whole fractions of the way to t_stop: the steps stay equal.
+        let parts = ((t_stop - self.t) / largest).ceil();
+        Ok(self.t + (t_stop - self.t) / parts)
     }
 
     /// At the first step from every `model.field_update` seconds on, solves the distance
@@ -658,7 +675,7 @@ impl Simulation {
 
     /// One step of the scene's stepping towards `t_stop`, or `None` once it is reached.
     fn step_towards(&mut self, t_stop: f64) -> Result<Option<StepReport>, CrowdError> {
-        let t_stop = self.moving_stop(t_stop);
+        let t_stop = self.moving_stop(t_stop)?;
         if self.stepping.reached(self.t, t_stop) {
             return Ok(None);
         }

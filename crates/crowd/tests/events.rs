@@ -373,3 +373,40 @@ keyframes = [{ t = 0.0 }, { t = 6.0, offset = [1.2, 0.0] }]
         "nobody entered near the box: the test would not see it"
     );
 }
+
+#[test]
+fn a_step_far_longer_than_the_horizon_did_not_hang_the_inflow_count() {
+    // Found by the fuzzer: with time.step = 2e301 (adaptive steps, which never take it) the
+    // tolerance on due times was 1e-9 × step = 2e292 s, and counting the people due never
+    // ended.
+    let scene = moreau_crowd::Scene::from_toml(
+        r#"
+name = "long-step"
+seed = 3
+[area]
+outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "east"
+segment = [[12.0, 2.0], [12.0, 4.0]]
+action = "remove"
+[[sources]]
+name = "gate"
+area = [[0.2, 0.2], [1.0, 0.2], [1.0, 1.0], [0.2, 1.0]]
+rate = 1.0
+radius = 0.2
+speed = 1.0
+destination = "east"
+[time]
+horizon = 10.0
+output_interval = 0.5
+step = 2e301
+tol = 5.0
+"#,
+        "<test>",
+    )
+    .unwrap();
+    let mut sim = moreau_crowd::Simulation::new(scene).unwrap();
+    sim.advance_to(10.0, &mut ()).unwrap();
+    // One person due every second from t = 1 s: ten by the horizon.
+    assert_eq!(sim.total_people(), 10);
+}

@@ -720,3 +720,33 @@ fn a_state_saved_after_a_drive_changed_rebuilds_the_fields_where_the_bodies_were
     };
     assert_eq!(bits(&whole), bits(&resumed));
 }
+
+#[test]
+fn a_body_too_fast_for_any_step_is_an_error_not_a_run_that_never_ends() {
+    let base = crush("horizon = 9.0\nstep = 0.05\noutput_interval = 0.5").to_toml();
+    // β = 10¹² m/s: steps of 10⁻¹³ s would keep it within half a radius.
+    let fast = base.replacen("t = 8.0", "t = 1e-6", 1).replacen(
+        "offset = [8.0, 0.0]",
+        "offset = [1000000.0, 0.0]",
+        1,
+    );
+    assert_ne!(fast, base);
+    let mut sim = Simulation::new(Scene::from_toml(&fast, "<test>").unwrap()).unwrap();
+    match sim.advance_to(1.0, &mut ()) {
+        Err(CrowdError::Invalid { field, reason, .. }) => {
+            assert_eq!(field, "moving");
+            assert!(reason.contains("steps of"), "{reason}");
+        }
+        other => panic!("expected an error, got {other:?}"),
+    }
+    // An infinite speed is refused with the scene.
+    let infinite = base.replacen("t = 8.0", "t = 5e-324", 1).replacen(
+        "offset = [8.0, 0.0]",
+        "offset = [1e15, 0.0]",
+        1,
+    );
+    match Scene::from_toml(&infinite, "<test>") {
+        Err(CrowdError::Invalid { field, .. }) => assert_eq!(field, "moving[0].keyframes[1].t"),
+        other => panic!("expected an error, got {other:?}"),
+    }
+}
