@@ -90,9 +90,10 @@ output_interval = {output_interval}
 
 /// A crowd pressed together: people on a hexagonal lattice at `density` per m² (5 by default:
 /// 0.48 m between centres) with radii of 0.995 × half the spacing (gaps of 2.4 mm), filling a
-/// square room, all pushing at 1 m/s towards a small area at its centre. From the first steps
-/// almost every pair of neighbours is in contact: the state of a crush, where nearly every
-/// row of the projection is active.
+/// square room, all pushing at 1 m/s towards a small area at its centre (the one or two
+/// lattice sites inside that area left empty). From the first steps almost every pair of
+/// neighbours is in contact: the state of a crush, where nearly every row of the projection
+/// is active.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Crush {
     /// People on the lattice.
@@ -137,15 +138,19 @@ impl Crush {
             (rows as f64 - 1.0) * dy + 2.0 * margin,
         );
         let side = w.max(h);
+        let (c0, c1) = (side / 2.0 - 0.25, side / 2.0 + 0.25);
+        // The lattice sites inside the centre's exit area stay empty: whoever stood there
+        // would be counted out before the first step (the scene check refuses it).
         let positions: Vec<String> = (0..self.people)
             .map(|k| {
                 let (r, c) = (k / per_row, k % per_row);
                 let x = margin + c as f64 * d + if r % 2 == 1 { d / 2.0 } else { 0.0 };
                 let y = margin + r as f64 * dy + (side - h) / 2.0;
-                format!("[{x}, {y}]")
+                (x, y)
             })
+            .filter(|&(x, y)| !((c0..=c1).contains(&x) && (c0..=c1).contains(&y)))
+            .map(|(x, y)| format!("[{x}, {y}]"))
             .collect();
-        let (c0, c1) = (side / 2.0 - 0.25, side / 2.0 + 0.25);
         let solver = toml::to_string(&self.solver).expect("solver settings serialize");
         let text = format!(
             r#"
