@@ -1,5 +1,6 @@
 //! Projected Gauss–Seidel on the dual in velocity form: one row's multiplier at a time, the
-//! velocity kept equal to `w + Jᵀλ`, certified every few sweeps.
+//! velocity kept equal to `w + Jᵀλ`, with optional over-relaxation, symmetric sweeps and
+//! momentum, certified from scratch every few sweeps.
 
 use moreau_core::{Parallelism, SolveStatus};
 
@@ -9,12 +10,12 @@ use crate::problem::{
 };
 use crate::workers::Workers;
 
-/// The order in which a sweep visits the rows.
+/// The order in which a forward pass visits the rows (a backward pass reverses it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RowOrder {
     /// The order the rows are stored in (a crowd's: the broad phase's pairs, then walls).
     Storage,
-    /// Rows sorted by their smallest unknown, stably (in a crowd: grouped by person, people
+    /// Rows sorted stably by their smallest unknown (in a crowd: grouped by person, people
     /// in their numbering along a space-filling curve).
     ByUnknown,
 }
@@ -26,15 +27,21 @@ pub struct GaussSeidelSettings {
     pub max_passes: usize,
     /// Over-relaxation `ω` in `(0, 2)`: `λ_k ← max(0, λ_k − ω s_k / |J_k|²)`.
     pub relaxation: f64,
-    /// Forward then backward passes (symmetric Gauss–Seidel) instead of forward only.
+    /// Sweeps of a forward then a backward pass (symmetric Gauss–Seidel) instead of forward
+    /// passes only.
     pub symmetric: bool,
     /// The order of the rows in a forward pass.
     pub order: RowOrder,
-    /// The longest run of passes between two certificates (each costs about one pass): the
-    /// interval grows from 1 to this as the solve goes on.
+    /// Nesterov's extrapolation between sweeps, `λ + β(λ − λ_prev)` with `v` following
+    /// linearly, restarted whenever a sweep ends with a larger dual objective than the one
+    /// before (O'Donoghue–Candès' function restart).
+    pub momentum: bool,
+    /// The most sweeps between two certificates. A certificate (about one pass of work) is
+    /// also taken as soon as the sweep's own running estimate (each row's multiplier times
+    /// its slack as the pass found it) meets the target.
     pub certify_every: usize,
-    /// Threads for the certificate's passes (the sweeps are sequential); the same bits on
-    /// any count.
+    /// Threads for the certificate's passes and the dual objective's sums (the sweeps
+    /// themselves are sequential); the same bits on any count.
     pub parallelism: Parallelism,
 }
 
@@ -45,7 +52,8 @@ impl Default for GaussSeidelSettings {
             relaxation: 1.0,
             symmetric: false,
             order: RowOrder::Storage,
-            certify_every: 16,
+            momentum: true,
+            certify_every: 64,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -109,12 +117,17 @@ impl GaussSeidelSettingsBuilder {
         self.0.order = order;
         self
     }
-    /// The longest run of passes between two certificates.
+    /// Momentum between sweeps on or off.
+    pub fn momentum(mut self, on: bool) -> Self {
+        self.0.momentum = on;
+        self
+    }
+    /// The most sweeps between two certificates.
     pub fn certify_every(mut self, n: usize) -> Self {
         self.0.certify_every = n;
         self
     }
-    /// Threads for the certificate's passes.
+    /// Threads for the certificate's passes and the dual objective's sums.
     pub fn parallelism(mut self, p: Parallelism) -> Self {
         self.0.parallelism = p;
         self
@@ -126,8 +139,9 @@ impl GaussSeidelSettingsBuilder {
     }
 }
 
-/// The rows in sweep order, packed for streaming: 32-bit columns, each row's offset and its
-/// step `ω / |J_k|²` (0 for a row without gradient), and where it came from.
+/// The rows in sweep order, packed for streaming: 32-bit columns, each row's step
+/// `ω / |J_k|²` (0 for a row without gradient) and offset `b_k`, where it came from, and
+/// the columns' entries in sweep order for the gather of `Jᵀλ`.
 #[derive(Debug, Default)]
 struct SweepRows {
     start: Vec<u32>,
@@ -136,43 +150,62 @@ struct SweepRows {
     b: Vec<f64>,
     step: Vec<f64>,
     original: Vec<u32>,
-    /// For each unknown, the entries of its column in ascending sweep position (the gather
-    /// of `Jᵀλ` in a fixed order).
     col_start: Vec<u32>,
     col_entries: Vec<u32>,
     entry_row: Vec<u32>,
-    col_next: Vec<u32>, // scratch for building
+    col_next: Vec<u32>,
+}
+
+/// What a pass saw: the sum of each row's multiplier times its slack, and the largest
+/// violation, both as the pass found them (before the row's update).
+#[derive(Debug, Clone, Copy, Default)]
+struct PassEstimate {
+    gap: f64,
+    violation: f64,
 }
 
 impl SweepRows {
-    fn build(&mut self, p: &ProjectionProblem<'_>, order: RowOrder, omega: f64) {
+    fn build(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        order: RowOrder,
+        omega: f64,
+    ) -> Result<(), SolveError> {
         let j = p.jacobian;
         let (m, n) = (p.rows(), p.dim());
+        if j.nnz() >= u32::MAX as usize || m >= u32::MAX as usize || n >= u32::MAX as usize {
+            return Err(SolveError::InvalidSetting {
+                field: "problem size",
+                value: format!("{m} rows, {n} unknowns, {} nonzeros", j.nnz()),
+                reason: "Gauss–Seidel indexes rows, unknowns and nonzeros with 32 bits",
+            });
+        }
         self.original.clear();
         self.original.extend(0..m as u32);
         if order == RowOrder::ByUnknown {
             let first = |i: u32| j.row(i as usize).0.iter().copied().min().unwrap_or(n);
             self.original.sort_by_key(|&i| first(i));
         }
-        self.start.clear();
-        self.cols.clear();
-        self.coefs.clear();
-        self.b.clear();
-        self.step.clear();
-        self.entry_row.clear();
+        for v in [&mut self.start, &mut self.cols, &mut self.entry_row] {
+            v.clear();
+        }
+        for v in [&mut self.coefs, &mut self.b, &mut self.step] {
+            v.clear();
+        }
         self.start.push(0);
         for (k, &i) in self.original.iter().enumerate() {
             let (c, a) = j.row(i as usize);
             self.cols.extend(c.iter().map(|&c| c as u32));
             self.coefs.extend_from_slice(a);
-            self.entry_row.extend(std::iter::repeat_n(k as u32, c.len()));
+            self.entry_row
+                .extend(std::iter::repeat_n(k as u32, c.len()));
             self.start.push(self.cols.len() as u32);
             self.b.push(p.b[i as usize]);
             let norm_sq = j.row_norm_sq(i as usize);
             self.step
                 .push(if norm_sq > 0.0 { omega / norm_sq } else { 0.0 });
         }
-        // The columns: counts, offsets, then entries in ascending sweep position.
+        // Each unknown's entries in ascending sweep position.
         self.col_start.clear();
         self.col_start.resize(n + 1, 0);
         for &c in &self.cols {
@@ -190,11 +223,22 @@ impl SweepRows {
             self.col_entries[*slot as usize] = e as u32;
             *slot += 1;
         }
+        Ok(())
+    }
+
+    fn len(&self) -> usize {
+        self.b.len()
     }
 
     fn row(&self, k: usize) -> (&[u32], &[f64]) {
         let (a, b) = (self.start[k] as usize, self.start[k + 1] as usize);
         (&self.cols[a..b], &self.coefs[a..b])
+    }
+
+    /// `J_k x`.
+    fn dot(&self, k: usize, x: &[f64]) -> f64 {
+        let (c, a) = self.row(k);
+        c.iter().zip(a).map(|(&c, &a)| a * x[c as usize]).sum()
     }
 
     /// `(Jᵀλ)_c`, summed in ascending sweep position.
@@ -206,17 +250,21 @@ impl SweepRows {
             .sum()
     }
 
-    /// One row's update: `λ_k ← max(0, λ_k − step_k s_k)`, `v += J_kᵀ Δλ_k`.
+    /// One row's update `λ_k ← max(0, λ_k − step_k s_k)`, `v += J_kᵀ Δλ_k`, with the slack
+    /// `s_k = b_k + J_k v` it found added to the pass's estimate.
     #[inline(always)]
-    fn relax(&self, k: usize, lam: &mut [f64], v: &mut [f64]) {
+    fn relax(&self, k: usize, lam: &mut [f64], v: &mut [f64], seen: &mut PassEstimate) {
         let (c, a) = self.row(k);
         let s = self.b[k]
             + c.iter()
                 .zip(a)
                 .map(|(&c, &a)| a * v[c as usize])
                 .sum::<f64>();
-        let next = (lam[k] - self.step[k] * s).max(0.0);
-        let delta = next - lam[k];
+        let old = lam[k];
+        seen.gap += old.max(0.0) * s.max(0.0);
+        seen.violation = seen.violation.max(-s);
+        let next = (old - self.step[k] * s).max(0.0);
+        let delta = next - old;
         if delta != 0.0 {
             lam[k] = next;
             for (&c, &a) in c.iter().zip(a) {
@@ -226,26 +274,38 @@ impl SweepRows {
     }
 }
 
-/// Projected Gauss–Seidel (with over-relaxation) on the dual `min_{λ≥0} ½λᵀJJᵀλ + λᵀ(b + Jw)`.
+/// Projected Gauss–Seidel (successive over-relaxation) on the dual
+/// `min_{λ≥0} φ(λ) = ½|Jᵀλ|² + λᵀ(b + Jw)`, in velocity form.
 ///
 /// The velocity `v = w + Jᵀλ` is kept alongside `λ`, so that one row's exact minimization
-/// costs its nonzeros twice: its slack `s_k = b_k + J_k v`, then `v += J_kᵀ Δλ_k`. Every few
-/// passes the pair is certified from scratch: `v = w + Jᵀλ` gathered anew (which also removes
-/// the rounding the incremental updates accumulate), `s = b + Jv`, the gap `Σ λ_k s_k⁺` and the
-/// violation `max (−s_k)⁺` — the same numbers [`certify`](crate::certify) computes for that
-/// pair. The sweeps are sequential (Gauss–Seidel is), the certificate's passes split over
-/// threads in fixed chunks, so results do not depend on the thread count. Scratch memory is
-/// sized once and reused.
+/// costs its nonzeros twice: its slack `s_k = b_k + J_k v`, then `v += J_kᵀ Δλ_k`; a pass
+/// allocates nothing. With momentum, the multipliers and the velocity are extrapolated
+/// between sweeps (both linearly, so `v = w + Jᵀλ` still holds), the extrapolation dropped
+/// and restarted whenever a sweep ends with a larger `φ` than the previous one.
+///
+/// Every few sweeps the multipliers are certified from scratch: `v = w + Jᵀλ` gathered anew
+/// (which also removes the rounding the incremental updates accumulate), `s = b + Jv`, the
+/// gap `Σ λ_k s_k⁺` and the violation `max (−s_k)⁺` — what [`certify`](crate::certify)
+/// computes for that pair. The returned pair is always a certified one.
+///
+/// Single-threaded where it matters: the sweeps are sequential (a colouring of the rows
+/// would let the rows of one colour go in parallel; not done). The certificate's passes and
+/// the dual objective's sums split over threads in fixed chunks, so results do not depend
+/// on the thread count.
 #[derive(Debug)]
 pub struct GaussSeidel {
     settings: GaussSeidelSettings,
     workers: Workers,
     rows: SweepRows,
-    // per-row scratch, in sweep order
+    // per-row scratch, in sweep order: λ, the slack of the certificate, λ before the last
+    // sweep, b + Jw
     lam: Vec<f64>,
     slack: Vec<f64>,
-    // per-unknown scratch
+    lam_prev: Vec<f64>,
+    offset_at_w: Vec<f64>,
+    // per-unknown scratch: v, v before the last sweep
     v: Vec<f64>,
+    v_prev: Vec<f64>,
 }
 
 impl GaussSeidel {
@@ -258,7 +318,10 @@ impl GaussSeidel {
             rows: SweepRows::default(),
             lam: Vec::new(),
             slack: Vec::new(),
+            lam_prev: Vec::new(),
+            offset_at_w: Vec::new(),
             v: Vec::new(),
+            v_prev: Vec::new(),
         })
     }
 
@@ -272,18 +335,37 @@ impl GaussSeidel {
         let (rows, lam, wk) = (&self.rows, &self.lam, &self.workers);
         wk.map(&mut self.v, |c, _| w[c] + rows.transpose_dot(lam, c));
         let v: &[f64] = &self.v;
-        wk.map(&mut self.slack, |k, _| {
-            let (c, a) = rows.row(k);
-            rows.b[k]
-                + c.iter()
-                    .zip(a)
-                    .map(|(&c, &a)| a * v[c as usize])
-                    .sum::<f64>()
-        });
+        wk.map(&mut self.slack, |k, _| rows.b[k] + rows.dot(k, v));
         let s: &[f64] = &self.slack;
         let gap = wk.sum(s.len(), |k| lam[k] * s[k].max(0.0));
         let violation = (-wk.min(s.len(), |k| s[k])).max(0.0);
         (gap, violation)
+    }
+
+    /// The dual objective `φ(λ) = ½|v − w|² + λᵀ(b + Jw)` for `v = w + Jᵀλ`.
+    fn dual_objective(&self, w: &[f64]) -> f64 {
+        let (v, lam, c, wk) = (&self.v, &self.lam, &self.offset_at_w, &self.workers);
+        0.5 * wk.sum(v.len(), |i| (v[i] - w[i]) * (v[i] - w[i]))
+            + wk.sum(lam.len(), |k| lam[k] * c[k])
+    }
+
+    /// One sweep: a forward pass, and a backward one when symmetric; returns the passes made
+    /// and what the last pass saw.
+    fn sweep(&mut self, passes_left: usize) -> (usize, PassEstimate) {
+        let (rows, lam, v) = (&self.rows, &mut self.lam, &mut self.v);
+        let m = rows.len();
+        let mut seen = PassEstimate::default();
+        for k in 0..m {
+            rows.relax(k, lam, v, &mut seen);
+        }
+        if !self.settings.symmetric || passes_left < 2 {
+            return (1, seen);
+        }
+        seen = PassEstimate::default();
+        for k in (0..m).rev() {
+            rows.relax(k, lam, v, &mut seen);
+        }
+        (2, seen)
     }
 }
 
@@ -308,26 +390,28 @@ impl ProjectionSolver for GaussSeidel {
         p.validate()?;
         let (m, n) = (p.rows(), p.dim());
         sol.resize_for(p);
-        let settings = &self.settings;
-        self.rows.build(p, settings.order, settings.relaxation);
+        let settings = self.settings.clone();
+        self.rows.build(p, settings.order, settings.relaxation)?;
         // The warm start in sweep order, clamped to λ ≥ 0; a row without gradient gets 0
-        // (its slack is the constant b_k: λ_k > 0 would only add to the gap).
+        // (its slack is the constant b_k: a multiplier there would only add to the gap).
         self.lam.clear();
-        self.lam.extend(self.rows.original.iter().enumerate().map(|(k, &i)| {
-            let l = sol.lambda[i as usize];
-            if self.rows.step[k] > 0.0 && l.is_finite() {
-                l.max(0.0)
-            } else {
-                0.0
-            }
-        }));
+        self.lam
+            .extend(self.rows.original.iter().enumerate().map(|(k, &i)| {
+                let l = sol.lambda[i as usize];
+                if self.rows.step[k] > 0.0 && l.is_finite() {
+                    l.max(0.0)
+                } else {
+                    0.0
+                }
+            }));
         self.slack.clear();
         self.slack.resize(m, 0.0);
         self.v.clear();
         self.v.resize(n, 0.0);
 
         // A row without gradient is a fixed number: b_k < 0 there cannot be repaired.
-        let infeasible = (0..m).any(|k| self.rows.step[k] == 0.0 && self.rows.b[k] < -target.violation);
+        let infeasible =
+            (0..m).any(|k| self.rows.step[k] == 0.0 && self.rows.b[k] < -target.violation);
         let (mut gap, mut violation) = self.certificate(p.w);
         let meets = |gap: f64, violation: f64| gap <= target.gap && violation <= target.violation;
         let mut passes = 0;
@@ -337,32 +421,56 @@ impl ProjectionSolver for GaussSeidel {
         } else if meets(gap, violation) {
             status = SolveStatus::Converged;
         } else {
-            let (max_passes, symmetric, every) = (
-                self.settings.max_passes,
-                self.settings.symmetric,
-                self.settings.certify_every,
-            );
+            if settings.momentum {
+                let rows = &self.rows;
+                self.offset_at_w.clear();
+                self.offset_at_w
+                    .extend((0..m).map(|k| rows.b[k] + rows.dot(k, p.w)));
+                self.lam_prev.clear();
+                self.lam_prev.extend_from_slice(&self.lam);
+                self.v_prev.clear();
+                self.v_prev.extend_from_slice(&self.v);
+            }
+            let mut objective = f64::INFINITY;
+            let mut t = 1.0_f64;
+            let mut sweeps = 0;
             let mut next_certificate = 1;
-            while passes < max_passes {
-                let backward = symmetric && passes % 2 == 1;
-                let (rows, lam, v) = (&self.rows, &mut self.lam, &mut self.v);
-                if backward {
-                    for k in (0..m).rev() {
-                        rows.relax(k, lam, v);
-                    }
-                } else {
-                    for k in 0..m {
-                        rows.relax(k, lam, v);
-                    }
-                }
-                passes += 1;
-                if passes >= next_certificate || passes == max_passes {
+            // The estimate must reach target × trust to trigger a certificate; halved each
+            // time an estimate-triggered certificate misses.
+            let mut trust = 1.0;
+            while passes < settings.max_passes {
+                let (made, seen) = self.sweep(settings.max_passes - passes);
+                passes += made;
+                sweeps += 1;
+                let estimated = meets(seen.gap / trust, seen.violation / trust);
+                if estimated || sweeps >= next_certificate || passes >= settings.max_passes {
                     (gap, violation) = self.certificate(p.w);
                     if meets(gap, violation) {
                         status = SolveStatus::Converged;
                         break;
                     }
-                    next_certificate = passes + (passes / 4).clamp(1, every);
+                    if estimated {
+                        trust *= 0.5;
+                    }
+                    next_certificate = sweeps + (sweeps / 4).clamp(1, settings.certify_every);
+                }
+                if passes >= settings.max_passes {
+                    break;
+                }
+                if settings.momentum {
+                    let now = self.dual_objective(p.w);
+                    let beta = if now > objective {
+                        t = 1.0;
+                        0.0
+                    } else {
+                        let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+                        let beta = (t - 1.0) / t_next;
+                        t = t_next;
+                        beta
+                    };
+                    objective = now;
+                    extrapolate(&mut self.lam, &mut self.lam_prev, beta);
+                    extrapolate(&mut self.v, &mut self.v_prev, beta);
                 }
             }
         }
@@ -380,5 +488,14 @@ impl ProjectionSolver for GaussSeidel {
             active,
             ..SolveReport::default()
         })
+    }
+}
+
+/// `x ← x + β(x − prev)` and `prev ← x` (its value before), in one sequential pass.
+fn extrapolate(x: &mut [f64], prev: &mut [f64], beta: f64) {
+    for (x, prev) in x.iter_mut().zip(prev.iter_mut()) {
+        let now = *x;
+        *x = now + beta * (now - *prev);
+        *prev = now;
     }
 }
