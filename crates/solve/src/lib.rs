@@ -155,6 +155,37 @@ impl SolverKind {
         Ok(Box::new(WithFallback::new(primary, fallback)))
     }
 
+    /// The solver of this kind alone, without the fallback [`build`](Self::build) adds (for
+    /// measuring one solver: its answer may miss the target, and its report says so).
+    pub fn build_alone(
+        self,
+        parallelism: Parallelism,
+    ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
+        Ok(match self {
+            SolverKind::Clarabel => Box::new(ClarabelReference::new(ClarabelSettings::default())),
+            SolverKind::Apgd => Box::new(Apgd::new(
+                ApgdSettings::builder().parallelism(parallelism).build()?,
+            )?),
+            SolverKind::Interior => Box::new(InteriorPoint::new(
+                InteriorPointSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?,
+            )?),
+            SolverKind::Newton => Box::new(Newton::new(
+                NewtonSettings::builder().parallelism(parallelism).build()?,
+            )?),
+            SolverKind::GaussSeidel => Box::new(GaussSeidel::new(
+                GaussSeidelSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?,
+            )?),
+            SolverKind::Auto => Box::new(AutoSolver::new(AutoSettings {
+                parallelism,
+                ..AutoSettings::default()
+            })?),
+        })
+    }
+
     /// What [`build`](Self::build) makes, in words (for run files and `--help`).
     pub fn describe(self, unknowns: usize) -> &'static str {
         let large = unknowns > Self::CLARABEL_FALLBACK_MAX_UNKNOWNS;
@@ -202,6 +233,8 @@ mod tests {
                     kind.as_str()
                 }
             );
+            let alone = kind.build_alone(Parallelism::SEQUENTIAL).unwrap();
+            assert_eq!(alone.name(), solver.name());
         }
         assert!(
             "simplex"
