@@ -33,8 +33,10 @@ pub struct GaussSeidelSettings {
     /// The order of the rows in a forward pass.
     pub order: RowOrder,
     /// Nesterov's extrapolation between sweeps, `λ + β(λ − λ_prev)` with `v` following
-    /// linearly, restarted whenever a sweep ends with a larger dual objective than the one
-    /// before (O'Donoghue–Candès' function restart).
+    /// linearly and FISTA's `β_k`, left out after any sweep that ends with a larger dual
+    /// objective than the one before (the next sweep then starts from that sweep's result),
+    /// and FISTA's sequence started again when that objective is also above the one of the
+    /// last such sweep.
     pub momentum: bool,
     /// The most sweeps between two certificates. A certificate (about one pass of work) is
     /// also taken as soon as the sweep's own running estimate (each row's multiplier times
@@ -280,8 +282,12 @@ impl SweepRows {
 /// The velocity `v = w + Jᵀλ` is kept alongside `λ`, so that one row's exact minimization
 /// costs its nonzeros twice: its slack `s_k = b_k + J_k v`, then `v += J_kᵀ Δλ_k`; a pass
 /// allocates nothing. With momentum, the multipliers and the velocity are extrapolated
-/// between sweeps (both linearly, so `v = w + Jᵀλ` still holds), the extrapolation dropped
-/// and restarted whenever a sweep ends with a larger `φ` than the previous one.
+/// between sweeps (both linearly, so `v = w + Jᵀλ` still holds; an extrapolated multiplier
+/// may be negative until the next sweep projects it), except after a sweep that ends with a
+/// larger `φ` than the previous one; FISTA's sequence starts again only when that `φ` is
+/// also above the one of the previous such sweep. (Starting it again at every rise, as
+/// O'Donoghue–Candès' restart does, fired every two or three sweeps on a crush and kept the
+/// momentum near zero; never starting it again let over-relaxed sweeps diverge.)
 ///
 /// Every few sweeps the multipliers are certified from scratch: `v = w + Jᵀλ` gathered anew
 /// (which also removes the rounding the incremental updates accumulate), `s = b + Jv`, the
@@ -433,6 +439,7 @@ impl ProjectionSolver for GaussSeidel {
             }
             let mut objective = f64::INFINITY;
             let mut t = 1.0_f64;
+            let mut last_rise = f64::INFINITY;
             let mut sweeps = 0;
             let mut next_certificate = 1;
             // The estimate must reach target × trust to trigger a certificate; halved each
@@ -459,8 +466,16 @@ impl ProjectionSolver for GaussSeidel {
                 }
                 if settings.momentum {
                     let now = self.dual_objective(p.w);
+                    // A sweep that ended higher than the one before is not extrapolated
+                    // (the next sweep starts from its own result) and the sequence `t` goes
+                    // on, unless it also ended higher than the last sweep that did: then
+                    // `t` starts again. So `φ` at these sweeps decreases, and in between
+                    // it decreases from sweep to sweep.
                     let beta = if now > objective {
-                        t = 1.0;
+                        if now > last_rise {
+                            t = 1.0;
+                        }
+                        last_rise = now;
                         0.0
                     } else {
                         let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
