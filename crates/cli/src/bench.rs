@@ -54,7 +54,12 @@ pub struct BenchArgs {
     /// The solvers of the cold comparison.
     #[arg(long, value_delimiter = ',', default_value = "clarabel")]
     compare: Vec<SolverKind>,
-    /// The solver of the steps (`interior`, `newton`, `apgd`, `auto`, `clarabel`, …).
+    /// Each solver of the cold comparison alone, without its fallback: a solve that misses
+    /// the target is reported as such (with its time) instead of being finished by another.
+    #[arg(long)]
+    compare_alone: bool,
+    /// The solver of the steps (`interior`, `newton`, `apgd`, `gauss-seidel`, `auto`,
+    /// `clarabel`, …).
     #[arg(long, default_value = "interior")]
     kind: SolverKind,
     /// Threads for the projection (0: every core).
@@ -203,7 +208,12 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     }
     let k = args.steps.max(1) as f64;
     let comparison = if n == args.compare_at {
-        Some(compare(&mut sim, &args.compare, args.threads)?)
+        Some(compare(
+            &mut sim,
+            &args.compare,
+            args.compare_alone,
+            args.threads,
+        )?)
     } else {
         None
     };
@@ -236,7 +246,12 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
 
 /// One more step (its projection warm-started from the previous step), then the same
 /// projection from cold by each of `kinds`.
-fn compare(sim: &mut Simulation, kinds: &[SolverKind], threads: usize) -> Result<Comparison> {
+fn compare(
+    sim: &mut Simulation,
+    kinds: &[SolverKind],
+    alone: bool,
+    threads: usize,
+) -> Result<Comparison> {
     let mu = 0.05;
     let mut last = Reports::default();
     sim.advance_to(sim.time() + mu, &mut last)?;
@@ -248,7 +263,12 @@ fn compare(sim: &mut Simulation, kinds: &[SolverKind], threads: usize) -> Result
     };
     let mut cold = Vec::new();
     for &kind in kinds {
-        let mut solver = kind.build(Parallelism::threads(threads), problem.dim())?;
+        let parallelism = Parallelism::threads(threads);
+        let mut solver = if alone {
+            kind.build_alone(parallelism)?
+        } else {
+            kind.build(parallelism, problem.dim())?
+        };
         let mut sol = ProjectionSolution::default();
         let start = Instant::now();
         let rep = solver.solve(&problem, target, &mut sol)?;
@@ -332,6 +352,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         if let Some(d) = args.density {
             cmd.args(["--density", &d.to_string()]);
         }
+        if args.compare_alone {
+            cmd.arg("--compare-alone");
+        }
         let out = cmd
             .output()
             .with_context(|| format!("running the {n}-people measurement"))?;
@@ -392,7 +415,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             );
             for k in &c.cold {
                 println!(
-                    "    cold {:<9} {:>10.1} ms  {:>5} it  gap {:.2e}  {} (by {})  {:.1}× the warm step",
+                    "    cold {:<12} {:>10.1} ms  {:>5} it  gap {:.2e}  {} (by {})  {:.1}× the warm step",
                     k.kind,
                     k.ms,
                     k.iterations,

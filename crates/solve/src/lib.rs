@@ -15,6 +15,7 @@ mod certificate;
 mod chain;
 mod clarabel_ref;
 mod error;
+mod gauss_seidel;
 mod interior;
 mod newton;
 mod normal;
@@ -28,6 +29,7 @@ pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings, infeasibility_certificate};
 pub use error::SolveError;
+pub use gauss_seidel::{GaussSeidel, GaussSeidelSettings, GaussSeidelSettingsBuilder, RowOrder};
 pub use interior::{InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder};
 pub use newton::{Newton, NewtonSettings, NewtonSettingsBuilder};
 pub use normal::FactorizationCounts;
@@ -51,6 +53,10 @@ pub enum SolverKind {
     /// the previous step's multipliers, the same normal equations as the interior point),
     /// with the large-problem fallback.
     Newton,
+    /// Projected Gauss–Seidel on the dual ([`GaussSeidel`]: one row at a time, the velocity
+    /// kept alongside, warm-started from the previous step's multipliers), with the
+    /// large-problem fallback.
+    GaussSeidel,
     /// Chosen for each projection ([`AutoSolver`]): APGD while few rows were active in the
     /// previous step, our interior point once contacts are dense, with the interior point's
     /// fallback. Each report names the solver that answered. The default.
@@ -61,7 +67,7 @@ pub enum SolverKind {
 impl std::str::FromStr for SolverKind {
     type Err = String;
 
-    /// The names scene files use (`apgd`, `clarabel`, `interior`, `newton`, `auto`).
+    /// The names scene files use (`apgd`, `clarabel`, `interior`, `newton`, `gauss-seidel`, `auto`).
     fn from_str(s: &str) -> Result<Self, String> {
         use serde::de::IntoDeserializer;
         Self::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| e.to_string())
@@ -70,11 +76,12 @@ impl std::str::FromStr for SolverKind {
 
 impl SolverKind {
     /// Every kind, in the order of the documentation.
-    pub const ALL: [SolverKind; 5] = [
+    pub const ALL: [SolverKind; 6] = [
         SolverKind::Apgd,
         SolverKind::Clarabel,
         SolverKind::Interior,
         SolverKind::Newton,
+        SolverKind::GaussSeidel,
         SolverKind::Auto,
     ];
 
@@ -90,6 +97,7 @@ impl SolverKind {
             SolverKind::Clarabel => "clarabel",
             SolverKind::Interior => "interior",
             SolverKind::Newton => "newton",
+            SolverKind::GaussSeidel => "gauss-seidel",
             SolverKind::Auto => "auto",
         }
     }
@@ -127,6 +135,15 @@ impl SolverKind {
                     if large { apgd()? } else { clarabel() },
                 )
             }
+            SolverKind::GaussSeidel => {
+                let settings = GaussSeidelSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?;
+                (
+                    Box::new(GaussSeidel::new(settings)?),
+                    if large { apgd()? } else { clarabel() },
+                )
+            }
             SolverKind::Auto => (
                 Box::new(AutoSolver::new(AutoSettings {
                     parallelism,
@@ -136,6 +153,37 @@ impl SolverKind {
             ),
         };
         Ok(Box::new(WithFallback::new(primary, fallback)))
+    }
+
+    /// The solver of this kind alone, without the fallback [`build`](Self::build) adds (for
+    /// measuring one solver: its answer may miss the target, and its report says so).
+    pub fn build_alone(
+        self,
+        parallelism: Parallelism,
+    ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
+        Ok(match self {
+            SolverKind::Clarabel => Box::new(ClarabelReference::new(ClarabelSettings::default())),
+            SolverKind::Apgd => Box::new(Apgd::new(
+                ApgdSettings::builder().parallelism(parallelism).build()?,
+            )?),
+            SolverKind::Interior => Box::new(InteriorPoint::new(
+                InteriorPointSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?,
+            )?),
+            SolverKind::Newton => Box::new(Newton::new(
+                NewtonSettings::builder().parallelism(parallelism).build()?,
+            )?),
+            SolverKind::GaussSeidel => Box::new(GaussSeidel::new(
+                GaussSeidelSettings::builder()
+                    .parallelism(parallelism)
+                    .build()?,
+            )?),
+            SolverKind::Auto => Box::new(AutoSolver::new(AutoSettings {
+                parallelism,
+                ..AutoSettings::default()
+            })?),
+        })
     }
 
     /// What [`build`](Self::build) makes, in words (for run files and `--help`).
@@ -148,6 +196,10 @@ impl SolverKind {
             (SolverKind::Interior, true) => "our interior point with APGD as fallback",
             (SolverKind::Newton, false) => "our semismooth Newton with Clarabel as fallback",
             (SolverKind::Newton, true) => "our semismooth Newton with APGD as fallback",
+            (SolverKind::GaussSeidel, false) => {
+                "our projected Gauss–Seidel with Clarabel as fallback"
+            }
+            (SolverKind::GaussSeidel, true) => "our projected Gauss–Seidel with APGD as fallback",
             (SolverKind::Auto, false) => {
                 "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
             }
@@ -181,6 +233,8 @@ mod tests {
                     kind.as_str()
                 }
             );
+            let alone = kind.build_alone(Parallelism::SEQUENTIAL).unwrap();
+            assert_eq!(alone.name(), solver.name());
         }
         assert!(
             "simplex"
