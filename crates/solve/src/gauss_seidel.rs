@@ -469,8 +469,7 @@ impl ProjectionSolver for GaussSeidel {
                     // A sweep that ended higher than the one before is not extrapolated
                     // (the next sweep starts from its own result) and the sequence `t` goes
                     // on, unless it also ended higher than the last sweep that did: then
-                    // `t` starts again. So `φ` at these sweeps decreases, and in between
-                    // it decreases from sweep to sweep.
+                    // `t` starts again (without that, over-relaxed sweeps diverged).
                     let beta = if now > objective {
                         if now > last_rise {
                             t = 1.0;
