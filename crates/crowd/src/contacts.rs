@@ -136,33 +136,40 @@ impl ContactSource for PersonWalls {
     }
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
-        let (q, radius, id) = (at.q, at.people.radius, at.people.id);
-        let segments = at.walls.segments();
-        for i in 0..radius.len() {
-            let p = [q[2 * i], q[2 * i + 1]];
-            at.walls
-                .near(p, radius[i] + at.margin.max(0.0), &mut self.near);
-            for &w in &self.near {
-                let wall = &segments[w as usize];
-                let c = wall.closest(p);
-                let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
-                let d = (ex * ex + ey * ey).sqrt();
-                let g = d - radius[i];
-                if g > at.margin {
-                    continue;
-                }
-                // On the wall itself: the walkable side is the wall's left.
-                let n = if d > 0.0 {
-                    [ex / d, ey / d]
-                } else {
-                    wall.left_normal()
-                };
-                rows.push(
-                    ContactKind::PersonWall.key(id[i], w),
-                    g,
-                    [(2 * i, n[0]), (2 * i + 1, n[1])],
-                );
+        push_segment_rows(ContactKind::PersonWall, at, at.walls, &mut self.near, rows);
+    }
+}
+
+/// Appends a row `g = dist(q_i, segment) − r_i` with `g ≤ margin`, keyed `kind(id, segment)`,
+/// for every person and every segment of `walls` near them (the segments' grid index); on a
+/// segment itself the normal is its left side.
+pub(crate) fn push_segment_rows(
+    kind: ContactKind,
+    at: &ContactQuery<'_>,
+    walls: &Walls,
+    near: &mut Vec<u32>,
+    rows: &mut ConstraintRows,
+) {
+    let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+    let segments = walls.segments();
+    for i in 0..radius.len() {
+        let p = [q[2 * i], q[2 * i + 1]];
+        walls.near(p, radius[i] + at.margin.max(0.0), near);
+        for &w in near.iter() {
+            let wall = &segments[w as usize];
+            let c = wall.closest(p);
+            let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
+            let d = (ex * ex + ey * ey).sqrt();
+            let g = d - radius[i];
+            if g > at.margin {
+                continue;
             }
+            let n = if d > 0.0 {
+                [ex / d, ey / d]
+            } else {
+                wall.left_normal()
+            };
+            rows.push(kind.key(id[i], w), g, [(2 * i, n[0]), (2 * i + 1, n[1])]);
         }
     }
 }

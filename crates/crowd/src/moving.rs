@@ -5,7 +5,7 @@
 use moreau_core::ConstraintRows;
 use serde::{Deserialize, Serialize};
 
-use crate::contacts::{ContactKind, ContactQuery, ContactSource};
+use crate::contacts::{ContactKind, ContactQuery, ContactSource, push_segment_rows};
 use crate::geometry::{Polygon, Segment, ring_contains};
 use crate::scene::{Exit, Keyframe, MovingBody, Scene};
 use crate::walls::Walls;
@@ -367,38 +367,19 @@ impl ContactSource for PersonMovingWalls {
     }
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
-        let (q, radius, id) = (at.q, at.people.radius, at.people.id);
         if at.moving.is_empty() {
             return;
         }
         let mut segments = std::mem::take(&mut self.at);
         at.moving.segments_at(at.t, &mut segments);
         self.index = Walls::new(segments);
-        for i in 0..radius.len() {
-            let p = [q[2 * i], q[2 * i + 1]];
-            self.index
-                .near(p, radius[i] + at.margin.max(0.0), &mut self.near);
-            for &w in &self.near {
-                let wall = &self.index.segments()[w as usize];
-                let c = wall.closest(p);
-                let (ex, ey) = (p[0] - c[0], p[1] - c[1]);
-                let d = (ex * ex + ey * ey).sqrt();
-                let g = d - radius[i];
-                if g > at.margin {
-                    continue;
-                }
-                let n = if d > 0.0 {
-                    [ex / d, ey / d]
-                } else {
-                    wall.left_normal()
-                };
-                rows.push(
-                    ContactKind::MovingWall.key(id[i], w),
-                    g,
-                    [(2 * i, n[0]), (2 * i + 1, n[1])],
-                );
-            }
-        }
+        push_segment_rows(
+            ContactKind::MovingWall,
+            at,
+            &self.index,
+            &mut self.near,
+            rows,
+        );
         self.at = self.index.take_segments();
     }
 }
