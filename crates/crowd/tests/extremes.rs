@@ -222,10 +222,11 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     );
 }
 
-/// `kind = "auto"` takes APGD while contacts are sparse and the interior point in a jam, and
-/// every step report names the solver that answered.
+/// `kind = "auto"` answers free flow with Gauss–Seidel and a jam with the interior point
+/// (Gauss–Seidel does not finish the jam within its budget), and every step report names
+/// the solver that answered.
 #[test]
-fn auto_picks_apgd_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
+fn auto_picks_gauss_seidel_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
     use moreau_crowd::SolverKind;
     // Free flow: a few people far apart walking to a wide door.
     let mut free = room(1.2, 0.05, 0.5, &spawn(10, "0.2", "1.0"));
@@ -236,7 +237,7 @@ fn auto_picks_apgd_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
         .into_iter()
         .map(|mu| sim.step(mu).unwrap().solver)
         .collect();
-    assert!(solvers.iter().all(|&s| s == "apgd"), "{solvers:?}");
+    assert!(solvers.iter().all(|&s| s == "gauss-seidel"), "{solvers:?}");
     // A jam at a door too narrow to pass: dense contacts after the first steps.
     let mut jam = room(0.3, 0.05, 4.0, &spawn(75, "0.25", "1.0"));
     jam.solver.kind = SolverKind::Auto;
@@ -245,10 +246,19 @@ fn auto_picks_apgd_in_free_flow_and_the_interior_point_in_a_jam_and_says_so() {
         .into_iter()
         .map(|mu| sim.step(mu).unwrap().solver)
         .collect();
-    // Once the crowd presses on the wall (the second half of the run) every step is dense.
+    // Once the crowd presses on the wall (the second half of the run), Gauss–Seidel does
+    // not finish the jam within its budget at some steps, and the interior point answers
+    // them (the rule that then skips Gauss–Seidel for a while is tested in crates/solve's
+    // kkt.rs; warm-started in a standing jam Gauss–Seidel may finish again).
     let half = solvers.len() / 2;
     assert!(
-        solvers[half..].iter().all(|&s| s == "interior"),
+        solvers[half..].iter().any(|s| s.contains("interior")),
+        "{solvers:?}"
+    );
+    assert!(
+        solvers
+            .iter()
+            .all(|s| ["gauss-seidel", "interior", "gs+interior"].contains(s)),
         "{solvers:?}"
     );
 }

@@ -1,10 +1,13 @@
-//! The automatic choice of solver for each projection: APGD while contacts are sparse, the
-//! interior point once they are dense, decided from the warm start.
+//! The automatic choice of solver: each connected component of a projection goes to
+//! Gauss–Seidel or to the interior point, by what Gauss–Seidel was measured to cost on
+//! components of its size.
 
-use moreau_core::Parallelism;
+use moreau_core::{Parallelism, SolveStatus};
 
-use crate::apgd::{Apgd, ApgdSettings};
+use crate::certificate::certify;
+use crate::components::Components;
 use crate::error::SolveError;
+use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
 use crate::interior::{InteriorPoint, InteriorPointSettings};
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
@@ -13,12 +16,15 @@ use crate::problem::{
 /// Settings of [`AutoSolver`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AutoSettings {
-    /// Below this fraction of rows active in the warm start (the previous step's answer),
-    /// APGD is tried first. Measured on evacuation halls (benches/README.md): APGD is 1.4×
-    /// faster with 18 % of the rows active, the interior point 4× faster with 58 %.
-    pub sparse_contacts: f64,
-    /// APGD's iteration budget before the interior point takes over (it needed ~75 at 18 %).
-    pub apgd_iterations: usize,
+    /// Gauss–Seidel's budget of passes over the rows it is given before the interior point
+    /// takes the components it left unfinished. An interior-point iteration costs 20–80
+    /// passes over the same rows and a solve 9–22 iterations (benches/README.md), so 200
+    /// passes stay below one interior-point solve on every scene measured.
+    pub first_order_passes: usize,
+    /// After Gauss–Seidel left a component of `r` rows unfinished, components of `r` rows
+    /// or more go straight to the interior point for this many solves; then Gauss–Seidel is
+    /// tried on them again (a jam may have cleared).
+    pub retry_after: usize,
     /// Threads for both.
     pub parallelism: Parallelism,
 }
@@ -26,37 +32,58 @@ pub struct AutoSettings {
 impl Default for AutoSettings {
     fn default() -> Self {
         Self {
-            sparse_contacts: 0.3,
-            apgd_iterations: 300,
+            first_order_passes: 200,
+            retry_after: 16,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
 }
 
-/// Picks APGD or the interior point for each projection from the warm start's share of
-/// active rows (a multiplier above 10⁻⁶ of the largest); a solve APGD does not finish within
-/// its budget goes on with the interior point. Each [`SolveReport::solver`] names the solver
-/// whose answer it is.
+/// Splits each projection into its connected components (groups of people in contact, with
+/// their walls: independent problems whose gaps add up), gives Gauss–Seidel the components
+/// it has been finishing within its budget, warm-started, and the interior point the rest,
+/// each set as one sub-problem. Gauss–Seidel's unfinished components go on to the interior
+/// point, and components at least that large skip Gauss–Seidel for
+/// [`AutoSettings::retry_after`] solves. The choice depends only on the work counted (passes
+/// and their outcome), never on timings, so answers do not depend on the machine or the
+/// thread count.
+///
+/// Each component must meet its share of the target gap (its rows over all rows) and the
+/// whole violation target; the answer is then certified as a whole by
+/// [`certify`](crate::certify). The report names the solver that answered:
+/// `gauss-seidel`, `interior`, or `gs+interior` when both answered components.
 #[derive(Debug)]
 pub struct AutoSolver {
     settings: AutoSettings,
-    apgd: Apgd,
+    gauss_seidel: GaussSeidel,
     interior: InteriorPoint,
+    components: Components,
+    // components of this many rows or more skip Gauss–Seidel (usize::MAX: none)
+    skip_from: usize,
+    // solves left before skip_from is lifted
+    skip_left: usize,
+    // per component: sent to Gauss–Seidel; finished
+    to_gs: Vec<bool>,
+    finished: Vec<bool>,
+    to_interior: Vec<bool>,
+    warm: Vec<f64>,
+    scratch_m: Vec<f64>,
+    scratch_n: Vec<f64>,
 }
 
 impl AutoSolver {
     /// Both solvers, with validated settings.
     pub fn new(settings: AutoSettings) -> Result<Self, SolveError> {
-        if !(settings.sparse_contacts >= 0.0 && settings.sparse_contacts <= 1.0) {
+        if settings.first_order_passes == 0 {
             return Err(SolveError::InvalidSetting {
-                field: "sparse_contacts",
-                value: settings.sparse_contacts.to_string(),
-                reason: "must be in [0, 1]",
+                field: "first_order_passes",
+                value: "0".into(),
+                reason: "must be at least 1",
             });
         }
-        let apgd = Apgd::new(
-            ApgdSettings::builder()
-                .max_iterations(settings.apgd_iterations)
+        let gauss_seidel = GaussSeidel::new(
+            GaussSeidelSettings::builder()
+                .max_passes(settings.first_order_passes)
                 .parallelism(settings.parallelism)
                 .build()?,
         )?;
@@ -67,23 +94,37 @@ impl AutoSolver {
         )?;
         Ok(Self {
             settings,
-            apgd,
+            gauss_seidel,
             interior,
+            components: Components::default(),
+            skip_from: usize::MAX,
+            skip_left: 0,
+            to_gs: Vec::new(),
+            finished: Vec::new(),
+            to_interior: Vec::new(),
+            warm: Vec::new(),
+            scratch_m: Vec::new(),
+            scratch_n: Vec::new(),
         })
     }
 
-    /// The share of rows whose warm-start multiplier is active.
-    fn warm_active_share(p: &ProjectionProblem<'_>, sol: &ProjectionSolution) -> f64 {
-        let m = p.rows();
-        if m == 0 || sol.lambda.len() != m {
-            return 0.0;
-        }
-        let largest = sol.lambda.iter().fold(0.0f64, |a, &l| a.max(l));
-        if !(largest > 0.0) {
-            return 0.0;
-        }
-        let active = sol.lambda.iter().filter(|&&l| l > 1e-6 * largest).count();
-        active as f64 / m as f64
+    /// Solves the sub-problem of the components marked in `take` with `solver` to their
+    /// share of `target`, and returns its report.
+    fn solve_part(
+        components: &mut Components,
+        solver: &mut dyn ProjectionSolver,
+        p: &ProjectionProblem<'_>,
+        warm: &[f64],
+        take: &[bool],
+        target: Target,
+    ) -> Result<SolveReport, SolveError> {
+        let rows = components.gather(p, warm, take);
+        let share = Target {
+            gap: target.gap * rows as f64 / p.rows().max(1) as f64,
+            violation: target.violation,
+        };
+        let (sub, sol) = components.sub_problem();
+        solver.solve(&sub, share, sol)
     }
 }
 
@@ -98,15 +139,92 @@ impl ProjectionSolver for AutoSolver {
         target: Target,
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
-        let mut spent = SolveReport::default();
-        if Self::warm_active_share(p, sol) < self.settings.sparse_contacts {
-            spent = self.apgd.solve(p, target, sol)?;
-            if spent.status.is_converged() {
-                return Ok(spent);
+        p.validate()?;
+        let m = p.rows();
+        sol.resize_for(p);
+        if self.skip_left > 0 {
+            self.skip_left -= 1;
+            if self.skip_left == 0 {
+                self.skip_from = usize::MAX;
             }
         }
-        let mut rep = self.interior.solve(p, target, sol)?;
-        rep.add_work(&spent);
-        Ok(rep)
+        let count = self.components.split(p);
+        self.to_gs.clear();
+        self.to_gs
+            .extend((0..count).map(|c| self.components.rows_of(c).len() < self.skip_from));
+        self.finished.clear();
+        self.finished.resize(count, false);
+
+        // The warm start, kept while the parts are written back into `sol`.
+        self.warm.clear();
+        self.warm.extend_from_slice(&sol.lambda);
+        sol.v.copy_from_slice(p.w);
+        sol.lambda.iter_mut().for_each(|l| *l = 0.0);
+        let mut report = SolveReport::default();
+        let mut gs_answered = false;
+        if self.to_gs.iter().any(|&t| t) {
+            let rep = Self::solve_part(
+                &mut self.components,
+                &mut self.gauss_seidel,
+                p,
+                &self.warm,
+                &self.to_gs,
+                target,
+            )?;
+            report.add_work(&rep);
+            if rep.status.is_converged() {
+                self.finished.copy_from_slice(&self.to_gs);
+            } else {
+                self.components
+                    .check_each(target, m, &mut self.finished);
+                // The smallest component left unfinished sets the size that skips it.
+                let smallest = (0..count)
+                    .filter(|&c| self.to_gs[c] && !self.finished[c])
+                    .map(|c| self.components.rows_of(c).len())
+                    .min();
+                if let Some(rows) = smallest {
+                    self.skip_from = self.skip_from.min(rows);
+                    self.skip_left = self.settings.retry_after;
+                }
+            }
+            gs_answered = self.finished.iter().any(|&f| f);
+            self.components.scatter(sol, &self.finished);
+        }
+        self.to_interior.clear();
+        self.to_interior.extend(self.finished.iter().map(|&f| !f));
+        let mut interior_answered = false;
+        let mut status = SolveStatus::Converged;
+        if self.to_interior.iter().any(|&t| t) {
+            let rep = Self::solve_part(
+                &mut self.components,
+                &mut self.interior,
+                p,
+                &self.warm,
+                &self.to_interior,
+                target,
+            )?;
+            report.add_work(&rep);
+            status = rep.status;
+            interior_answered = true;
+            self.components.scatter(sol, &self.to_interior);
+        }
+        // Unknowns in no row keep v = w (set above); the whole answer is certified here.
+        self.scratch_m.resize(m, 0.0);
+        self.scratch_n.resize(p.dim(), 0.0);
+        let cert = certify(p, &sol.v, &sol.lambda, &mut self.scratch_m, &mut self.scratch_n);
+        if status.is_converged() && !(cert.gap <= target.gap && cert.violation <= target.violation)
+        {
+            status = SolveStatus::MaxIterations;
+        }
+        report.solver = match (gs_answered, interior_answered) {
+            (true, true) => "gs+interior",
+            (false, true) => "interior",
+            _ => "gauss-seidel",
+        };
+        report.status = status;
+        report.gap = cert.gap;
+        report.violation = cert.violation;
+        report.active = cert.active;
+        Ok(report)
     }
 }

@@ -13,6 +13,7 @@ mod apgd;
 mod auto;
 mod certificate;
 mod chain;
+mod components;
 mod clarabel_ref;
 mod error;
 mod gauss_seidel;
@@ -57,9 +58,10 @@ pub enum SolverKind {
     /// kept alongside, warm-started from the previous step's multipliers), with the
     /// large-problem fallback.
     GaussSeidel,
-    /// Chosen for each projection ([`AutoSolver`]): APGD while few rows were active in the
-    /// previous step, our interior point once contacts are dense, with the interior point's
-    /// fallback. Each report names the solver that answered. The default.
+    /// Chosen for each part of each projection ([`AutoSolver`]): the projection split into
+    /// its connected components, Gauss–Seidel on those it has been finishing within its
+    /// budget, our interior point on the rest, with the interior point's fallback. Each
+    /// report names the solver that answered. The default.
     #[default]
     Auto,
 }
@@ -201,10 +203,10 @@ impl SolverKind {
             }
             (SolverKind::GaussSeidel, true) => "our projected Gauss–Seidel with APGD as fallback",
             (SolverKind::Auto, false) => {
-                "APGD while contacts are sparse, our interior point once dense, Clarabel as fallback"
+                "per connected component: Gauss–Seidel where it finishes within its budget, our interior point elsewhere, Clarabel as fallback"
             }
             (SolverKind::Auto, true) => {
-                "APGD while contacts are sparse, our interior point once dense, APGD as fallback"
+                "per connected component: Gauss–Seidel where it finishes within its budget, our interior point elsewhere, APGD as fallback"
             }
         }
     }

@@ -2,7 +2,7 @@
 
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
-    Apgd, ApgdSettings, ClarabelReference, ClarabelSettings, GaussSeidel, GaussSeidelSettings,
+    Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings, GaussSeidel, GaussSeidelSettings,
     InteriorPoint, InteriorPointSettings, Newton, NewtonSettings, ProjectionProblem,
     ProjectionSolution, ProjectionSolver, RowOrder, SolveReport, Target, certify,
 };
@@ -12,6 +12,7 @@ use rand_chacha::ChaCha8Rng;
 #[path = "support/mod.rs"]
 mod support;
 
+#[derive(Clone)]
 struct Instance {
     w: Vec<f64>,
     rows: ConstraintRows,
@@ -472,6 +473,119 @@ fn gauss_seidel_warm_across_a_pattern_change_meets_kkt() {
     }
 }
 
+// `auto` on the same families: most of these problems are one component or a few; with
+// Gauss–Seidel's budget cut to one pass the interior point answers most of them.
+#[test]
+fn auto_cold_and_warm_meet_kkt_on_every_family() {
+    for passes in [200, 1] {
+        let mut solver = AutoSolver::new(AutoSettings {
+            first_order_passes: passes,
+            ..AutoSettings::default()
+        })
+        .unwrap();
+        for kind in 0..5 {
+            run_cold_and_warm(&mut solver, kind, 40, 100 + kind as u64, false, false);
+            run_cold_and_warm(&mut solver, kind, 20, 200 + kind as u64, true, false);
+            run_cold_and_warm(&mut solver, kind, 20, 300 + kind as u64, kind % 2 == 1, true);
+        }
+    }
+}
+
+/// `blocks` side by side: one problem whose components are (at least) the blocks.
+fn side_by_side(blocks: &[(Vec<f64>, ConstraintRows, Vec<f64>)]) -> Instance {
+    let n: usize = blocks.iter().map(|(w, _, _)| w.len()).sum();
+    let mut rows = ConstraintRows::new(n);
+    let (mut w, mut b) = (Vec::new(), Vec::new());
+    let mut key = 0;
+    for (bw, brows, bb) in blocks {
+        let shift = w.len();
+        for i in 0..bb.len() {
+            let (c, a) = brows.row(i);
+            rows.push(key, 0.0, c.iter().zip(a).map(|(&c, &a)| (c + shift, a)));
+            key += 1;
+        }
+        w.extend_from_slice(bw);
+        b.extend_from_slice(bb);
+    }
+    Instance { w, rows, b }
+}
+
+/// A crush beside small random problems: Gauss–Seidel finishes the small ones within a
+/// budget of 20 passes and not the crush, which the interior point then answers; the
+/// whole answer is Clarabel's, each block is the exact projection of the enumerator, and
+/// the crush skips Gauss–Seidel for `retry_after` solves, then is tried on again.
+#[test]
+fn auto_answers_each_component_with_the_solver_that_finishes_it() {
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let mut blocks = vec![small_crush()];
+    let mut small = Vec::new();
+    for _ in 0..8 {
+        let inst = random_instance(&mut rng, 0);
+        small.push(inst.clone());
+        blocks.push((inst.w, inst.rows, inst.b));
+    }
+    let whole = side_by_side(&blocks);
+    let p = ProjectionProblem {
+        w: &whole.w,
+        jacobian: &whole.rows,
+        b: &whole.b,
+    };
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut auto = AutoSolver::new(AutoSettings {
+        first_order_passes: 20,
+        retry_after: 3,
+        ..AutoSettings::default()
+    })
+    .unwrap();
+    let mut cold = || {
+        let mut sol = ProjectionSolution::default();
+        let rep = auto.solve(&p, t, &mut sol).unwrap();
+        (rep, sol)
+    };
+    let (first, sol) = cold();
+    assert_eq!(first.status, SolveStatus::Converged, "{first:?}");
+    assert_eq!(first.solver, "gs+interior", "{first:?}");
+    check_report(&p, t, "auto", &sol, &first);
+    let mut reference = ProjectionSolution::default();
+    let crep = ClarabelReference::default()
+        .solve(&p, t, &mut reference)
+        .unwrap();
+    let obj = |v: &[f64]| {
+        0.5 * v
+            .iter()
+            .zip(&whole.w)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+    };
+    assert!(
+        (obj(&sol.v) - obj(&reference.v)).abs() <= 2.0 * (first.gap + crep.gap) + 1e-7,
+        "objective {} vs clarabel {}",
+        obj(&sol.v),
+        obj(&reference.v)
+    );
+    // Each small block: the exact projection (its unknowns follow the crush's 450).
+    let mut shift = blocks[0].0.len();
+    for inst in &small {
+        let (v, _) = exact_projection(inst);
+        for (k, x) in v.iter().enumerate() {
+            assert!((sol.v[shift + k] - x).abs() <= 1e-4, "block at {shift}: {:?} vs {v:?}", &sol.v[shift..shift + v.len()]);
+        }
+        shift += v.len();
+    }
+    // The next `retry_after − 1` solves skip Gauss–Seidel on the crush: fewer passes; then
+    // it is tried again and spends its budget as the first time.
+    let skipping: Vec<usize> = (0..3).map(|_| cold().0.iterations).collect();
+    assert!(
+        skipping[..2].iter().all(|&it| it < first.iterations),
+        "{skipping:?} vs {}",
+        first.iterations
+    );
+    assert_eq!(skipping[2], first.iterations, "{skipping:?}");
+}
+
 /// Every option of the Gauss–Seidel (no momentum, symmetric sweeps, under- and
 /// over-relaxation, the rows by unknown, a certificate after every sweep).
 fn gauss_seidel_variants() -> Vec<(&'static str, GaussSeidelSettings)> {
@@ -566,11 +680,11 @@ fn an_infeasible_problem_is_never_converged_by_gauss_seidel() {
     }
 }
 
-/// A small crush: a hexagonal packing of 15 × 15 disks 2.4 mm apart, everyone pushing at
-/// 1 m/s towards the centre (the bench's crush in miniature: every row a contact of 4
-/// nonzeros), solved by every variant to the same objective as Clarabel, cold and warm.
-#[test]
-fn a_small_crush_matches_clarabel() {
+/// The small crush solved by every Gauss–Seidel variant to the same objective as Clarabel,
+/// cold and warm.
+/// A hexagonal packing of 15 × 15 disks 2.4 mm apart, everyone pushing at 1 m/s towards the
+/// centre (the bench's crush in miniature: every row a contact of 4 nonzeros): `(w, J, b)`.
+fn small_crush() -> (Vec<f64>, ConstraintRows, Vec<f64>) {
     let (d, radius, mu) = (0.48, 0.995 * 0.24, 0.05);
     let (per_row, rows_of_people) = (15, 15);
     let mut q = Vec::new();
@@ -613,6 +727,12 @@ fn a_small_crush_matches_clarabel() {
             }
         }
     }
+    (w, rows, b)
+}
+
+#[test]
+fn a_small_crush_matches_clarabel() {
+    let (w, rows, b) = small_crush();
     let p = ProjectionProblem {
         w: &w,
         jacobian: &rows,
@@ -790,7 +910,7 @@ fn settings_are_validated() {
 
 /// On 1 and 2 threads: APGD and Gauss–Seidel give the same bits (their parallel loops sum in
 /// fixed chunks);
-/// the interior point's and Newton's answers agree within their certified radii (faer's parallel
+/// the interior point's, Newton's and `auto`'s answers agree within their certified radii (faer's parallel
 /// supernodal factorization, which it picks on this random problem, sums in another order).
 /// Problems larger than one chunk (4,096 rows) so that the loops do split.
 #[test]
@@ -840,6 +960,13 @@ fn one_and_two_threads_give_the_same_answer() {
             "newton" => Box::new(
                 Newton::new(NewtonSettings::builder().parallelism(par).build().unwrap()).unwrap(),
             ),
+            "auto" => Box::new(
+                AutoSolver::new(AutoSettings {
+                    parallelism: par,
+                    ..AutoSettings::default()
+                })
+                .unwrap(),
+            ),
             "gauss-seidel" => Box::new(
                 GaussSeidel::new(
                     GaussSeidelSettings::builder()
@@ -868,7 +995,7 @@ fn one_and_two_threads_give_the_same_answer() {
     assert_eq!(one.lambda, two.lambda, "Gauss–Seidel");
     assert_eq!(r1, r2, "Gauss–Seidel");
     // ½|v − v*|² ≤ gap + |λ*|₁·violation for each answer (λ* approximated by the answer's λ).
-    for which in ["interior", "newton"] {
+    for which in ["interior", "newton", "auto"] {
         let ((one, r1), (two, r2)) = (solve(1, which), solve(2, which));
         let l1: f64 = one.lambda.iter().sum();
         let radius = |r: &SolveReport| (2.0 * (r.gap + l1 * r.violation)).sqrt();

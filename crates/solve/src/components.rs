@@ -1,0 +1,321 @@
+//! The connected components of a projection problem, and the sub-problems made of some of
+//! them: rows that share no unknown, directly or through other rows, are independent
+//! problems whose gaps add up.
+
+use moreau_core::ConstraintRows;
+
+use crate::problem::{ProjectionProblem, ProjectionSolution, Target};
+
+/// The components of the last problem given to [`split`](Self::split), and one sub-problem
+/// buffer. Scratch only: sized by the largest problem seen, nothing allocated per row once
+/// warm.
+#[derive(Debug, Default)]
+pub(crate) struct Components {
+    // union–find over unknowns (roots are the smallest unknown of their set)
+    parent: Vec<u32>,
+    // component of each root unknown, u32::MAX before it is numbered
+    numbered: Vec<u32>,
+    // component of each row
+    row_component: Vec<u32>,
+    // the rows of component c are rows[start[c]..start[c + 1]], in storage order
+    start: Vec<u32>,
+    rows: Vec<u32>,
+    // the sub-problem: the chosen rows, their unknowns renumbered in order of appearance
+    local: Vec<u32>,
+    unknowns: Vec<u32>,
+    sub_rows: Vec<u32>,
+    // position of each row in the sub-problem, u32::MAX when not in it
+    sub_position: Vec<u32>,
+    slack: Vec<f64>,
+    sub_jacobian: ConstraintRows,
+    sub_w: Vec<f64>,
+    sub_b: Vec<f64>,
+    sub_solution: ProjectionSolution,
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        let up = parent[parent[i as usize] as usize];
+        parent[i as usize] = up;
+        i = up;
+    }
+    i
+}
+
+impl Components {
+    /// Finds the components of `p`'s rows (numbered in the order of their first row; a row
+    /// without gradient is a component of its own) and returns how many there are.
+    pub fn split(&mut self, p: &ProjectionProblem<'_>) -> usize {
+        let (m, n) = (p.rows(), p.dim());
+        let j = p.jacobian;
+        self.parent.clear();
+        self.parent.extend(0..n as u32);
+        for i in 0..m {
+            let cols = j.row(i).0;
+            if let Some((&first, rest)) = cols.split_first() {
+                let mut a = find(&mut self.parent, first as u32);
+                for &c in rest {
+                    let b = find(&mut self.parent, c as u32);
+                    if a != b {
+                        let (lo, hi) = (a.min(b), a.max(b));
+                        self.parent[hi as usize] = lo;
+                        a = lo;
+                    }
+                }
+            }
+        }
+        self.numbered.clear();
+        self.numbered.resize(n, u32::MAX);
+        self.row_component.clear();
+        let mut count = 0u32;
+        for i in 0..m {
+            let c = match j.row(i).0.first() {
+                Some(&first) => {
+                    let root = find(&mut self.parent, first as u32) as usize;
+                    if self.numbered[root] == u32::MAX {
+                        self.numbered[root] = count;
+                        count += 1;
+                    }
+                    self.numbered[root]
+                }
+                None => {
+                    count += 1;
+                    count - 1
+                }
+            };
+            self.row_component.push(c);
+        }
+        // Rows grouped by component (a counting sort keeps storage order within each).
+        let k = count as usize;
+        self.start.clear();
+        self.start.resize(k + 1, 0);
+        for &c in &self.row_component {
+            self.start[c as usize + 1] += 1;
+        }
+        for c in 0..k {
+            self.start[c + 1] += self.start[c];
+        }
+        self.rows.clear();
+        self.rows.resize(m, 0);
+        // `numbered` is free again: reuse it as the next slot of each component.
+        self.numbered.clear();
+        self.numbered.extend_from_slice(&self.start[..k]);
+        for (i, &c) in self.row_component.iter().enumerate() {
+            let slot = &mut self.numbered[c as usize];
+            self.rows[*slot as usize] = i as u32;
+            *slot += 1;
+        }
+        k
+    }
+
+    /// The rows of component `c` (after [`split`](Self::split)).
+    pub fn rows_of(&self, c: usize) -> &[u32] {
+        &self.rows[self.start[c] as usize..self.start[c + 1] as usize]
+    }
+
+    /// Makes the sub-problem of the components `c` with `take[c]`: their rows (in storage
+    /// order), the unknowns those rows touch, the warm start `lambda` of those rows. Returns
+    /// its number of rows.
+    pub fn gather(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64], take: &[bool]) -> usize {
+        let (m, n) = (p.rows(), p.dim());
+        let j = p.jacobian;
+        self.local.clear();
+        self.local.resize(n, u32::MAX);
+        self.unknowns.clear();
+        self.sub_rows.clear();
+        self.sub_position.clear();
+        self.sub_position.resize(m, u32::MAX);
+        for i in 0..m {
+            if take[self.row_component[i] as usize] {
+                self.sub_position[i] = self.sub_rows.len() as u32;
+                self.sub_rows.push(i as u32);
+            }
+        }
+        for &i in &self.sub_rows {
+            for &c in j.row(i as usize).0 {
+                if self.local[c] == u32::MAX {
+                    self.local[c] = self.unknowns.len() as u32;
+                    self.unknowns.push(c as u32);
+                }
+            }
+        }
+        self.sub_jacobian.clear(self.unknowns.len());
+        self.sub_b.clear();
+        self.sub_solution.lambda.clear();
+        let keys = j.keys();
+        for &i in &self.sub_rows {
+            let i = i as usize;
+            let (cols, coefs) = j.row(i);
+            let local = &self.local;
+            self.sub_jacobian.push(
+                keys[i],
+                j.values()[i],
+                cols.iter()
+                    .zip(coefs)
+                    .map(|(&c, &a)| (local[c] as usize, a)),
+            );
+            self.sub_b.push(p.b[i]);
+            self.sub_solution
+                .lambda
+                .push(lambda.get(i).copied().unwrap_or(0.0));
+        }
+        self.sub_w.clear();
+        self.sub_w
+            .extend(self.unknowns.iter().map(|&c| p.w[c as usize]));
+        self.sub_rows.len()
+    }
+
+    /// The sub-problem made by [`gather`](Self::gather) and its solution buffers.
+    pub fn sub_problem(&mut self) -> (ProjectionProblem<'_>, &mut ProjectionSolution) {
+        (
+            ProjectionProblem {
+                w: &self.sub_w,
+                jacobian: &self.sub_jacobian,
+                b: &self.sub_b,
+            },
+            &mut self.sub_solution,
+        )
+    }
+
+    /// Writes the sub-problem's solution into `sol` (its rows' multipliers, its unknowns'
+    /// velocities) for the components `c` with `keep[c]`.
+    pub fn scatter(&self, sol: &mut ProjectionSolution, keep: &[bool]) {
+        let local_sol = &self.sub_solution;
+        for (k, &i) in self.sub_rows.iter().enumerate() {
+            let i = i as usize;
+            if keep[self.row_component[i] as usize] {
+                sol.lambda[i] = local_sol.lambda[k];
+                for &c in self.sub_jacobian.row(k).0 {
+                    sol.v[self.unknowns[c] as usize] = local_sol.v[c];
+                }
+            }
+        }
+    }
+
+    /// Whether each component of the sub-problem meets its share of `target` (its rows /
+    /// `total_rows` of the gap, all of the violation) with the sub-problem's solution, which
+    /// must have `v = w + Jᵀλ` (as every solver returns it): the gap is then `Σ λ_k s_k⁺`.
+    /// Sets `met[c]` for the components of the sub-problem, leaves the others.
+    pub fn check_each(&mut self, target: Target, total_rows: usize, met: &mut [bool]) {
+        let sol = &self.sub_solution;
+        self.slack.clear();
+        self.slack.resize(self.sub_rows.len(), 0.0);
+        self.sub_jacobian.mul(&sol.v, &mut self.slack);
+        for c in 0..self.start.len() - 1 {
+            let rows = self.rows_of(c);
+            if self.sub_position[rows[0] as usize] == u32::MAX {
+                continue;
+            }
+            let (mut gap, mut violation) = (0.0f64, 0.0f64);
+            for &i in rows {
+                let k = self.sub_position[i as usize] as usize;
+                let s = self.sub_b[k] + self.slack[k];
+                gap += sol.lambda[k].max(0.0) * s.max(0.0);
+                violation = violation.max(-s);
+            }
+            let share = target.gap * rows.len() as f64 / total_rows.max(1) as f64;
+            met[c] = gap <= share && violation <= target.violation;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rows over unknowns 0–5: (0, 1), (2), (1, 3), a row without gradient, (4, 5), (3):
+    /// components {rows 0, 2, 5}, {1}, {3}, {4}, numbered by their first row.
+    fn problem() -> (ConstraintRows, Vec<f64>, Vec<f64>) {
+        let mut rows = ConstraintRows::new(7);
+        rows.push(10, 0.1, [(0, 1.0), (1, -1.0)]);
+        rows.push(11, 0.2, [(2, 1.0)]);
+        rows.push(12, 0.3, [(1, 1.0), (3, -1.0)]);
+        rows.push(13, 0.4, []);
+        rows.push(14, 0.5, [(4, 1.0), (5, -1.0)]);
+        rows.push(15, 0.6, [(3, 2.0)]);
+        let w = (0..7).map(|c| c as f64).collect();
+        let b = (0..6).map(|i| -(i as f64)).collect();
+        (rows, w, b)
+    }
+
+    #[test]
+    fn rows_sharing_unknowns_through_other_rows_are_one_component() {
+        let (rows, w, b) = problem();
+        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let mut parts = Components::default();
+        assert_eq!(parts.split(&p), 4);
+        assert_eq!(parts.rows_of(0), &[0, 2, 5]);
+        assert_eq!(parts.rows_of(1), &[1]);
+        assert_eq!(parts.rows_of(2), &[3]);
+        assert_eq!(parts.rows_of(3), &[4]);
+        // A second, different problem in the same scratch.
+        let mut one = ConstraintRows::new(2);
+        one.push(0, 0.0, [(1, 1.0)]);
+        let p = ProjectionProblem { w: &w[..2], jacobian: &one, b: &b[..1] };
+        assert_eq!(parts.split(&p), 1);
+        assert_eq!(parts.rows_of(0), &[0]);
+    }
+
+    #[test]
+    fn a_sub_problem_keeps_its_rows_in_storage_order_and_writes_back_only_what_is_kept() {
+        let (rows, w, b) = problem();
+        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let mut parts = Components::default();
+        parts.split(&p);
+        let warm = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        assert_eq!(parts.gather(&p, &warm, &[true, false, false, true]), 4);
+        {
+            let (sub, sol) = parts.sub_problem();
+            // rows 0, 2, 4, 5; unknowns in order of appearance 0, 1, 3, 4, 5
+            assert_eq!(sub.jacobian.keys(), &[10, 12, 14, 15]);
+            assert_eq!(sub.b, &[0.0, -2.0, -4.0, -5.0]);
+            assert_eq!(sub.w, &[0.0, 1.0, 3.0, 4.0, 5.0]);
+            assert_eq!(sub.jacobian.row(1).0, &[1, 2]);
+            assert_eq!(sub.jacobian.row(3), (&[2usize][..], &[2.0][..]));
+            assert_eq!(sol.lambda, vec![1.0, 3.0, 5.0, 6.0]);
+            sol.v = vec![10.0, 11.0, 13.0, 14.0, 15.0];
+            sol.lambda = vec![-1.0, -3.0, -5.0, -6.0];
+        }
+        let mut out = ProjectionSolution { v: vec![0.0; 7], lambda: vec![0.0; 6] };
+        parts.scatter(&mut out, &[false, false, false, true]);
+        assert_eq!(out.lambda, vec![0.0, 0.0, 0.0, 0.0, -5.0, 0.0]);
+        assert_eq!(out.v, vec![0.0, 0.0, 0.0, 0.0, 14.0, 15.0, 0.0]);
+        parts.scatter(&mut out, &[true, true, true, true]);
+        assert_eq!(out.lambda, vec![-1.0, 0.0, -3.0, 0.0, -5.0, -6.0]);
+        assert_eq!(out.v, vec![10.0, 11.0, 0.0, 13.0, 14.0, 15.0, 0.0]);
+    }
+
+    #[test]
+    fn each_component_is_checked_against_its_share_of_the_target() {
+        // Two components of one row each, x0 ≥ 1 and x1 ≥ 1, from w = 0.
+        let mut rows = ConstraintRows::new(2);
+        rows.push(0, 0.0, [(0, 1.0)]);
+        rows.push(1, 0.0, [(1, 1.0)]);
+        let (w, b) = ([0.0, 0.0], [-1.0, -1.0]);
+        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let mut parts = Components::default();
+        parts.split(&p);
+        parts.gather(&p, &[0.0, 0.0], &[true, true]);
+        {
+            // The first solved exactly (λ = 1, s = 0); the second with λ = 0.5 (v = 0.5:
+            // s = −0.5, violated).
+            let (_, sol) = parts.sub_problem();
+            sol.v = vec![1.0, 0.5];
+            sol.lambda = vec![1.0, 0.5];
+        }
+        let mut met = [false, true];
+        let t = Target { gap: 1e-9, violation: 1e-3 };
+        parts.check_each(t, 2, &mut met);
+        assert_eq!(met, [true, false]);
+        // Both feasible, the second with a gap λ s = 0.5 · 0.25: met only with a share ≥ it.
+        {
+            let (_, sol) = parts.sub_problem();
+            sol.v = vec![1.0, 1.25];
+            sol.lambda = vec![1.0, 0.5];
+        }
+        parts.check_each(Target { gap: 0.25, violation: 1e-3 }, 2, &mut met);
+        assert_eq!(met, [true, true]);
+        parts.check_each(Target { gap: 0.24, violation: 1e-3 }, 2, &mut met);
+        assert_eq!(met, [true, false]);
+    }
+}
