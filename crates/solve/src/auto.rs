@@ -158,43 +158,64 @@ impl ProjectionSolver for AutoSolver {
         // The warm start, kept while the parts are written back into `sol`.
         self.warm.clear();
         self.warm.extend_from_slice(&sol.lambda);
-        sol.v.copy_from_slice(p.w);
-        sol.lambda.iter_mut().for_each(|l| *l = 0.0);
         let mut report = SolveReport::default();
         let mut gs_answered = false;
-        if self.to_gs.iter().any(|&t| t) {
-            let rep = Self::solve_part(
-                &mut self.components,
-                &mut self.gauss_seidel,
-                p,
-                &self.warm,
-                &self.to_gs,
-                target,
-            )?;
+        let all_gs = self.to_gs.iter().all(|&t| t);
+        if all_gs {
+            // The whole problem: no copy.
+            let rep = self.gauss_seidel.solve(p, target, sol)?;
             report.add_work(&rep);
             if rep.status.is_converged() {
-                self.finished.copy_from_slice(&self.to_gs);
+                self.finished.iter_mut().for_each(|f| *f = true);
             } else {
                 self.components
-                    .check_each(target, m, &mut self.finished);
-                // The smallest component left unfinished sets the size that skips it.
-                let smallest = (0..count)
-                    .filter(|&c| self.to_gs[c] && !self.finished[c])
-                    .map(|c| self.components.rows_of(c).len())
-                    .min();
-                if let Some(rows) = smallest {
-                    self.skip_from = self.skip_from.min(rows);
-                    self.skip_left = self.settings.retry_after;
-                }
+                    .check_whole(p, sol, target, &mut self.finished);
             }
+        } else {
+            sol.v.copy_from_slice(p.w);
+            sol.lambda.iter_mut().for_each(|l| *l = 0.0);
+            if self.to_gs.iter().any(|&t| t) {
+                let rep = Self::solve_part(
+                    &mut self.components,
+                    &mut self.gauss_seidel,
+                    p,
+                    &self.warm,
+                    &self.to_gs,
+                    target,
+                )?;
+                report.add_work(&rep);
+                if rep.status.is_converged() {
+                    self.finished.copy_from_slice(&self.to_gs);
+                } else {
+                    self.components.check_sub(target, &mut self.finished);
+                }
+                self.components.scatter(sol, &self.finished);
+            }
+        }
+        if self.to_gs.iter().any(|&t| t) {
             gs_answered = self.finished.iter().any(|&f| f);
-            self.components.scatter(sol, &self.finished);
+            // The smallest component left unfinished sets the size that skips it.
+            let smallest = (0..count)
+                .filter(|&c| self.to_gs[c] && !self.finished[c])
+                .map(|c| self.components.rows_of(c).len())
+                .min();
+            if let Some(rows) = smallest {
+                self.skip_from = self.skip_from.min(rows);
+                self.skip_left = self.settings.retry_after;
+            }
         }
         self.to_interior.clear();
         self.to_interior.extend(self.finished.iter().map(|&f| !f));
         let mut interior_answered = false;
         let mut status = SolveStatus::Converged;
-        if self.to_interior.iter().any(|&t| t) {
+        if self.to_interior.iter().all(|&t| t) && count > 0 {
+            // The whole problem again, from the caller's warm start.
+            sol.lambda.copy_from_slice(&self.warm);
+            let rep = self.interior.solve(p, target, sol)?;
+            report.add_work(&rep);
+            status = rep.status;
+            interior_answered = true;
+        } else if self.to_interior.iter().any(|&t| t) {
             let rep = Self::solve_part(
                 &mut self.components,
                 &mut self.interior,
@@ -208,7 +229,7 @@ impl ProjectionSolver for AutoSolver {
             interior_answered = true;
             self.components.scatter(sol, &self.to_interior);
         }
-        // Unknowns in no row keep v = w (set above); the whole answer is certified here.
+        // Unknowns in no row have v = w; the whole answer is certified here.
         self.scratch_m.resize(m, 0.0);
         self.scratch_n.resize(p.dim(), 0.0);
         let cert = certify(p, &sol.v, &sol.lambda, &mut self.scratch_m, &mut self.scratch_n);

@@ -24,9 +24,10 @@ pub(crate) struct Components {
     local: Vec<u32>,
     unknowns: Vec<u32>,
     sub_rows: Vec<u32>,
-    // position of each row in the sub-problem, u32::MAX when not in it
-    sub_position: Vec<u32>,
+    // per row of the problem checked: its slack; per component: gap and violation
     slack: Vec<f64>,
+    gap: Vec<f64>,
+    violation: Vec<f64>,
     sub_jacobian: ConstraintRows,
     sub_w: Vec<f64>,
     sub_b: Vec<f64>,
@@ -123,11 +124,8 @@ impl Components {
         self.local.resize(n, u32::MAX);
         self.unknowns.clear();
         self.sub_rows.clear();
-        self.sub_position.clear();
-        self.sub_position.resize(m, u32::MAX);
         for i in 0..m {
             if take[self.row_component[i] as usize] {
-                self.sub_position[i] = self.sub_rows.len() as u32;
                 self.sub_rows.push(i as u32);
             }
         }
@@ -192,29 +190,65 @@ impl Components {
         }
     }
 
-    /// Whether each component of the sub-problem meets its share of `target` (its rows /
-    /// `total_rows` of the gap, all of the violation) with the sub-problem's solution, which
-    /// must have `v = w + Jᵀλ` (as every solver returns it): the gap is then `Σ λ_k s_k⁺`.
-    /// Sets `met[c]` for the components of the sub-problem, leaves the others.
-    pub fn check_each(&mut self, target: Target, total_rows: usize, met: &mut [bool]) {
-        let sol = &self.sub_solution;
+    /// Whether each component meets its share of `target` (its rows / all rows of the gap,
+    /// all of the violation) with the answer `sol` to the whole problem `p`, which must have
+    /// `v = w + Jᵀλ` (as every solver returns it): the gap is then `Σ λ_k s_k⁺`. Sets
+    /// `met[c]` for every component.
+    pub fn check_whole(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        sol: &ProjectionSolution,
+        target: Target,
+        met: &mut [bool],
+    ) {
+        self.check(p.jacobian, p.b, sol, false, target, met);
+    }
+
+    /// [`check_whole`](Self::check_whole) for the sub-problem of [`gather`](Self::gather)
+    /// and its solution: sets `met[c]` for the components of the sub-problem only.
+    pub fn check_sub(&mut self, target: Target, met: &mut [bool]) {
+        let (j, b, sol) = (
+            std::mem::take(&mut self.sub_jacobian),
+            std::mem::take(&mut self.sub_b),
+            std::mem::take(&mut self.sub_solution),
+        );
+        self.check(&j, &b, &sol, true, target, met);
+        (self.sub_jacobian, self.sub_b, self.sub_solution) = (j, b, sol);
+    }
+
+    fn check(
+        &mut self,
+        j: &ConstraintRows,
+        b: &[f64],
+        sol: &ProjectionSolution,
+        sub: bool,
+        target: Target,
+        met: &mut [bool],
+    ) {
+        let total_rows = self.row_component.len();
         self.slack.clear();
-        self.slack.resize(self.sub_rows.len(), 0.0);
-        self.sub_jacobian.mul(&sol.v, &mut self.slack);
-        for c in 0..self.start.len() - 1 {
-            let rows = self.rows_of(c);
-            if self.sub_position[rows[0] as usize] == u32::MAX {
-                continue;
-            }
-            let (mut gap, mut violation) = (0.0f64, 0.0f64);
-            for &i in rows {
-                let k = self.sub_position[i as usize] as usize;
-                let s = self.sub_b[k] + self.slack[k];
-                gap += sol.lambda[k].max(0.0) * s.max(0.0);
-                violation = violation.max(-s);
-            }
-            let share = target.gap * rows.len() as f64 / total_rows.max(1) as f64;
-            met[c] = gap <= share && violation <= target.violation;
+        self.slack.resize(b.len(), 0.0);
+        j.mul(&sol.v, &mut self.slack);
+        let k = self.start.len() - 1;
+        self.gap.clear();
+        self.gap.resize(k, 0.0);
+        self.violation.clear();
+        self.violation.resize(k, 0.0);
+        let component = |r: usize| {
+            let i = if sub { self.sub_rows[r] as usize } else { r };
+            self.row_component[i] as usize
+        };
+        for (r, (&jv, &b)) in self.slack.iter().zip(b).enumerate() {
+            let c = component(r);
+            let s = jv + b;
+            self.gap[c] += sol.lambda[r].max(0.0) * s.max(0.0);
+            self.violation[c] = self.violation[c].max(-s);
+        }
+        for r in 0..b.len() {
+            let c = component(r);
+            let share = target.gap * (self.start[c + 1] - self.start[c]) as f64
+                / total_rows.max(1) as f64;
+            met[c] = self.gap[c] <= share && self.violation[c] <= target.violation;
         }
     }
 }
@@ -295,27 +329,29 @@ mod tests {
         let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
         let mut parts = Components::default();
         parts.split(&p);
-        parts.gather(&p, &[0.0, 0.0], &[true, true]);
-        {
-            // The first solved exactly (λ = 1, s = 0); the second with λ = 0.5 (v = 0.5:
-            // s = −0.5, violated).
-            let (_, sol) = parts.sub_problem();
-            sol.v = vec![1.0, 0.5];
-            sol.lambda = vec![1.0, 0.5];
-        }
-        let mut met = [false, true];
+        // The first solved exactly (λ = 1, s = 0); the second with λ = 0.5 (v = 0.5:
+        // s = −0.5, violated).
+        let mut sol = ProjectionSolution { v: vec![1.0, 0.5], lambda: vec![1.0, 0.5] };
         let t = Target { gap: 1e-9, violation: 1e-3 };
-        parts.check_each(t, 2, &mut met);
+        let mut met = [false, true];
+        parts.check_whole(&p, &sol, t, &mut met);
         assert_eq!(met, [true, false]);
-        // Both feasible, the second with a gap λ s = 0.5 · 0.25: met only with a share ≥ it.
-        {
-            let (_, sol) = parts.sub_problem();
-            sol.v = vec![1.0, 1.25];
-            sol.lambda = vec![1.0, 0.5];
-        }
-        parts.check_each(Target { gap: 0.25, violation: 1e-3 }, 2, &mut met);
+        // The second feasible with a gap λ s = 0.5 · 0.25 (the arithmetic only: this v is
+        // not w + Jᵀλ): met only with a share (half the target) ≥ it.
+        sol.v[1] = 1.25;
+        parts.check_whole(&p, &sol, Target { gap: 0.25, ..t }, &mut met);
         assert_eq!(met, [true, true]);
-        parts.check_each(Target { gap: 0.24, violation: 1e-3 }, 2, &mut met);
+        parts.check_whole(&p, &sol, Target { gap: 0.24, ..t }, &mut met);
         assert_eq!(met, [true, false]);
+        // The second alone as a sub-problem: the first's verdict is left as it was.
+        parts.gather(&p, &[0.0, 0.0], &[false, true]);
+        {
+            let (_, sub_sol) = parts.sub_problem();
+            sub_sol.v = vec![1.0];
+            sub_sol.lambda = vec![1.0];
+        }
+        let mut met = [false, false];
+        parts.check_sub(t, &mut met);
+        assert_eq!(met, [false, true]);
     }
 }
