@@ -34,6 +34,9 @@ pub(crate) struct Components {
     sub_solution: ProjectionSolution,
 }
 
+/// The component of a row set aside.
+const NONE: u32 = u32::MAX;
+
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         let up = parent[parent[i as usize] as usize];
@@ -44,14 +47,19 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
 }
 
 impl Components {
-    /// Finds the components of `p`'s rows (numbered in the order of their first row; a row
-    /// without gradient is a component of its own) and returns how many there are.
-    pub fn split(&mut self, p: &ProjectionProblem<'_>) -> usize {
+    /// Finds the components of `p`'s rows, leaving out the rows `i` with `set_aside[i]`
+    /// (they belong to none), numbered in the order of their first row (a row without
+    /// gradient is a component of its own), and returns how many there are.
+    pub fn split(&mut self, p: &ProjectionProblem<'_>, set_aside: &[bool]) -> usize {
         let (m, n) = (p.rows(), p.dim());
         let j = p.jacobian;
         self.parent.clear();
         self.parent.extend(0..n as u32);
+        let aside = |i: usize| set_aside.get(i).copied().unwrap_or(false);
         for i in 0..m {
+            if aside(i) {
+                continue;
+            }
             let cols = j.row(i).0;
             if let Some((&first, rest)) = cols.split_first() {
                 let mut a = find(&mut self.parent, first as u32);
@@ -70,6 +78,10 @@ impl Components {
         self.row_component.clear();
         let mut count = 0u32;
         for i in 0..m {
+            if aside(i) {
+                self.row_component.push(NONE);
+                continue;
+            }
             let c = match j.row(i).0.first() {
                 Some(&first) => {
                     let root = find(&mut self.parent, first as u32) as usize;
@@ -91,17 +103,22 @@ impl Components {
         self.start.clear();
         self.start.resize(k + 1, 0);
         for &c in &self.row_component {
-            self.start[c as usize + 1] += 1;
+            if c != NONE {
+                self.start[c as usize + 1] += 1;
+            }
         }
         for c in 0..k {
             self.start[c + 1] += self.start[c];
         }
         self.rows.clear();
-        self.rows.resize(m, 0);
+        self.rows.resize(self.start[k] as usize, 0);
         // `numbered` is free again: reuse it as the next slot of each component.
         self.numbered.clear();
         self.numbered.extend_from_slice(&self.start[..k]);
         for (i, &c) in self.row_component.iter().enumerate() {
+            if c == NONE {
+                continue;
+            }
             let slot = &mut self.numbered[c as usize];
             self.rows[*slot as usize] = i as u32;
             *slot += 1;
@@ -125,7 +142,8 @@ impl Components {
         self.unknowns.clear();
         self.sub_rows.clear();
         for i in 0..m {
-            if take[self.row_component[i] as usize] {
+            let c = self.row_component[i];
+            if c != NONE && take[c as usize] {
                 self.sub_rows.push(i as u32);
             }
         }
@@ -236,18 +254,26 @@ impl Components {
         self.violation.resize(k, 0.0);
         let component = |r: usize| {
             let i = if sub { self.sub_rows[r] as usize } else { r };
-            self.row_component[i] as usize
+            self.row_component[i]
         };
         for (r, (&jv, &b)) in self.slack.iter().zip(b).enumerate() {
             let c = component(r);
+            if c == NONE {
+                continue;
+            }
+            let c = c as usize;
             let s = jv + b;
             self.gap[c] += sol.lambda[r].max(0.0) * s.max(0.0);
             self.violation[c] = self.violation[c].max(-s);
         }
         for r in 0..b.len() {
             let c = component(r);
-            let share = target.gap * (self.start[c + 1] - self.start[c]) as f64
-                / total_rows.max(1) as f64;
+            if c == NONE {
+                continue;
+            }
+            let c = c as usize;
+            let share =
+                target.gap * (self.start[c + 1] - self.start[c]) as f64 / total_rows.max(1) as f64;
             met[c] = self.gap[c] <= share && self.violation[c] <= target.violation;
         }
     }
@@ -275,27 +301,46 @@ mod tests {
     #[test]
     fn rows_sharing_unknowns_through_other_rows_are_one_component() {
         let (rows, w, b) = problem();
-        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
         let mut parts = Components::default();
-        assert_eq!(parts.split(&p), 4);
+        assert_eq!(parts.split(&p, &[]), 4);
         assert_eq!(parts.rows_of(0), &[0, 2, 5]);
         assert_eq!(parts.rows_of(1), &[1]);
         assert_eq!(parts.rows_of(2), &[3]);
         assert_eq!(parts.rows_of(3), &[4]);
+        // Row 2 set aside: rows 0 and 5 no longer meet.
+        assert_eq!(
+            parts.split(&p, &[false, false, true, false, false, false]),
+            5
+        );
+        assert_eq!(parts.rows_of(0), &[0]);
+        assert_eq!(parts.rows_of(4), &[5]);
         // A second, different problem in the same scratch.
         let mut one = ConstraintRows::new(2);
         one.push(0, 0.0, [(1, 1.0)]);
-        let p = ProjectionProblem { w: &w[..2], jacobian: &one, b: &b[..1] };
-        assert_eq!(parts.split(&p), 1);
+        let p = ProjectionProblem {
+            w: &w[..2],
+            jacobian: &one,
+            b: &b[..1],
+        };
+        assert_eq!(parts.split(&p, &[]), 1);
         assert_eq!(parts.rows_of(0), &[0]);
     }
 
     #[test]
     fn a_sub_problem_keeps_its_rows_in_storage_order_and_writes_back_only_what_is_kept() {
         let (rows, w, b) = problem();
-        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
         let mut parts = Components::default();
-        parts.split(&p);
+        parts.split(&p, &[]);
         let warm = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
         assert_eq!(parts.gather(&p, &warm, &[true, false, false, true]), 4);
         {
@@ -310,7 +355,10 @@ mod tests {
             sol.v = vec![10.0, 11.0, 13.0, 14.0, 15.0];
             sol.lambda = vec![-1.0, -3.0, -5.0, -6.0];
         }
-        let mut out = ProjectionSolution { v: vec![0.0; 7], lambda: vec![0.0; 6] };
+        let mut out = ProjectionSolution {
+            v: vec![0.0; 7],
+            lambda: vec![0.0; 6],
+        };
         parts.scatter(&mut out, &[false, false, false, true]);
         assert_eq!(out.lambda, vec![0.0, 0.0, 0.0, 0.0, -5.0, 0.0]);
         assert_eq!(out.v, vec![0.0, 0.0, 0.0, 0.0, 14.0, 15.0, 0.0]);
@@ -326,13 +374,23 @@ mod tests {
         rows.push(0, 0.0, [(0, 1.0)]);
         rows.push(1, 0.0, [(1, 1.0)]);
         let (w, b) = ([0.0, 0.0], [-1.0, -1.0]);
-        let p = ProjectionProblem { w: &w, jacobian: &rows, b: &b };
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
         let mut parts = Components::default();
-        parts.split(&p);
+        parts.split(&p, &[]);
         // The first solved exactly (λ = 1, s = 0); the second with λ = 0.5 (v = 0.5:
         // s = −0.5, violated).
-        let mut sol = ProjectionSolution { v: vec![1.0, 0.5], lambda: vec![1.0, 0.5] };
-        let t = Target { gap: 1e-9, violation: 1e-3 };
+        let mut sol = ProjectionSolution {
+            v: vec![1.0, 0.5],
+            lambda: vec![1.0, 0.5],
+        };
+        let t = Target {
+            gap: 1e-9,
+            violation: 1e-3,
+        };
         let mut met = [false, true];
         parts.check_whole(&p, &sol, t, &mut met);
         assert_eq!(met, [true, false]);

@@ -2,9 +2,10 @@
 
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
-    Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings, GaussSeidel, GaussSeidelSettings,
-    InteriorPoint, InteriorPointSettings, Newton, NewtonSettings, ProjectionProblem,
-    ProjectionSolution, ProjectionSolver, RowOrder, SolveReport, Target, certify,
+    Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings, GaussSeidel,
+    GaussSeidelSettings, InteriorPoint, InteriorPointSettings, Newton, NewtonSettings,
+    ProjectionProblem, ProjectionSolution, ProjectionSolver, RowOrder, SolveReport, Target,
+    certify,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -486,7 +487,14 @@ fn auto_cold_and_warm_meet_kkt_on_every_family() {
         for kind in 0..5 {
             run_cold_and_warm(&mut solver, kind, 40, 100 + kind as u64, false, false);
             run_cold_and_warm(&mut solver, kind, 20, 200 + kind as u64, true, false);
-            run_cold_and_warm(&mut solver, kind, 20, 300 + kind as u64, kind % 2 == 1, true);
+            run_cold_and_warm(
+                &mut solver,
+                kind,
+                20,
+                300 + kind as u64,
+                kind % 2 == 1,
+                true,
+            );
         }
     }
 }
@@ -571,7 +579,11 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
     for inst in &small {
         let (v, _) = exact_projection(inst);
         for (k, x) in v.iter().enumerate() {
-            assert!((sol.v[shift + k] - x).abs() <= 1e-4, "block at {shift}: {:?} vs {v:?}", &sol.v[shift..shift + v.len()]);
+            assert!(
+                (sol.v[shift + k] - x).abs() <= 1e-4,
+                "block at {shift}: {:?} vs {v:?}",
+                &sol.v[shift..shift + v.len()]
+            );
         }
         shift += v.len();
     }
@@ -584,6 +596,60 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
         first.iterations
     );
     assert_eq!(skipping[2], first.iterations, "{skipping:?}");
+}
+
+/// A row far from binding at `w` is set aside, but the correction of another row moves it
+/// past zero (a row with a large gradient): `auto` sees the violation in its certificate
+/// and solves again with every row, reaching the exact projection.
+#[test]
+fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
+    // v1 − v0 ≥ 0 and 100 (v2 − v1) + 40 ≥ 0.
+    let mut rows = ConstraintRows::new(3);
+    rows.push(0, 0.0, [(0, -1.0), (1, 1.0)]);
+    rows.push(1, 0.0, [(1, -100.0), (2, 100.0)]);
+    let b = [0.0, 40.0];
+    let t = Target {
+        gap: 1e-12,
+        violation: 1e-9,
+    };
+    let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
+    // At rest: nothing moves, so the next solve expects small changes.
+    let rest = ProjectionProblem {
+        w: &[0.0, 0.0, 0.0],
+        jacobian: &rows,
+        b: &b,
+    };
+    let mut sol = ProjectionSolution::default();
+    assert!(
+        auto.solve(&rest, t, &mut sol)
+            .unwrap()
+            .status
+            .is_converged()
+    );
+    // Person 0 pushes person 1 at 1 m/s: s(w) = (−1, 40); the second row is set aside
+    // (40 > 1.5 · 1), but v1 = 0.5 alone would make it −10.
+    let push = Instance {
+        w: vec![1.0, 0.0, 0.0],
+        rows: rows.clone(),
+        b: b.to_vec(),
+    };
+    let p = ProjectionProblem {
+        w: &push.w,
+        jacobian: &push.rows,
+        b: &push.b,
+    };
+    let rep = auto.solve(&p, t, &mut sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+    check_kkt(&push, "auto", &sol, rep.gap, rep.violation);
+    let (v, _) = exact_projection(&push);
+    for (a, b) in sol.v.iter().zip(&v) {
+        assert!((a - b).abs() <= 1e-5, "{:?} vs {v:?}", sol.v);
+    }
+    assert!(
+        sol.lambda[1] > 0.0,
+        "the second row binds: {:?}",
+        sol.lambda
+    );
 }
 
 /// Every option of the Gauss–Seidel (no momentum, symmetric sweeps, under- and
