@@ -148,8 +148,20 @@ impl AutoSolver {
         target: Target,
     ) -> Result<SolveReport, SolveError> {
         let rows = components.gather(p, warm, take);
+        Self::solve_gathered(components, solver, p.rows(), rows, target)
+    }
+
+    /// Solves the sub-problem gathered (`rows` of the whole problem's `total_rows`) with
+    /// `solver` to its share of `target`.
+    fn solve_gathered(
+        components: &mut Components,
+        solver: &mut dyn ProjectionSolver,
+        total_rows: usize,
+        rows: usize,
+        target: Target,
+    ) -> Result<SolveReport, SolveError> {
         let share = Target {
-            gap: target.gap * rows as f64 / p.rows().max(1) as f64,
+            gap: target.gap * rows as f64 / total_rows.max(1) as f64,
             violation: target.violation,
         };
         let (sub, sol) = components.sub_problem();
@@ -301,18 +313,35 @@ impl AutoSolver {
             status = rep.status;
             interior_answered = true;
         } else if self.to_interior.iter().any(|&t| t) {
-            let rep = Self::solve_part(
-                &mut self.components,
-                &mut self.interior,
-                p,
-                &self.warm,
-                &self.to_interior,
-                target,
-            )?;
+            // The largest component on its own (it takes the iterations it needs, not the
+            // most any component needs), then the others together.
+            let largest = (0..count)
+                .filter(|&c| self.to_interior[c])
+                .max_by_key(|&c| (self.components.rows_of(c).len(), std::cmp::Reverse(c)))
+                .expect("some component goes to the interior point");
+            let rows = self.components.gather_one(p, &self.warm, largest);
+            let rep =
+                Self::solve_gathered(&mut self.components, &mut self.interior, m, rows, target)?;
             report.add_work(&rep);
             status = rep.status;
+            self.components.scatter_all(sol);
+            self.to_interior[largest] = false;
+            if self.to_interior.iter().any(|&t| t) {
+                let rows = self.components.gather(p, &self.warm, &self.to_interior);
+                let rep = Self::solve_gathered(
+                    &mut self.components,
+                    &mut self.interior,
+                    m,
+                    rows,
+                    target,
+                )?;
+                report.add_work(&rep);
+                if status.is_converged() {
+                    status = rep.status;
+                }
+                self.components.scatter_all(sol);
+            }
             interior_answered = true;
-            self.components.scatter(sol, &self.to_interior);
         }
         // Unknowns in no row have v = w; the whole answer is certified here.
         self.scratch_m.resize(m, 0.0);

@@ -135,18 +135,31 @@ impl Components {
     /// order), the unknowns those rows touch, the warm start `lambda` of those rows. Returns
     /// its number of rows.
     pub fn gather(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64], take: &[bool]) -> usize {
-        let (m, n) = (p.rows(), p.dim());
-        let j = p.jacobian;
-        self.local.clear();
-        self.local.resize(n, u32::MAX);
-        self.unknowns.clear();
         self.sub_rows.clear();
-        for i in 0..m {
-            let c = self.row_component[i];
+        for (i, &c) in self.row_component.iter().enumerate() {
             if c != NONE && take[c as usize] {
                 self.sub_rows.push(i as u32);
             }
         }
+        self.gather_sub_rows(p, lambda)
+    }
+
+    /// [`gather`](Self::gather) for component `c` alone, in time proportional to its size.
+    pub fn gather_one(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64], c: usize) -> usize {
+        self.sub_rows.clear();
+        let (a, b) = (self.start[c] as usize, self.start[c + 1] as usize);
+        self.sub_rows.extend_from_slice(&self.rows[a..b]);
+        self.gather_sub_rows(p, lambda)
+    }
+
+    fn gather_sub_rows(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64]) -> usize {
+        let j = p.jacobian;
+        // `local` is all unset between calls; only the entries set here are reset below.
+        if self.local.len() != p.dim() {
+            self.local.clear();
+            self.local.resize(p.dim(), u32::MAX);
+        }
+        self.unknowns.clear();
         for &i in &self.sub_rows {
             for &c in j.row(i as usize).0 {
                 if self.local[c] == u32::MAX {
@@ -178,6 +191,9 @@ impl Components {
         self.sub_w.clear();
         self.sub_w
             .extend(self.unknowns.iter().map(|&c| p.w[c as usize]));
+        for &c in &self.unknowns {
+            self.local[c as usize] = u32::MAX;
+        }
         self.sub_rows.len()
     }
 
@@ -191,6 +207,17 @@ impl Components {
             },
             &mut self.sub_solution,
         )
+    }
+
+    /// Writes the whole sub-problem's solution into `sol`.
+    pub fn scatter_all(&self, sol: &mut ProjectionSolution) {
+        let local_sol = &self.sub_solution;
+        for (k, &i) in self.sub_rows.iter().enumerate() {
+            sol.lambda[i as usize] = local_sol.lambda[k];
+        }
+        for (k, &c) in self.unknowns.iter().enumerate() {
+            sol.v[c as usize] = local_sol.v[k];
+        }
     }
 
     /// Writes the sub-problem's solution into `sol` (its rows' multipliers, its unknowns'
@@ -365,6 +392,19 @@ mod tests {
         parts.scatter(&mut out, &[true, true, true, true]);
         assert_eq!(out.lambda, vec![-1.0, 0.0, -3.0, 0.0, -5.0, -6.0]);
         assert_eq!(out.v, vec![10.0, 11.0, 0.0, 13.0, 14.0, 15.0, 0.0]);
+        let mut all = ProjectionSolution { v: vec![0.0; 7], lambda: vec![0.0; 6] };
+        parts.scatter_all(&mut all);
+        assert_eq!(all, out);
+        // Component 1 alone (row 1, unknown 2).
+        assert_eq!(parts.gather_one(&p, &warm, 1), 1);
+        {
+            let (sub, sol) = parts.sub_problem();
+            assert_eq!((sub.w, sub.b), (&[2.0][..], &[-1.0][..]));
+            assert_eq!(sol.lambda, vec![2.0]);
+            sol.v = vec![12.0];
+        }
+        parts.scatter_all(&mut all);
+        assert_eq!(all.v[2], 12.0);
     }
 
     #[test]

@@ -63,7 +63,7 @@ pub struct Target {
 }
 
 /// Caller-owned buffers for the answer; reused across solves.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ProjectionSolution {
     /// The velocity `v`.
     pub v: Vec<f64>,
