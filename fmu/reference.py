@@ -16,7 +16,9 @@ False)` at t = 10.1 s (what the FMU does when its input `door_open` turns false:
 computed here from the native run, in numpy and shapely, by their definitions in the model
 description:
 
-- people_evacuated / people_inside: the native run's exit records (who passed the door by then);
+- people_evacuated / people_inside: the native run's exit records (who entered the door by
+  then; not the positions: a person in the doorway when it closes is pushed back into the room
+  and stays counted, as the FMU counts them);
 - internal_steps: the native run's step count;
 - mean_speed: the mean distance the people moved over the communication step, over its length;
 - min_gap: the smallest gap between two people (centre distance less both radii, from the
