@@ -4,6 +4,8 @@ with each other, nobody overlaps, and the file reproduces its run."""
 from __future__ import annotations
 
 import json
+import pathlib
+import shutil
 
 import h5py
 import numpy as np
@@ -143,6 +145,39 @@ def test_a_run_file_reproduces_its_run(room_run, tmp_path):
     assert a.attrs["scene"] == b.attrs["scene"]
     np.testing.assert_array_equal(a.trajectory, b.trajectory)
     np.testing.assert_array_equal(a.steps["eps"], b.steps["eps"])
+
+
+def test_a_run_file_from_before_the_lipschitz_default_replays_its_classic_run(tmp_path):
+    """Run files written while the classic desired velocity was the default store scenes
+    without `[model]`; `run --from` replays them with the classic one, as they ran (a scene file
+    without `[model]` gets the Lipschitz one)."""
+    import moreau as moreau_module
+    from conftest import ROOM
+
+    def run(kind: str) -> pathlib.Path:
+        d = moreau_module.Scene.from_file(ROOM).to_dict()
+        d["time"]["horizon"] = 6.0
+        d["model"] = {"desired_velocity": kind}
+        scene = tmp_path / f"{kind}.toml"
+        scene.write_text(moreau_module.Scene.from_dict(d).to_toml())
+        out = tmp_path / f"{kind}.h5"
+        moreau("run", scene, "-o", out, "--quiet")
+        return out
+
+    classic, lipschitz = run("classic"), run("lipschitz")
+    old = tmp_path / "old.h5"
+    shutil.copy(classic, old)
+    with h5py.File(old, "r+") as f:
+        text = f.attrs["scene"]
+        assert '[model]\ndesired_velocity = "classic"\n' in text, text
+        f.attrs["scene"] = text.replace('[model]\ndesired_velocity = "classic"\n', "")
+    again = tmp_path / "again.h5"
+    moreau("run", "--from", old, "-o", again, "--quiet")
+    a, b, c = (moreau_run.load(p) for p in (classic, again, lipschitz))
+    np.testing.assert_array_equal(a.trajectory, b.trajectory)
+    assert 'desired_velocity = "classic"' in b.attrs["scene"], "the replay names its kind"
+    # The two kinds differ within these 6 s, so the replay could have gone the other way.
+    assert not np.array_equal(a.trajectory, c.trajectory)
 
 
 def test_the_plot_script_writes_its_pngs(room_run, tmp_path):

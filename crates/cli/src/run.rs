@@ -88,7 +88,7 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
             let file = RunFile::open(run)?;
             let text = file.text("scene")?;
             let origin = format!("{} (attribute 'scene')", run.display());
-            Ok((Scene::from_toml(&text, &origin)?, origin))
+            Ok((Scene::from_run_file(&text, &origin)?, origin))
         }
         _ => bail!("give a scene file or --from RUN.h5"),
     }
@@ -278,7 +278,7 @@ fn resumed(out: &Path, overwrite: Overwrite) -> Result<(Simulation, Option<RunWr
     }
     let r = RunWriter::resume(out, overwrite)?;
     let origin = format!("{} (resumed)", r.writer.partial().display());
-    let scene = Scene::from_toml(&r.header.scene, &origin)?;
+    let scene = Scene::from_run_file(&r.header.scene, &origin)?;
     let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
     let state =
         SimState::from_bytes(&r.state).with_context(|| format!("the state saved in {origin}"))?;

@@ -131,7 +131,7 @@ fn exits(scene: &Scene) -> Vec<Exit> {
 /// Builds the page's data from an open run file.
 fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
     let header = f.header()?;
-    let scene = Scene::from_toml(&header.scene, "the run file's attribute 'scene'")
+    let scene = Scene::from_run_file(&header.scene, "the run file's attribute 'scene'")
         .context("reading the scene stored in the run file")?;
     let times = f.frame_times()?;
     let steps = f.steps()?;

@@ -322,27 +322,31 @@ impl Default for SolverSettings {
     }
 }
 
-/// Which desired velocity people follow.
+/// Which desired velocity people follow (the default: [`Lipschitz`](Self::Lipschitz); it was
+/// [`Classic`](Self::Classic) before, which is how [`Scene::from_run_file`] reads run files
+/// of that time).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum DesiredVelocityKind {
     /// Speed × the descent direction of the distance to the goal, projected off any wall
     /// within 5 cm beyond the radius, zero once arrived: it jumps where the wall slide starts
-    /// and on arrival (not Lipschitz).
-    #[default]
+    /// and on arrival (not Lipschitz). `[model] desired_velocity = "classic"`.
     Classic,
     /// Lipschitz in the positions (the assumption of seeds/000 (8)) wherever the distance
     /// field's direction is: the wall slide fades in linearly over the 5 cm beyond the radius,
     /// and people heading to a target area slow down linearly over its last metre and stop
-    /// on its boundary.
+    /// on its boundary. The default.
+    #[default]
     Lipschitz,
 }
 
-/// The model's choices that the papers leave open.
+/// The model's choices that the papers leave open. A scene always serializes it whole with
+/// its desired velocity (a scene written out, into a run file say, says which one it ran with
+/// whatever the default is when it is read back).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Model {
-    /// The desired velocity (`classic` or `lipschitz`).
+    /// The desired velocity (`lipschitz`, the default, or `classic`).
     #[serde(default)]
     pub desired_velocity: DesiredVelocityKind,
     /// With moving bodies: every this many seconds (at the first step from then on), the
@@ -351,12 +355,6 @@ pub struct Model {
     /// only, and people walk into a closed door as if it were open.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub field_update: Option<f64>,
-}
-
-impl Model {
-    fn is_default(&self) -> bool {
-        *self == Model::default()
-    }
 }
 
 /// What a run records beyond positions, exits and step reports: only what the scene asks for.
@@ -399,8 +397,8 @@ pub struct Scene {
     /// Solver settings.
     #[serde(default)]
     pub solver: SolverSettings,
-    /// The model's open choices (absent: the classic desired velocity).
-    #[serde(default, skip_serializing_if = "Model::is_default")]
+    /// The model's open choices (absent: the Lipschitz desired velocity). Always written.
+    #[serde(default)]
     pub model: Model,
     /// What a run records (absent: positions, exits and steps only).
     #[serde(default, skip_serializing_if = "Output::is_default")]
@@ -501,7 +499,30 @@ impl Scene {
         Ok(scene)
     }
 
-    /// The scene as TOML (it round-trips through [`Scene::from_toml`]).
+    /// A scene stored in a run file (its attribute `scene`), `origin` naming it in errors. A
+    /// scene serialized since the desired velocity's default became `lipschitz` always names
+    /// its kind ([`Model`] is always written); one that does not was stored before, when an
+    /// absent kind meant `classic`, and it is read as `classic`, so that `moreau run --from`
+    /// reproduces what ran. Scene files are read with [`Scene::from_file`]: there an absent kind
+    /// is the default.
+    pub fn from_run_file(text: &str, origin: &str) -> Result<Self, CrowdError> {
+        let mut scene = Self::from_toml(text, origin)?;
+        let table: toml::Table = toml::from_str(text).map_err(|e| CrowdError::Parse {
+            path: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        let named = table
+            .get("model")
+            .and_then(|m| m.get("desired_velocity"))
+            .is_some();
+        if !named {
+            scene.model.desired_velocity = DesiredVelocityKind::Classic;
+        }
+        Ok(scene)
+    }
+
+    /// The scene as TOML (it round-trips through [`Scene::from_toml`]; `[model]` always
+    /// written).
     pub fn to_toml(&self) -> String {
         toml::to_string(self).expect("a scene serializes")
     }
