@@ -4,9 +4,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # System packages (HDF5 for the output writer, pkg-config to find it, Python for analysis,
-# Chromium and its driver for the player's browser test, ffmpeg for MP4 animations).
+# Chromium and its driver for the player's browser test, ffmpeg for MP4 animations, binutils'
+# strip for the FMU's library).
 missing=()
-for pkg in pkg-config libhdf5-dev chromium chromium-driver ffmpeg; do
+for pkg in pkg-config libhdf5-dev chromium chromium-driver ffmpeg binutils; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 command -v python3 >/dev/null 2>&1 || missing+=(python3)

@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 status=0
-cargo test --workspace --release --locked 2>&1 | tee "$log" || status=$?
+cargo test --workspace --release --locked --no-fail-fast 2>&1 | tee "$log" || status=$?
 
 # The Python tests drive target/release/moreau, built by setup.sh above.
 # -rP shows what passing tests print (the measured figures, e.g. memory over 10,000 FMU instances).

@@ -930,6 +930,7 @@ impl Simulation {
             fields_due: self.fields_due,
             stepping: self.stepping.state(),
             multipliers: self.scheme.correction().warm_start().to_vec(),
+            solver_memory: self.scheme.correction().solver().memory(),
         }
     }
 
@@ -1019,6 +1020,10 @@ impl Simulation {
         self.scheme
             .correction_mut()
             .set_warm_start(&state.multipliers);
+        self.scheme
+            .correction_mut()
+            .solver_mut()
+            .set_memory(&state.solver_memory);
         Ok(())
     }
 }

@@ -51,12 +51,16 @@ pub struct SimState {
     pub stepping: SteppingState,
     /// The last step's multipliers by contact key: the next step's warm start.
     pub multipliers: Vec<(ConstraintKey, f64)>,
+    /// What the projection solver carries from one solve to the next
+    /// ([`ProjectionSolver::memory`](moreau_solve::ProjectionSolver::memory): `auto`'s
+    /// choices).
+    pub solver_memory: Vec<f64>,
 }
 
 impl SimState {
-    /// The layout version; bumped whenever a field changes meaning (3: `inflow`, `moving`,
-    /// `fields_built`; 2 was written by builds with only some of them).
-    pub const FORMAT: u32 = 3;
+    /// The layout version; bumped whenever a field changes meaning (4: `solver_memory`;
+    /// 3: `inflow`, `moving`, `fields_built`; 2 was written by builds with only some of them).
+    pub const FORMAT: u32 = 4;
 
     /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of
     /// the scene it was saved from.

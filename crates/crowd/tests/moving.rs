@@ -336,9 +336,13 @@ fn a_barrier_crushing_people_against_a_wall_is_infeasible_and_names_them() {
             why.t
         );
         // The run stopped at its last feasible step, every frame before it reported.
+        // Feasible within the certified violation: each of the chain's four contacts
+        // (barrier, three people, wall) may overlap by `max_violation`, so a step may end up
+        // to 4 · max_violation / (1 m/s, the barrier's speed) after 6.3 s.
+        let slack = 4.0 * sim.scene().solver.max_violation / 1.0;
         assert!(
-            sim.time() <= 6.3 + 1e-9 && sim.time() > 6.2,
-            "{}",
+            sim.time() <= 6.3 + slack + 1e-9 && sim.time() > 6.2,
+            "{time}: {}",
             sim.time()
         );
         assert_eq!(frames.0.len(), 13, "{time}: frames at {:?}", frames.0);

@@ -162,6 +162,11 @@ impl<S: ProjectionSolver> LinearizedProjection<S> {
         &self.solver
     }
 
+    /// The solver, to restore its memory ([`ProjectionSolver::set_memory`]).
+    pub fn solver_mut(&mut self) -> &mut S {
+        &mut self.solver
+    }
+
     /// The rows assembled in the last step.
     pub fn rows(&self) -> &ConstraintRows {
         &self.rows

@@ -218,6 +218,41 @@ impl ProjectionSolver for AutoSolver {
         self.last_change = self.scratch_m.iter().fold(0.0f64, |a, x| a.max(x.abs()));
         Ok(report)
     }
+
+    /// `[skip_from, skip_left, last_change]`, finite numbers (JSON has no infinity):
+    /// `skip_from` 0 when nothing skips, `last_change` −1 before the first solve.
+    fn memory(&self) -> Vec<f64> {
+        let skip_from = if self.skip_from == usize::MAX {
+            0.0
+        } else {
+            self.skip_from as f64
+        };
+        let last_change = if self.last_change.is_finite() {
+            self.last_change
+        } else {
+            -1.0
+        };
+        vec![skip_from, self.skip_left as f64, last_change]
+    }
+
+    fn set_memory(&mut self, memory: &[f64]) {
+        (self.skip_from, self.skip_left, self.last_change) = match *memory {
+            [skip_from, skip_left, last_change] => (
+                if skip_from >= 1.0 {
+                    skip_from as usize
+                } else {
+                    usize::MAX
+                },
+                skip_left as usize,
+                if last_change >= 0.0 {
+                    last_change
+                } else {
+                    f64::INFINITY
+                },
+            ),
+            _ => (usize::MAX, 0, f64::INFINITY),
+        };
+    }
 }
 
 impl AutoSolver {

@@ -49,4 +49,13 @@ impl ProjectionSolver for WithFallback {
         rep.add_work(&first);
         Ok(rep)
     }
+
+    /// The primary's (the fallbacks keep none).
+    fn memory(&self) -> Vec<f64> {
+        self.primary.memory()
+    }
+
+    fn set_memory(&mut self, memory: &[f64]) {
+        self.primary.set_memory(memory);
+    }
 }

@@ -129,6 +129,20 @@ pub trait ProjectionSolver: std::fmt::Debug + Send {
         target: Target,
         solution: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError>;
+
+    /// What the solver carries from one solve to the next that changes its answers (not
+    /// scratch: e.g. `auto`'s choices), as numbers: part of the state of a run, so that a
+    /// run restored with [`set_memory`](Self::set_memory) goes on bit for bit. Empty for a
+    /// solver whose answers depend only on the problem and the warm start.
+    fn memory(&self) -> Vec<f64> {
+        Vec::new()
+    }
+
+    /// Takes back what [`memory`](Self::memory) gave (from a solver of the same kind); an
+    /// empty or foreign memory leaves the solver as new.
+    fn set_memory(&mut self, memory: &[f64]) {
+        let _ = memory;
+    }
 }
 
 impl<S: ProjectionSolver + ?Sized> ProjectionSolver for Box<S> {
@@ -142,5 +156,11 @@ impl<S: ProjectionSolver + ?Sized> ProjectionSolver for Box<S> {
         solution: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         (**self).solve(problem, target, solution)
+    }
+    fn memory(&self) -> Vec<f64> {
+        (**self).memory()
+    }
+    fn set_memory(&mut self, memory: &[f64]) {
+        (**self).set_memory(memory)
     }
 }
