@@ -400,7 +400,13 @@ impl AutoSolver {
         report.status = status;
         report.gap = cert.gap;
         report.violation = cert.violation;
-        report.active = cert.active;
+        // Active as the interior point counts it (a multiplier above its slack), whichever
+        // solver answered the row: Gauss–Seidel's λ > 0 would count rows at a tiny
+        // multiplier with their slack open.
+        p.jacobian.mul(&sol.v, &mut self.scratch_m);
+        report.active = (0..m)
+            .filter(|&i| sol.lambda[i] > p.b[i] + self.scratch_m[i])
+            .count();
         Ok(report)
     }
 }
