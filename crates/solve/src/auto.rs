@@ -5,7 +5,7 @@
 use moreau_core::{Parallelism, SolveStatus};
 
 use crate::certificate::certify;
-use crate::components::Components;
+use crate::components::{Components, SubProblem};
 use crate::error::SolveError;
 use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
 use crate::interior::{InteriorPoint, InteriorPointSettings};
@@ -31,7 +31,8 @@ pub struct AutoSettings {
     /// the certificate of the whole answer. When one of them turns out to be needed, the
     /// projection is solved again with every row. `f64::INFINITY`: never.
     pub set_aside_factor: f64,
-    /// Threads for both.
+    /// Threads: Gauss–Seidel's certificate loops use them; the interior point's part runs
+    /// as two solves at once (the largest component, the others), each on one thread.
     pub parallelism: Parallelism,
 }
 
@@ -62,6 +63,10 @@ impl Default for AutoSettings {
 /// zero multipliers they add nothing to its gap); when one is violated, the projection is
 /// solved again with every row.
 ///
+/// With threads ([`AutoSettings::parallelism`] above one), the largest component and the
+/// others are solved at once, each by its own interior point on one thread; the split is the
+/// same on any thread count, and so are the answers, bit for bit.
+///
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
 /// [`certify`](crate::certify). The report names the solver that answered:
@@ -70,8 +75,11 @@ impl Default for AutoSettings {
 pub struct AutoSolver {
     settings: AutoSettings,
     gauss_seidel: GaussSeidel,
-    interior: InteriorPoint,
+    // the interior point of the largest component (and of the whole problem), and of the
+    // other components together: two, so that they can run at once
+    interiors: [InteriorPoint; 2],
     components: Components,
+    parts: [SubProblem; 2],
     // components of this many rows or more skip Gauss–Seidel (usize::MAX: none)
     skip_from: usize,
     // solves left before skip_from is lifted
@@ -113,16 +121,26 @@ impl AutoSolver {
                 .parallelism(settings.parallelism)
                 .build()?,
         )?;
-        let interior = InteriorPoint::new(
-            InteriorPointSettings::builder()
-                .parallelism(settings.parallelism)
-                .build()?,
-        )?;
+        // With threads, the largest component and the others run at once, each interior
+        // point on one thread (two interior points each spreading its loops over the same
+        // cores would only contend).
+        let interior = || {
+            InteriorPoint::new(
+                InteriorPointSettings::builder()
+                    .parallelism(if settings.parallelism.is_sequential() {
+                        settings.parallelism
+                    } else {
+                        Parallelism::SEQUENTIAL
+                    })
+                    .build()?,
+            )
+        };
         Ok(Self {
             settings,
             gauss_seidel,
-            interior,
+            interiors: [interior()?, interior()?],
             components: Components::default(),
+            parts: [SubProblem::default(), SubProblem::default()],
             skip_from: usize::MAX,
             skip_left: 0,
             to_gs: Vec::new(),
@@ -137,24 +155,10 @@ impl AutoSolver {
         })
     }
 
-    /// Solves the sub-problem of the components marked in `take` with `solver` to their
-    /// share of `target`, and returns its report.
-    fn solve_part(
-        components: &mut Components,
-        solver: &mut dyn ProjectionSolver,
-        p: &ProjectionProblem<'_>,
-        warm: &[f64],
-        take: &[bool],
-        target: Target,
-    ) -> Result<SolveReport, SolveError> {
-        let rows = components.gather(p, warm, take);
-        Self::solve_gathered(components, solver, p.rows(), rows, target)
-    }
-
-    /// Solves the sub-problem gathered (`rows` of the whole problem's `total_rows`) with
-    /// `solver` to its share of `target`.
+    /// Solves the sub-problem gathered in `part` (`rows` of the whole problem's
+    /// `total_rows`) with `solver` to its share of `target`.
     fn solve_gathered(
-        components: &mut Components,
+        part: &mut SubProblem,
         solver: &mut dyn ProjectionSolver,
         total_rows: usize,
         rows: usize,
@@ -164,7 +168,7 @@ impl AutoSolver {
             gap: target.gap * rows as f64 / total_rows.max(1) as f64,
             violation: target.violation,
         };
-        let (sub, sol) = components.sub_problem();
+        let (sub, sol) = part.problem();
         solver.solve(&sub, share, sol)
     }
 }
@@ -307,21 +311,17 @@ impl AutoSolver {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
             if self.to_gs.iter().any(|&t| t) {
-                let rep = Self::solve_part(
-                    &mut self.components,
-                    &mut self.gauss_seidel,
-                    p,
-                    &self.warm,
-                    &self.to_gs,
-                    target,
-                )?;
+                let part = &mut self.parts[0];
+                let rows = part.gather(&self.components, p, &self.warm, &self.to_gs);
+                let rep = Self::solve_gathered(part, &mut self.gauss_seidel, m, rows, target)?;
                 report.add_work(&rep);
                 if rep.status.is_converged() {
                     self.finished.copy_from_slice(&self.to_gs);
                 } else {
-                    self.components.check_sub(target, &mut self.finished);
+                    self.components
+                        .check_sub(&self.parts[0], target, &mut self.finished);
                 }
-                self.components.scatter(sol, &self.finished);
+                self.parts[0].scatter(&self.components, sol, &self.finished);
             }
         }
         if self.to_gs.iter().any(|&t| t) {
@@ -343,7 +343,7 @@ impl AutoSolver {
         if self.to_interior.iter().all(|&t| t) && count > 0 && !any_aside {
             // The whole problem again, from the caller's warm start.
             sol.lambda.copy_from_slice(&self.warm);
-            let rep = self.interior.solve(p, target, sol)?;
+            let rep = self.interiors[0].solve(p, target, sol)?;
             report.add_work(&rep);
             status = rep.status;
             interior_answered = true;
@@ -354,27 +354,40 @@ impl AutoSolver {
                 .filter(|&c| self.to_interior[c])
                 .max_by_key(|&c| (self.components.rows_of(c).len(), std::cmp::Reverse(c)))
                 .expect("some component goes to the interior point");
-            let rows = self.components.gather_one(p, &self.warm, largest);
-            let rep =
-                Self::solve_gathered(&mut self.components, &mut self.interior, m, rows, target)?;
-            report.add_work(&rep);
-            status = rep.status;
-            self.components.scatter_all(sol);
+            let [largest_part, rest_part] = &mut self.parts;
+            let largest_rows = largest_part.gather_one(&self.components, p, &self.warm, largest);
             self.to_interior[largest] = false;
-            if self.to_interior.iter().any(|&t| t) {
-                let rows = self.components.gather(p, &self.warm, &self.to_interior);
-                let rep = Self::solve_gathered(
-                    &mut self.components,
-                    &mut self.interior,
-                    m,
-                    rows,
-                    target,
-                )?;
-                report.add_work(&rep);
+            let rest = self.to_interior.iter().any(|&t| t);
+            let rest_rows = if rest {
+                rest_part.gather(&self.components, p, &self.warm, &self.to_interior)
+            } else {
+                0
+            };
+            let [first, second] = &mut self.interiors;
+            let (a, b) = if rest && !self.settings.parallelism.is_sequential() {
+                std::thread::scope(|scope| {
+                    let other = scope
+                        .spawn(|| Self::solve_gathered(rest_part, second, m, rest_rows, target));
+                    let a = Self::solve_gathered(largest_part, first, m, largest_rows, target);
+                    let b = other.join().expect("the interior point's thread panicked");
+                    (a, Some(b))
+                })
+            } else {
+                let a = Self::solve_gathered(largest_part, first, m, largest_rows, target);
+                let b = rest.then(|| Self::solve_gathered(rest_part, second, m, rest_rows, target));
+                (a, b)
+            };
+            let a = a?;
+            report.add_work(&a);
+            status = a.status;
+            largest_part.scatter_all(sol);
+            if let Some(b) = b {
+                let b = b?;
+                report.add_work(&b);
                 if status.is_converged() {
-                    status = rep.status;
+                    status = b.status;
                 }
-                self.components.scatter_all(sol);
+                rest_part.scatter_all(sol);
             }
             interior_answered = true;
         }

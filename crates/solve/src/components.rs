@@ -6,32 +6,37 @@ use moreau_core::ConstraintRows;
 
 use crate::problem::{ProjectionProblem, ProjectionSolution, Target};
 
-/// The components of the last problem given to [`split`](Self::split), and one sub-problem
-/// buffer. Scratch only: sized by the largest problem seen, nothing allocated per row once
-/// warm.
+/// The components of the last problem given to [`split`](Self::split). Scratch only: sized
+/// by the largest problem seen, nothing allocated per row once warm.
 #[derive(Debug, Default)]
 pub(crate) struct Components {
     // union–find over unknowns (roots are the smallest unknown of their set)
     parent: Vec<u32>,
     // component of each root unknown, u32::MAX before it is numbered
     numbered: Vec<u32>,
-    // component of each row
+    // component of each row (NONE: set aside)
     row_component: Vec<u32>,
     // the rows of component c are rows[start[c]..start[c + 1]], in storage order
     start: Vec<u32>,
     rows: Vec<u32>,
-    // the sub-problem: the chosen rows, their unknowns renumbered in order of appearance
-    local: Vec<u32>,
-    unknowns: Vec<u32>,
-    sub_rows: Vec<u32>,
     // per row of the problem checked: its slack; per component: gap and violation
     slack: Vec<f64>,
     gap: Vec<f64>,
     violation: Vec<f64>,
-    sub_jacobian: ConstraintRows,
-    sub_w: Vec<f64>,
-    sub_b: Vec<f64>,
-    sub_solution: ProjectionSolution,
+}
+
+/// A sub-problem made of some components: their rows, the unknowns those rows touch
+/// (renumbered in order of appearance), and its solution buffers. Scratch, reused.
+#[derive(Debug, Default)]
+pub(crate) struct SubProblem {
+    // unknown -> local index (u32::MAX: not in it); all unset between calls
+    local: Vec<u32>,
+    unknowns: Vec<u32>,
+    rows: Vec<u32>,
+    jacobian: ConstraintRows,
+    w: Vec<f64>,
+    b: Vec<f64>,
+    solution: ProjectionSolution,
 }
 
 /// The component of a row set aside.
@@ -131,110 +136,6 @@ impl Components {
         &self.rows[self.start[c] as usize..self.start[c + 1] as usize]
     }
 
-    /// Makes the sub-problem of the components `c` with `take[c]`: their rows (in storage
-    /// order), the unknowns those rows touch, the warm start `lambda` of those rows. Returns
-    /// its number of rows.
-    pub fn gather(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64], take: &[bool]) -> usize {
-        self.sub_rows.clear();
-        for (i, &c) in self.row_component.iter().enumerate() {
-            if c != NONE && take[c as usize] {
-                self.sub_rows.push(i as u32);
-            }
-        }
-        self.gather_sub_rows(p, lambda)
-    }
-
-    /// [`gather`](Self::gather) for component `c` alone, in time proportional to its size.
-    pub fn gather_one(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64], c: usize) -> usize {
-        self.sub_rows.clear();
-        let (a, b) = (self.start[c] as usize, self.start[c + 1] as usize);
-        self.sub_rows.extend_from_slice(&self.rows[a..b]);
-        self.gather_sub_rows(p, lambda)
-    }
-
-    fn gather_sub_rows(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64]) -> usize {
-        let j = p.jacobian;
-        // `local` is all unset between calls; only the entries set here are reset below.
-        if self.local.len() != p.dim() {
-            self.local.clear();
-            self.local.resize(p.dim(), u32::MAX);
-        }
-        self.unknowns.clear();
-        for &i in &self.sub_rows {
-            for &c in j.row(i as usize).0 {
-                if self.local[c] == u32::MAX {
-                    self.local[c] = self.unknowns.len() as u32;
-                    self.unknowns.push(c as u32);
-                }
-            }
-        }
-        self.sub_jacobian.clear(self.unknowns.len());
-        self.sub_b.clear();
-        self.sub_solution.lambda.clear();
-        let keys = j.keys();
-        for &i in &self.sub_rows {
-            let i = i as usize;
-            let (cols, coefs) = j.row(i);
-            let local = &self.local;
-            self.sub_jacobian.push(
-                keys[i],
-                j.values()[i],
-                cols.iter()
-                    .zip(coefs)
-                    .map(|(&c, &a)| (local[c] as usize, a)),
-            );
-            self.sub_b.push(p.b[i]);
-            self.sub_solution
-                .lambda
-                .push(lambda.get(i).copied().unwrap_or(0.0));
-        }
-        self.sub_w.clear();
-        self.sub_w
-            .extend(self.unknowns.iter().map(|&c| p.w[c as usize]));
-        for &c in &self.unknowns {
-            self.local[c as usize] = u32::MAX;
-        }
-        self.sub_rows.len()
-    }
-
-    /// The sub-problem made by [`gather`](Self::gather) and its solution buffers.
-    pub fn sub_problem(&mut self) -> (ProjectionProblem<'_>, &mut ProjectionSolution) {
-        (
-            ProjectionProblem {
-                w: &self.sub_w,
-                jacobian: &self.sub_jacobian,
-                b: &self.sub_b,
-            },
-            &mut self.sub_solution,
-        )
-    }
-
-    /// Writes the whole sub-problem's solution into `sol`.
-    pub fn scatter_all(&self, sol: &mut ProjectionSolution) {
-        let local_sol = &self.sub_solution;
-        for (k, &i) in self.sub_rows.iter().enumerate() {
-            sol.lambda[i as usize] = local_sol.lambda[k];
-        }
-        for (k, &c) in self.unknowns.iter().enumerate() {
-            sol.v[c as usize] = local_sol.v[k];
-        }
-    }
-
-    /// Writes the sub-problem's solution into `sol` (its rows' multipliers, its unknowns'
-    /// velocities) for the components `c` with `keep[c]`.
-    pub fn scatter(&self, sol: &mut ProjectionSolution, keep: &[bool]) {
-        let local_sol = &self.sub_solution;
-        for (k, &i) in self.sub_rows.iter().enumerate() {
-            let i = i as usize;
-            if keep[self.row_component[i] as usize] {
-                sol.lambda[i] = local_sol.lambda[k];
-                for &c in self.sub_jacobian.row(k).0 {
-                    sol.v[self.unknowns[c] as usize] = local_sol.v[c];
-                }
-            }
-        }
-    }
-
     /// Whether each component meets its share of `target` (its rows / all rows of the gap,
     /// all of the violation) with the answer `sol` to the whole problem `p`, which must have
     /// `v = w + Jᵀλ` (as every solver returns it): the gap is then `Σ λ_k s_k⁺`. Sets
@@ -246,19 +147,20 @@ impl Components {
         target: Target,
         met: &mut [bool],
     ) {
-        self.check(p.jacobian, p.b, sol, false, target, met);
+        self.check(p.jacobian, p.b, sol, None, target, met);
     }
 
-    /// [`check_whole`](Self::check_whole) for the sub-problem of [`gather`](Self::gather)
-    /// and its solution: sets `met[c]` for the components of the sub-problem only.
-    pub fn check_sub(&mut self, target: Target, met: &mut [bool]) {
-        let (j, b, sol) = (
-            std::mem::take(&mut self.sub_jacobian),
-            std::mem::take(&mut self.sub_b),
-            std::mem::take(&mut self.sub_solution),
+    /// [`check_whole`](Self::check_whole) for a sub-problem of these components and its
+    /// solution: sets `met[c]` for the components of the sub-problem only.
+    pub fn check_sub(&mut self, sub: &SubProblem, target: Target, met: &mut [bool]) {
+        self.check(
+            &sub.jacobian,
+            &sub.b,
+            &sub.solution,
+            Some(&sub.rows),
+            target,
+            met,
         );
-        self.check(&j, &b, &sol, true, target, met);
-        (self.sub_jacobian, self.sub_b, self.sub_solution) = (j, b, sol);
     }
 
     fn check(
@@ -266,7 +168,7 @@ impl Components {
         j: &ConstraintRows,
         b: &[f64],
         sol: &ProjectionSolution,
-        sub: bool,
+        sub_rows: Option<&[u32]>,
         target: Target,
         met: &mut [bool],
     ) {
@@ -280,7 +182,7 @@ impl Components {
         self.violation.clear();
         self.violation.resize(k, 0.0);
         let component = |r: usize| {
-            let i = if sub { self.sub_rows[r] as usize } else { r };
+            let i = sub_rows.map_or(r, |rows| rows[r] as usize);
             self.row_component[i]
         };
         for (r, (&jv, &b)) in self.slack.iter().zip(b).enumerate() {
@@ -302,6 +204,123 @@ impl Components {
             let share =
                 target.gap * (self.start[c + 1] - self.start[c]) as f64 / total_rows.max(1) as f64;
             met[c] = self.gap[c] <= share && self.violation[c] <= target.violation;
+        }
+    }
+}
+
+impl SubProblem {
+    /// Makes the sub-problem of the components `c` with `take[c]`: their rows (in storage
+    /// order), the unknowns those rows touch, the warm start `lambda` of those rows. Returns
+    /// its number of rows.
+    pub fn gather(
+        &mut self,
+        parts: &Components,
+        p: &ProjectionProblem<'_>,
+        lambda: &[f64],
+        take: &[bool],
+    ) -> usize {
+        self.rows.clear();
+        for (i, &c) in parts.row_component.iter().enumerate() {
+            if c != NONE && take[c as usize] {
+                self.rows.push(i as u32);
+            }
+        }
+        self.gather_rows(p, lambda)
+    }
+
+    /// [`gather`](Self::gather) for component `c` alone, in time proportional to its size.
+    pub fn gather_one(
+        &mut self,
+        parts: &Components,
+        p: &ProjectionProblem<'_>,
+        lambda: &[f64],
+        c: usize,
+    ) -> usize {
+        self.rows.clear();
+        self.rows.extend_from_slice(parts.rows_of(c));
+        self.gather_rows(p, lambda)
+    }
+
+    fn gather_rows(&mut self, p: &ProjectionProblem<'_>, lambda: &[f64]) -> usize {
+        let j = p.jacobian;
+        // `local` is all unset between calls; only the entries set here are reset below.
+        if self.local.len() != p.dim() {
+            self.local.clear();
+            self.local.resize(p.dim(), u32::MAX);
+        }
+        self.unknowns.clear();
+        for &i in &self.rows {
+            for &c in j.row(i as usize).0 {
+                if self.local[c] == u32::MAX {
+                    self.local[c] = self.unknowns.len() as u32;
+                    self.unknowns.push(c as u32);
+                }
+            }
+        }
+        self.jacobian.clear(self.unknowns.len());
+        self.b.clear();
+        self.solution.lambda.clear();
+        let keys = j.keys();
+        for &i in &self.rows {
+            let i = i as usize;
+            let (cols, coefs) = j.row(i);
+            let local = &self.local;
+            self.jacobian.push(
+                keys[i],
+                j.values()[i],
+                cols.iter()
+                    .zip(coefs)
+                    .map(|(&c, &a)| (local[c] as usize, a)),
+            );
+            self.b.push(p.b[i]);
+            self.solution
+                .lambda
+                .push(lambda.get(i).copied().unwrap_or(0.0));
+        }
+        self.w.clear();
+        self.w
+            .extend(self.unknowns.iter().map(|&c| p.w[c as usize]));
+        for &c in &self.unknowns {
+            self.local[c as usize] = u32::MAX;
+        }
+        self.rows.len()
+    }
+
+    /// The sub-problem made by [`gather`](Self::gather) and its solution buffers.
+    pub fn problem(&mut self) -> (ProjectionProblem<'_>, &mut ProjectionSolution) {
+        (
+            ProjectionProblem {
+                w: &self.w,
+                jacobian: &self.jacobian,
+                b: &self.b,
+            },
+            &mut self.solution,
+        )
+    }
+
+    /// Writes the whole sub-problem's solution into `sol`.
+    pub fn scatter_all(&self, sol: &mut ProjectionSolution) {
+        let local_sol = &self.solution;
+        for (k, &i) in self.rows.iter().enumerate() {
+            sol.lambda[i as usize] = local_sol.lambda[k];
+        }
+        for (k, &c) in self.unknowns.iter().enumerate() {
+            sol.v[c as usize] = local_sol.v[k];
+        }
+    }
+
+    /// Writes the sub-problem's solution into `sol` (its rows' multipliers, its unknowns'
+    /// velocities) for the components `c` with `keep[c]`.
+    pub fn scatter(&self, parts: &Components, sol: &mut ProjectionSolution, keep: &[bool]) {
+        let local_sol = &self.solution;
+        for (k, &i) in self.rows.iter().enumerate() {
+            let i = i as usize;
+            if keep[parts.row_component[i] as usize] {
+                sol.lambda[i] = local_sol.lambda[k];
+                for &c in self.jacobian.row(k).0 {
+                    sol.v[self.unknowns[c] as usize] = local_sol.v[c];
+                }
+            }
         }
     }
 }
@@ -369,9 +388,13 @@ mod tests {
         let mut parts = Components::default();
         parts.split(&p, &[]);
         let warm = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        assert_eq!(parts.gather(&p, &warm, &[true, false, false, true]), 4);
+        let mut part = SubProblem::default();
+        assert_eq!(
+            part.gather(&parts, &p, &warm, &[true, false, false, true]),
+            4
+        );
         {
-            let (sub, sol) = parts.sub_problem();
+            let (sub, sol) = part.problem();
             // rows 0, 2, 4, 5; unknowns in order of appearance 0, 1, 3, 4, 5
             assert_eq!(sub.jacobian.keys(), &[10, 12, 14, 15]);
             assert_eq!(sub.b, &[0.0, -2.0, -4.0, -5.0]);
@@ -386,24 +409,27 @@ mod tests {
             v: vec![0.0; 7],
             lambda: vec![0.0; 6],
         };
-        parts.scatter(&mut out, &[false, false, false, true]);
+        part.scatter(&parts, &mut out, &[false, false, false, true]);
         assert_eq!(out.lambda, vec![0.0, 0.0, 0.0, 0.0, -5.0, 0.0]);
         assert_eq!(out.v, vec![0.0, 0.0, 0.0, 0.0, 14.0, 15.0, 0.0]);
-        parts.scatter(&mut out, &[true, true, true, true]);
+        part.scatter(&parts, &mut out, &[true, true, true, true]);
         assert_eq!(out.lambda, vec![-1.0, 0.0, -3.0, 0.0, -5.0, -6.0]);
         assert_eq!(out.v, vec![10.0, 11.0, 0.0, 13.0, 14.0, 15.0, 0.0]);
-        let mut all = ProjectionSolution { v: vec![0.0; 7], lambda: vec![0.0; 6] };
-        parts.scatter_all(&mut all);
+        let mut all = ProjectionSolution {
+            v: vec![0.0; 7],
+            lambda: vec![0.0; 6],
+        };
+        part.scatter_all(&mut all);
         assert_eq!(all, out);
         // Component 1 alone (row 1, unknown 2).
-        assert_eq!(parts.gather_one(&p, &warm, 1), 1);
+        assert_eq!(part.gather_one(&parts, &p, &warm, 1), 1);
         {
-            let (sub, sol) = parts.sub_problem();
+            let (sub, sol) = part.problem();
             assert_eq!((sub.w, sub.b), (&[2.0][..], &[-1.0][..]));
             assert_eq!(sol.lambda, vec![2.0]);
             sol.v = vec![12.0];
         }
-        parts.scatter_all(&mut all);
+        part.scatter_all(&mut all);
         assert_eq!(all.v[2], 12.0);
     }
 
@@ -442,14 +468,15 @@ mod tests {
         parts.check_whole(&p, &sol, Target { gap: 0.24, ..t }, &mut met);
         assert_eq!(met, [true, false]);
         // The second alone as a sub-problem: the first's verdict is left as it was.
-        parts.gather(&p, &[0.0, 0.0], &[false, true]);
+        let mut part = SubProblem::default();
+        part.gather(&parts, &p, &[0.0, 0.0], &[false, true]);
         {
-            let (_, sub_sol) = parts.sub_problem();
+            let (_, sub_sol) = part.problem();
             sub_sol.v = vec![1.0];
             sub_sol.lambda = vec![1.0];
         }
         let mut met = [false, false];
-        parts.check_sub(t, &mut met);
+        parts.check_sub(&part, t, &mut met);
         assert_eq!(met, [false, true]);
     }
 }

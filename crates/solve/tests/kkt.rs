@@ -598,6 +598,60 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
     assert_eq!(skipping[2], first.iterations, "{skipping:?}");
 }
 
+/// Two crushes beside small problems: the interior point answers the larger crush alone
+/// and the other with whatever Gauss–Seidel left, on one thread in turn or on two at once:
+/// the same bits either way (the split does not depend on the thread count).
+#[test]
+fn auto_gives_the_same_bits_on_one_and_two_threads() {
+    let mut rng = ChaCha8Rng::seed_from_u64(43);
+    let crush = small_crush();
+    // The second crush with its last 40 people's rows left out: smaller.
+    let mut smaller = ConstraintRows::new(crush.0.len());
+    let mut smaller_b = Vec::new();
+    for i in 0..crush.2.len() {
+        let (c, a) = crush.1.row(i);
+        if c.iter().all(|&c| c < crush.0.len() - 80) {
+            smaller.push(i as u64, 0.0, c.iter().copied().zip(a.iter().copied()));
+            smaller_b.push(crush.2[i]);
+        }
+    }
+    let mut blocks = vec![crush.clone(), (crush.0.clone(), smaller, smaller_b)];
+    for _ in 0..6 {
+        let inst = random_instance(&mut rng, 0);
+        blocks.push((inst.w, inst.rows, inst.b));
+    }
+    let whole = side_by_side(&blocks);
+    let p = ProjectionProblem {
+        w: &whole.w,
+        jacobian: &whole.rows,
+        b: &whole.b,
+    };
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let solve = |threads: usize| {
+        let mut auto = AutoSolver::new(AutoSettings {
+            first_order_passes: 20,
+            parallelism: Parallelism::threads(threads),
+            ..AutoSettings::default()
+        })
+        .unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = auto.solve(&p, t, &mut sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        check_report(&p, t, "auto", &sol, &rep);
+        (sol, rep)
+    };
+    let (one, r1) = solve(1);
+    let (two, r2) = solve(2);
+    assert!(r1.solver.contains("interior"), "{r1:?}");
+    let bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&one.v), bits(&two.v));
+    assert_eq!(bits(&one.lambda), bits(&two.lambda));
+    assert_eq!((r1.iterations, r1.gap), (r2.iterations, r2.gap));
+}
+
 /// A row far from binding at `w` is set aside, but the correction of another row moves it
 /// past zero (a row with a large gradient): `auto` sees the violation in its certificate
 /// and solves again with every row, reaching the exact projection.
