@@ -187,6 +187,13 @@ impl ProjectionSolver for AutoSolver {
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
         let m = p.rows();
+        if m >= u32::MAX as usize || p.dim() >= u32::MAX as usize {
+            return Err(SolveError::InvalidSetting {
+                field: "problem size",
+                value: format!("{m} rows, {} unknowns", p.dim()),
+                reason: "auto numbers rows, unknowns and components with 32 bits",
+            });
+        }
         sol.resize_for(p);
         if self.skip_left > 0 {
             self.skip_left -= 1;
