@@ -11,11 +11,14 @@ use moreau_crowd::{DesiredVelocityKind, Scene, Simulation};
 /// `[model]` table (`None`: no table).
 fn one_person_room(model: Option<&str>) -> String {
     let groups = common::listed("one", &[[5.0, 1.0]], 0.2, 1.0);
-    let mut table: toml::Table = toml::from_str(&common::room(1.0, 0.05, 1.0, &groups).to_toml())
-        .expect("a scene's TOML");
+    let mut table: toml::Table =
+        toml::from_str(&common::room(1.0, 0.05, 1.0, &groups).to_toml()).expect("a scene's TOML");
     table.remove("model");
     if let Some(model) = model {
-        table.insert("model".into(), toml::from_str(model).expect("a [model] table"));
+        table.insert(
+            "model".into(),
+            toml::from_str(model).expect("a [model] table"),
+        );
     }
     toml::to_string(&table).unwrap()
 }
