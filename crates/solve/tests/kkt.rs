@@ -94,6 +94,36 @@ fn exact_projection(inst: &Instance) -> (Vec<f64>, Vec<f64>) {
     support::exact_qp(&inst.w, &j, &inst.b)
 }
 
+/// `½|v − w|²`: the projection's objective.
+fn objective(w: &[f64], v: &[f64]) -> f64 {
+    0.5 * v.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum::<f64>()
+}
+
+/// Clarabel's certified answer to `p` (an independent interior point: the reference).
+fn clarabel_answer(p: &ProjectionProblem<'_>, t: Target) -> (ProjectionSolution, SolveReport) {
+    let mut reference = ProjectionSolution::default();
+    let rep = ClarabelReference::default()
+        .solve(p, t, &mut reference)
+        .unwrap();
+    assert!(rep.status.is_converged(), "clarabel: {rep:?}");
+    (reference, rep)
+}
+
+/// `sol` (certified to `gap`) reaches Clarabel's objective within both certificates.
+fn assert_clarabel_objective(
+    p: &ProjectionProblem<'_>,
+    name: &str,
+    sol: &ProjectionSolution,
+    gap: f64,
+    (reference, crep): &(ProjectionSolution, SolveReport),
+) {
+    let (ours, theirs) = (objective(p.w, &sol.v), objective(p.w, &reference.v));
+    assert!(
+        (ours - theirs).abs() <= 2.0 * (gap + crep.gap) + 1e-7,
+        "{name}: objective {ours} vs clarabel {theirs}"
+    );
+}
+
 /// Checks `(v, λ)` against the KKT conditions computed here from the data, and against the
 /// exact projection: the certificate must bound the true suboptimality.
 fn check_kkt(inst: &Instance, name: &str, sol: &ProjectionSolution, gap: f64, violation: f64) {
@@ -145,14 +175,7 @@ fn check_kkt(inst: &Instance, name: &str, sol: &ProjectionSolution, gap: f64, vi
     }
     // Honest certificate: P(v) − P(v*) ≤ gap + |λ*|₁ · violation.
     let (vstar, lstar) = exact_projection(inst);
-    let obj = |v: &[f64]| {
-        0.5 * v
-            .iter()
-            .zip(&inst.w)
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>()
-    };
-    let excess = obj(&sol.v) - obj(&vstar);
+    let excess = objective(&inst.w, &sol.v) - objective(&inst.w, &vstar);
     let l1: f64 = lstar.iter().sum();
     assert!(
         excess <= gap + l1 * violation + 1e-12,
@@ -353,7 +376,6 @@ fn run_cold_and_warm(
         violation: 1e-9,
     };
     let solver_name = solver.name();
-    let mut clarabel = ClarabelReference::new(ClarabelSettings::default());
     let mut solve = |inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
         let p = ProjectionProblem {
             w: &inst.w,
@@ -365,22 +387,7 @@ fn run_cold_and_warm(
         check_kkt(inst, name, sol, rep.gap, rep.violation);
         check_report(&p, target, name, sol, &rep);
         // Clarabel, an independent interior point, reaches the same objective.
-        let mut reference = ProjectionSolution::default();
-        let crep = clarabel.solve(&p, target, &mut reference).unwrap();
-        assert!(crep.status.is_converged(), "{name}: clarabel {crep:?}");
-        let obj = |v: &[f64]| {
-            0.5 * v
-                .iter()
-                .zip(&inst.w)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>()
-        };
-        assert!(
-            (obj(&sol.v) - obj(&reference.v)).abs() <= 2.0 * (rep.gap + crep.gap) + 1e-7,
-            "{name}: objective {} vs clarabel {}",
-            obj(&sol.v),
-            obj(&reference.v)
-        );
+        assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
     };
     for case in 0..cases {
         let mut inst = random_instance(&mut rng, kind);
@@ -557,23 +564,7 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
     assert_eq!(first.status, SolveStatus::Converged, "{first:?}");
     assert_eq!(first.solver, "gs+interior", "{first:?}");
     check_report(&p, t, "auto", &sol, &first);
-    let mut reference = ProjectionSolution::default();
-    let crep = ClarabelReference::default()
-        .solve(&p, t, &mut reference)
-        .unwrap();
-    let obj = |v: &[f64]| {
-        0.5 * v
-            .iter()
-            .zip(&whole.w)
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>()
-    };
-    assert!(
-        (obj(&sol.v) - obj(&reference.v)).abs() <= 2.0 * (first.gap + crep.gap) + 1e-7,
-        "objective {} vs clarabel {}",
-        obj(&sol.v),
-        obj(&reference.v)
-    );
+    assert_clarabel_objective(&p, "auto", &sol, first.gap, &clarabel_answer(&p, t));
     // Each small block: the exact projection (its unknowns follow the crush's 450).
     let mut shift = blocks[0].0.len();
     for inst in &small {
@@ -862,18 +853,7 @@ fn a_small_crush_matches_clarabel() {
         gap: 1e-8,
         violation: 1e-9,
     };
-    let mut reference = ProjectionSolution::default();
-    let crep = ClarabelReference::default()
-        .solve(&p, t, &mut reference)
-        .unwrap();
-    assert!(crep.status.is_converged(), "{crep:?}");
-    let obj = |v: &[f64]| {
-        0.5 * v
-            .iter()
-            .zip(&w)
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>()
-    };
+    let reference = clarabel_answer(&p, t);
     let mut variants = gauss_seidel_variants();
     variants.push(("default", GaussSeidelSettings::default()));
     for (name, settings) in variants {
@@ -886,12 +866,7 @@ fn a_small_crush_matches_clarabel() {
             "{name}: {cold:?}"
         );
         check_report(&p, t, name, &sol, &cold);
-        assert!(
-            (obj(&sol.v) - obj(&reference.v)).abs() <= 2.0 * (cold.gap + crep.gap) + 1e-7,
-            "{name}: objective {} vs clarabel {}",
-            obj(&sol.v),
-            obj(&reference.v)
-        );
+        assert_clarabel_objective(&p, name, &sol, cold.gap, &reference);
         // Warm from its own answer: certified before any sweep.
         let warm = solver.solve(&p, t, &mut sol).unwrap();
         assert_eq!(
