@@ -2,6 +2,7 @@
 
 use moreau_core::{Parallelism, SolveStatus};
 
+use crate::certificate::gap_and_violation;
 use crate::error::SolveError;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
@@ -186,12 +187,6 @@ impl Apgd {
         }
         est
     }
-}
-
-fn gap_and_violation(w: &Workers, lam: &[f64], s: &[f64]) -> (f64, f64) {
-    let gap = w.sum(s.len(), |i| lam[i] * s[i].max(0.0));
-    let viol = (-w.min(s.len(), |i| s[i])).max(0.0);
-    (gap, viol)
 }
 
 impl Default for Apgd {

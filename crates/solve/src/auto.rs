@@ -215,19 +215,17 @@ impl ProjectionSolver for AutoSolver {
         let screened = self.settings.set_aside_factor.is_finite() && self.last_change.is_finite();
         let mut report =
             self.solve_split(p, target, sol, if screened { reach } else { f64::INFINITY })?;
-        if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, sol, target)
-        {
+        if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
             // A row set aside was needed after all: every row this time.
             let first = report;
             report = self.solve_split(p, target, sol, f64::INFINITY)?;
             report.add_work(&first);
         }
-        // How far the correction moved any row's slack: the next solve's reach.
-        self.scratch_n.clear();
-        self.scratch_n
-            .extend(sol.v.iter().zip(p.w).map(|(v, w)| v - w));
-        p.jacobian.mul(&self.scratch_n, &mut self.scratch_m);
-        self.last_change = self.scratch_m.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        // How far the correction moved any row's slack, s(v) − s(w) (`scratch_m` holds J v):
+        // the next solve's reach.
+        self.last_change = (0..m).fold(0.0f64, |a, i| {
+            a.max((p.b[i] + self.scratch_m[i] - self.slack_at_w[i]).abs())
+        });
         Ok(report)
     }
 
@@ -268,20 +266,15 @@ impl ProjectionSolver for AutoSolver {
 }
 
 impl AutoSolver {
-    /// Whether the answer `sol` violates a row that was set aside.
-    fn needed_a_row_set_aside(
-        &mut self,
-        p: &ProjectionProblem<'_>,
-        sol: &ProjectionSolution,
-        target: Target,
-    ) -> bool {
-        p.jacobian.mul(&sol.v, &mut self.scratch_m);
+    /// Whether the answer of the last [`solve_split`](Self::solve_split) violates a row that
+    /// was set aside (its `J v` is in `scratch_m`).
+    fn needed_a_row_set_aside(&self, p: &ProjectionProblem<'_>, target: Target) -> bool {
         (0..p.rows()).any(|i| self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation)
     }
 
     /// One solve with the rows whose slack at `w` exceeds `reach` set aside: the components
     /// of the rest, each answered by Gauss–Seidel or the interior point, certified as a
-    /// whole (rows set aside included, with zero multipliers).
+    /// whole (rows set aside included, with zero multipliers). Leaves `J v` in `scratch_m`.
     fn solve_split(
         &mut self,
         p: &ProjectionProblem<'_>,

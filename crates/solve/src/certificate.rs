@@ -1,6 +1,7 @@
 //! The certificate of a primal–dual pair: duality gap and violation, computed from the data.
 
 use crate::problem::ProjectionProblem;
+use crate::workers::Workers;
 
 /// What a pair `(v, λ)` proves about the projection problem.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,4 +71,13 @@ pub fn certify(
         violation,
         active,
     }
+}
+
+/// The certificate of a pair with `v = w + Jᵀλ` (as the first-order solvers keep it), from
+/// the slacks `s = b + Jv`: the gap `Σ λ_i s_i⁺` and the violation `max (−s_i)⁺`, summed on
+/// `w`'s threads in fixed chunks.
+pub(crate) fn gap_and_violation(w: &Workers, lam: &[f64], s: &[f64]) -> (f64, f64) {
+    let gap = w.sum(s.len(), |i| lam[i] * s[i].max(0.0));
+    let viol = (-w.min(s.len(), |i| s[i])).max(0.0);
+    (gap, viol)
 }

@@ -4,6 +4,7 @@
 
 use moreau_core::{Parallelism, SolveStatus};
 
+use crate::certificate::gap_and_violation;
 use crate::error::SolveError;
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
@@ -342,10 +343,7 @@ impl GaussSeidel {
         wk.map(&mut self.v, |c, _| w[c] + rows.transpose_dot(lam, c));
         let v: &[f64] = &self.v;
         wk.map(&mut self.slack, |k, _| rows.b[k] + rows.dot(k, v));
-        let s: &[f64] = &self.slack;
-        let gap = wk.sum(s.len(), |k| lam[k] * s[k].max(0.0));
-        let violation = (-wk.min(s.len(), |k| s[k])).max(0.0);
-        (gap, violation)
+        gap_and_violation(wk, lam, &self.slack)
     }
 
     /// The dual objective `φ(λ) = ½|v − w|² + λᵀ(b + Jw)` for `v = w + Jᵀλ`.
