@@ -11,6 +11,7 @@
 
 mod apgd;
 mod auto;
+mod blocked;
 mod certificate;
 mod chain;
 mod clarabel_ref;

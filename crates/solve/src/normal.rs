@@ -1,6 +1,8 @@
-//! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized by faer's
-//! sparse Cholesky: ordering, pattern, symbolic analysis (redone only when the columns of
-//! `J`'s rows change), numeric factorization, triangular solves, and the time spent in each.
+//! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized in 2×2
+//! blocks ([`crate::blocked`]) when the unknowns pair up and the factor is thin, by faer's
+//! sparse Cholesky otherwise: ordering, pattern, symbolic analysis (redone only when the
+//! columns of `J`'s rows change), numeric factorization, triangular solves, and the time
+//! spent in each.
 //!
 //! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
 //! rows, a person's x and y), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
@@ -23,6 +25,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use moreau_core::{ConstraintRows, Parallelism};
 
+use crate::blocked::{BlockCholesky, BlockPattern};
 use crate::error::SolveError;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
@@ -39,6 +42,8 @@ pub struct FactorizationCounts {
     pub matrix_nnz: usize,
     /// Stored entries of its last Cholesky factor (the fill the ordering left).
     pub factor_nnz: usize,
+    /// Numeric factorizations done in 2×2 blocks (the rest by faer).
+    pub block_factorizations: usize,
     /// Multiply–adds of one numeric factorization of the last analysed pattern,
     /// `Σ_j c_j (c_j + 1) / 2` over the factor's column counts `c_j`: the cost a factorization
     /// will have, known before any numeric work.
@@ -91,6 +96,9 @@ struct NormalPattern {
     slots: Vec<Index>,
     // Where each row's products start in `slots` (one more entry than rows).
     slot_start: Vec<usize>,
+    // Length of the values `slots` index (the pattern's entries, or the blocks' after
+    // [`NormalPattern::into_blocks`]).
+    value_len: usize,
     // scratch for building
     count: Vec<usize>,
     fill: Vec<Index>,
@@ -191,6 +199,7 @@ impl NormalPattern {
             start = end;
         }
         self.col_ptr.push(self.row_idx.len() as Index);
+        self.value_len = self.row_idx.len();
         self.diag.clear();
         self.slots.clear();
         self.slot_start.clear();
@@ -222,6 +231,53 @@ impl NormalPattern {
         self.slot_start.push(out.len());
     }
 
+    /// The pattern of this lower triangle's 2×2 blocks (unknowns `2k, 2k + 1` paired; an
+    /// entry outside the pattern stays zero), with `slots` and the diagonal redirected to
+    /// the blocks' values (four per block, column order). `None` when `n` is odd.
+    fn into_blocks(&mut self) -> Option<BlockPattern> {
+        let n = self.n;
+        if n % 2 != 0 {
+            return None;
+        }
+        let mut blocks = BlockPattern::default();
+        blocks.ptr.push(0);
+        let mut rows: Vec<Index> = Vec::new();
+        for k in 0..n / 2 {
+            rows.clear();
+            let (a, b) = (
+                self.col_ptr[2 * k] as usize,
+                self.col_ptr[2 * k + 2] as usize,
+            );
+            rows.push(k as Index);
+            rows.extend(self.row_idx[a..b].iter().map(|&r| r / 2));
+            rows.sort_unstable();
+            rows.dedup();
+            blocks.row.extend_from_slice(&rows);
+            blocks.ptr.push(blocks.row.len() as Index);
+        }
+        // Where each scalar entry lands among the blocks' values.
+        let mut at = vec![0 as Index; self.row_idx.len()];
+        for c in 0..n {
+            let (first, last) = (blocks.ptr[c / 2] as usize, blocks.ptr[c / 2 + 1] as usize);
+            for p in self.col_ptr[c] as usize..self.col_ptr[c + 1] as usize {
+                let r = self.row_idx[p] as usize;
+                let b = first
+                    + blocks.row[first..last]
+                        .binary_search(&((r / 2) as Index))
+                        .expect("every entry's block is in the pattern");
+                at[p] = (4 * b + r % 2 + 2 * (c % 2)) as Index;
+            }
+        }
+        for s in self.slots.iter_mut() {
+            *s = at[*s as usize];
+        }
+        for d in self.diag.iter_mut() {
+            *d = at[*d] as usize;
+        }
+        self.value_len = 4 * blocks.row.len();
+        Some(blocks)
+    }
+
     fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
         SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
     }
@@ -229,7 +285,7 @@ impl NormalPattern {
     /// `values = triangle(shift·I + Jᵀ diag(d) J)`; rows with `d_i = 0` are skipped.
     fn assemble(&self, j: &ConstraintRows, shift: f64, d: &[f64], values: &mut Vec<f64>) {
         values.clear();
-        values.resize(self.row_idx.len(), 0.0);
+        values.resize(self.value_len, 0.0);
         for &p in &self.diag {
             values[p] = shift;
         }
@@ -259,6 +315,12 @@ impl std::fmt::Debug for Scratch {
         f.write_str("Scratch")
     }
 }
+/// Multiply–adds per factor entry above which faer's supernodal factorization is used
+/// instead of the 2×2-block one: faer's own threshold between its simplicial and supernodal
+/// factorizations, and where the 2×2 blocks and faer's supernodes cross on crushes
+/// (benches/README.md: blocks 2.3× faster at 37 a entry, supernodes 1.1× at 46, 1.3× at 63).
+const SUPERNODAL_FLOPS_PER_ENTRY: u64 = 40;
+
 /// The normal equations `shift·I + Jᵀ diag(d) J` of one structure of `J`: analysed once per
 /// structure, factorized for any values, solved in the unknowns' natural order.
 ///
@@ -283,6 +345,10 @@ pub(crate) struct NormalEquations {
     jt: Transpose,
     pattern: NormalPattern,
     symbolic: Option<SymbolicCholesky<Index>>,
+    // The factorization in 2×2 blocks, used instead of faer's when the unknowns pair up and
+    // the factor is thin (`blocked`).
+    block: BlockCholesky,
+    blocked: bool,
     side: Side,
     counts: FactorizationCounts,
     times: StageTimes,
@@ -311,6 +377,8 @@ impl NormalEquations {
             jt: Transpose::default(),
             pattern: NormalPattern::default(),
             symbolic: None,
+            block: BlockCholesky::default(),
+            blocked: false,
             side: Side::Upper,
             counts: FactorizationCounts::default(),
             times: StageTimes::default(),
@@ -359,7 +427,7 @@ impl NormalEquations {
     }
 
     fn analyse_untimed(&mut self, j: &ConstraintRows) -> Result<bool, SolveError> {
-        if self.symbolic.is_some()
+        if (self.symbolic.is_some() || self.blocked)
             && self.pattern.n == j.dim()
             && self.j_row_start == j.row_starts()
             && self.j_cols == j.columns()
@@ -424,6 +492,35 @@ impl NormalEquations {
         self.perm_inv.resize(n, 0);
         for (k, &c) in self.perm.iter().enumerate() {
             self.perm_inv[c] = k;
+        }
+
+        // Unknowns in pairs (a disk's x and y: groups of even size, so every pair 2k, 2k + 1
+        // shares its rows): the factorization in 2×2 blocks, unless the factor is so dense
+        // that faer's supernodal one wins.
+        self.symbolic = None;
+        self.blocked = false;
+        if self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
+            self.pattern
+                .build(j, Some((&self.perm_inv, n)), false, true);
+            if let Some(blocks) = self.pattern.into_blocks() {
+                self.block.analyse(blocks);
+                let products = self.block.factor_block_products();
+                let blocks = self.block.factor_blocks() as u64;
+                // faer's measure, multiply–adds per factor entry, in scalar equivalents.
+                if 8 * products <= SUPERNODAL_FLOPS_PER_ENTRY * 4 * blocks {
+                    self.blocked = true;
+                    self.mem = Scratch(MemBuffer::new(StackReq::EMPTY));
+                    self.l = Vec::new();
+                    // Scalar equivalents: a block column of c blocks is two columns of 2c
+                    // and 2c − 1 entries, 4c² multiply–adds.
+                    self.counts.factor_nnz = (4 * blocks - (n / 2) as u64) as usize;
+                    self.counts.factor_flops = 8 * products - 4 * blocks;
+                    self.counts.matrix_nnz = self.pattern.row_idx.len();
+                    self.counts.analyses += 1;
+                    return Ok(true);
+                }
+                self.block = BlockCholesky::default();
+            }
         }
 
         // The permuted upper triangle: faer's simplicial factorization reads it without a
@@ -499,6 +596,13 @@ impl NormalEquations {
     pub(crate) fn factorize(&mut self, j: &ConstraintRows, shift: f64, d: &[f64]) -> bool {
         self.pattern.assemble(j, shift, d, &mut self.h);
         let clock = Instant::now();
+        if self.blocked {
+            self.counts.factorizations += 1;
+            self.counts.block_factorizations += 1;
+            let ok = self.block.factorize(&self.h);
+            self.times.factorize += clock.elapsed().as_secs_f64();
+            return ok;
+        }
         let par = self.par();
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
@@ -533,19 +637,127 @@ impl NormalEquations {
             w.map(&mut self.x, |k, _| r[perm[k]]);
         }
         let clock = Instant::now();
-        let par = self.par();
-        let symbolic = self.symbolic.as_ref().expect("analysed");
-        let (l, x, mem) = (&self.l, &mut self.x, &mut self.mem.0);
-        w.install(|| {
-            LltRef::new(symbolic, l).solve_in_place_with_conj(
-                Conj::No,
-                MatMut::from_column_major_slice_mut(x, n, 1),
-                par,
-                MemStack::new(mem),
-            )
-        });
+        if self.blocked {
+            self.block.solve_in_place(&mut self.x);
+        } else {
+            let par = self.par();
+            let symbolic = self.symbolic.as_ref().expect("analysed");
+            let (l, x, mem) = (&self.l, &mut self.x, &mut self.mem.0);
+            w.install(|| {
+                LltRef::new(symbolic, l).solve_in_place_with_conj(
+                    Conj::No,
+                    MatMut::from_column_major_slice_mut(x, n, 1),
+                    par,
+                    MemStack::new(mem),
+                )
+            });
+        }
         self.times.factorize += clock.elapsed().as_secs_f64();
         let (x, perm_inv) = (&self.x, &self.perm_inv);
         w.map(rhs, |c, _| x[perm_inv[c]]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// `shift·I + Jᵀ diag(d) J` dense.
+    fn dense(j: &ConstraintRows, shift: f64, d: &[f64]) -> Vec<Vec<f64>> {
+        let n = j.dim();
+        let mut a = vec![vec![0.0; n]; n];
+        for (c, row) in a.iter_mut().enumerate() {
+            row[c] = shift;
+        }
+        for (i, &di) in d.iter().enumerate() {
+            let (cols, coefs) = j.row(i);
+            for (&ca, &xa) in cols.iter().zip(coefs) {
+                for (&cb, &xb) in cols.iter().zip(coefs) {
+                    a[ca][cb] += di * xa * xb;
+                }
+            }
+        }
+        a
+    }
+
+    /// Contacts between `people` disks (unknowns `2p, 2p + 1`) and, when `lone`, one more
+    /// unknown that only one row touches (so the unknowns do not pair up).
+    fn contacts(rng: &mut ChaCha8Rng, people: usize, rows: usize, lone: bool) -> ConstraintRows {
+        let n = 2 * people + usize::from(lone);
+        let mut j = ConstraintRows::new(n);
+        for i in 0..rows {
+            let a = rng.random_range(0..people);
+            let angle: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+            let (nx, ny) = (angle.cos(), angle.sin());
+            if rng.random_bool(0.2) {
+                // a wall
+                j.push(i as u64, 0.0, [(2 * a, nx), (2 * a + 1, ny)]);
+            } else {
+                let b = (a + rng.random_range(1..people.max(2))) % people;
+                let (lo, hi) = (a.min(b), a.max(b));
+                if lo == hi {
+                    continue;
+                }
+                j.push(
+                    i as u64,
+                    0.0,
+                    [
+                        (2 * lo, -nx),
+                        (2 * lo + 1, -ny),
+                        (2 * hi, nx),
+                        (2 * hi + 1, ny),
+                    ],
+                );
+            }
+        }
+        if lone {
+            j.push(rows as u64, 0.0, [(0, 1.0), (n - 1, -2.0)]);
+        }
+        j
+    }
+
+    #[test]
+    fn the_blocked_and_the_scalar_factorizations_solve_the_normal_equations() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for case in 0..30 {
+            let people = rng.random_range(1..40);
+            let rows = rng.random_range(0..4 * people);
+            let lone = case % 3 == 2;
+            let j = contacts(&mut rng, people, rows, lone);
+            let d: Vec<f64> = (0..j.len())
+                .map(|_| {
+                    if rng.random_bool(0.2) {
+                        0.0
+                    } else {
+                        rng.random_range(0.0..1e3)
+                    }
+                })
+                .collect();
+            let shift = rng.random_range(0.5..2.0);
+            let b: Vec<f64> = (0..j.dim()).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
+            ne.analyse(&j).unwrap();
+            assert!(ne.factorize(&j, shift, &d));
+            let mut x = b.clone();
+            ne.solve_in_place(&mut x);
+            // The pairs go to the 2×2 blocks, the lone unknown to faer.
+            assert_eq!(
+                ne.counts().block_factorizations,
+                usize::from(!lone),
+                "case {case}"
+            );
+            let a = dense(&j, shift, &d);
+            let scale = 1.0 + d.iter().fold(0.0f64, |m, &v| m.max(v)) * 4.0;
+            for (r, row) in a.iter().enumerate() {
+                let ax: f64 = row.iter().zip(&x).map(|(a, x)| a * x).sum();
+                assert!(
+                    (ax - b[r]).abs() <= 1e-11 * scale,
+                    "case {case} row {r}: {ax} against {}",
+                    b[r]
+                );
+            }
+        }
     }
 }
