@@ -96,8 +96,8 @@ struct NormalPattern {
     slots: Vec<Index>,
     // Where each row's products start in `slots` (one more entry than rows).
     slot_start: Vec<usize>,
-    // Length of the values `slots` index (the pattern's entries, or the blocks' after
-    // [`NormalPattern::into_blocks`]).
+    // Length of the values `slots` index (the pattern's entries, or the blocks' values after
+    // [`NormalPattern::build_blocks`]).
     value_len: usize,
     // scratch for building
     count: Vec<usize>,
@@ -231,51 +231,95 @@ impl NormalPattern {
         self.slot_start.push(out.len());
     }
 
-    /// The pattern of this lower triangle's 2×2 blocks (unknowns `2k, 2k + 1` paired; an
-    /// entry outside the pattern stays zero), with `slots` and the diagonal redirected to
-    /// the blocks' values (four per block, column order). `None` when `n` is odd.
-    fn into_blocks(&mut self) -> Option<BlockPattern> {
-        let n = self.n;
-        if n % 2 != 0 {
-            return None;
+    /// The lower triangle of `j`'s normal matrix in 2×2 blocks, with unknown `c` at position
+    /// `at[c]` of `n` (even) and positions `2k, 2k + 1` paired into block `k`: the blocks'
+    /// pattern, and `slots` and the diagonal as positions among the blocks' values (four per
+    /// block, column order). A pair's entry outside the products stays zero.
+    fn build_blocks(&mut self, j: &ConstraintRows, at: &[usize], n: usize) -> BlockPattern {
+        debug_assert!(n % 2 == 0);
+        let nb = n / 2;
+        self.n = n;
+        self.col_ptr.clear();
+        self.row_idx.clear();
+        // Bucket the off-diagonal blocks by column (duplicates included), then sort and
+        // deduplicate each column behind its diagonal block.
+        self.count.clear();
+        self.count.resize(nb, 1);
+        for_each_product(j, |ca, cb| {
+            let (a, b) = (at[ca] / 2, at[cb] / 2);
+            if a != b {
+                self.count[a.min(b)] += 1;
+            }
+        });
+        let mut total = 0;
+        for c in self.count.iter_mut() {
+            let k = *c;
+            *c = total;
+            total += k;
+        }
+        self.fill.clear();
+        self.fill.resize(total, 0);
+        {
+            let (count, fill) = (&mut self.count, &mut self.fill);
+            for k in 0..nb {
+                fill[count[k]] = k as Index;
+                count[k] += 1;
+            }
+            for_each_product(j, |ca, cb| {
+                let (a, b) = (at[ca] / 2, at[cb] / 2);
+                if a != b {
+                    let c = a.min(b);
+                    fill[count[c]] = a.max(b) as Index;
+                    count[c] += 1;
+                }
+            });
         }
         let mut blocks = BlockPattern::default();
         blocks.ptr.push(0);
-        let mut rows: Vec<Index> = Vec::new();
-        for k in 0..n / 2 {
-            rows.clear();
-            let (a, b) = (
-                self.col_ptr[2 * k] as usize,
-                self.col_ptr[2 * k + 2] as usize,
-            );
-            rows.push(k as Index);
-            rows.extend(self.row_idx[a..b].iter().map(|&r| r / 2));
-            rows.sort_unstable();
-            rows.dedup();
-            blocks.row.extend_from_slice(&rows);
+        let mut start = 0;
+        for k in 0..nb {
+            let end = self.count[k];
+            let bucket = &mut self.fill[start..end];
+            bucket.sort_unstable();
+            let mut last = Index::MAX;
+            for &r in bucket.iter() {
+                if r != last {
+                    blocks.row.push(r);
+                    last = r;
+                }
+            }
             blocks.ptr.push(blocks.row.len() as Index);
+            start = end;
         }
-        // Where each scalar entry lands among the blocks' values.
-        let mut at = vec![0 as Index; self.row_idx.len()];
-        for c in 0..n {
-            let (first, last) = (blocks.ptr[c / 2] as usize, blocks.ptr[c / 2 + 1] as usize);
-            for p in self.col_ptr[c] as usize..self.col_ptr[c + 1] as usize {
-                let r = self.row_idx[p] as usize;
-                let b = first
-                    + blocks.row[first..last]
-                        .binary_search(&((r / 2) as Index))
-                        .expect("every entry's block is in the pattern");
-                at[p] = (4 * b + r % 2 + 2 * (c % 2)) as Index;
+        // The diagonal: (0, 0) or (1, 1) of the first block of its column.
+        self.diag.clear();
+        for &q in &at[..n] {
+            self.diag.push(4 * blocks.ptr[q / 2] as usize + 3 * (q % 2));
+        }
+        let find = |pr: usize, pc: usize| -> Index {
+            let (a, b) = (blocks.ptr[pc / 2] as usize, blocks.ptr[pc / 2 + 1] as usize);
+            let k = a + blocks.row[a..b]
+                .binary_search(&((pr / 2) as Index))
+                .expect("every product has a block in the pattern");
+            (4 * k + pr % 2 + 2 * (pc % 2)) as Index
+        };
+        self.slots.clear();
+        self.slot_start.clear();
+        for i in 0..j.len() {
+            self.slot_start.push(self.slots.len());
+            let cols = j.row(i).0;
+            for &ca in cols {
+                for &cb in cols {
+                    if ca >= cb {
+                        let (pa, pb) = (at[ca], at[cb]);
+                        self.slots.push(find(pa.max(pb), pa.min(pb)));
+                    }
+                }
             }
         }
-        for s in self.slots.iter_mut() {
-            *s = at[*s as usize];
-        }
-        for d in self.diag.iter_mut() {
-            *d = at[*d] as usize;
-        }
+        self.slot_start.push(self.slots.len());
         self.value_len = 4 * blocks.row.len();
-        Some(blocks)
+        blocks
     }
 
     fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
@@ -331,8 +375,8 @@ pub(crate) struct NormalEquations {
     parallelism: Parallelism,
     workers: Workers,
     // The structure of J the analysis below was made for.
-    j_row_start: Vec<usize>,
-    j_cols: Vec<usize>,
+    j_row_start: Vec<Index>,
+    j_cols: Vec<Index>,
     // The unpermuted lower triangle (input of the ordering), the fill-reducing ordering,
     // and the permuted triangle that is factorized (no permutation per factorization).
     natural: NormalPattern,
@@ -427,17 +471,16 @@ impl NormalEquations {
     }
 
     fn analyse_untimed(&mut self, j: &ConstraintRows) -> Result<bool, SolveError> {
+        let same = |kept: &[Index], now: &[usize]| {
+            kept.len() == now.len() && kept.iter().zip(now).all(|(&a, &b)| a as usize == b)
+        };
         if (self.symbolic.is_some() || self.blocked)
             && self.pattern.n == j.dim()
-            && self.j_row_start == j.row_starts()
-            && self.j_cols == j.columns()
+            && same(&self.j_row_start, j.row_starts())
+            && same(&self.j_cols, j.columns())
         {
             return Ok(false);
         }
-        self.j_row_start.clear();
-        self.j_row_start.extend_from_slice(j.row_starts());
-        self.j_cols.clear();
-        self.j_cols.extend_from_slice(j.columns());
         let n = j.dim();
         let starts = j.row_starts();
         let products: usize = n
@@ -452,6 +495,12 @@ impl NormalEquations {
                 "{products} products in I + JᵀDJ: more than 32-bit indices hold"
             )));
         }
+        // The structure analysed, in 32-bit indices (every product, so every column and row
+        // start, fits: checked above).
+        self.j_row_start.clear();
+        self.j_row_start.extend(starts.iter().map(|&s| s as Index));
+        self.j_cols.clear();
+        self.j_cols.extend(j.columns().iter().map(|&c| c as Index));
 
         // Fill-reducing ordering (AMD) of the pattern compressed to groups of adjacent
         // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
@@ -500,27 +549,25 @@ impl NormalEquations {
         self.symbolic = None;
         self.blocked = false;
         if self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
-            self.pattern
-                .build(j, Some((&self.perm_inv, n)), false, true);
-            if let Some(blocks) = self.pattern.into_blocks() {
-                self.block.analyse(blocks);
-                let products = self.block.factor_block_products();
-                let blocks = self.block.factor_blocks() as u64;
-                // faer's measure, multiply–adds per factor entry, in scalar equivalents.
-                if 8 * products <= SUPERNODAL_FLOPS_PER_ENTRY * 4 * blocks {
-                    self.blocked = true;
-                    self.mem = Scratch(MemBuffer::new(StackReq::EMPTY));
-                    self.l = Vec::new();
-                    // Scalar equivalents: a block column of c blocks is two columns of 2c
-                    // and 2c − 1 entries, 4c² multiply–adds.
-                    self.counts.factor_nnz = (4 * blocks - (n / 2) as u64) as usize;
-                    self.counts.factor_flops = 8 * products - 4 * blocks;
-                    self.counts.matrix_nnz = self.pattern.row_idx.len();
-                    self.counts.analyses += 1;
-                    return Ok(true);
-                }
-                self.block = BlockCholesky::default();
+            let blocks = self.pattern.build_blocks(j, &self.perm_inv, n);
+            let a_blocks = blocks.row.len();
+            self.block.analyse(blocks);
+            let products = self.block.factor_block_products();
+            let blocks = self.block.factor_blocks() as u64;
+            // faer's measure, multiply–adds per factor entry, in scalar equivalents.
+            if 8 * products <= SUPERNODAL_FLOPS_PER_ENTRY * 4 * blocks {
+                self.blocked = true;
+                self.mem = Scratch(MemBuffer::new(StackReq::EMPTY));
+                self.l = Vec::new();
+                // Scalar equivalents: a block column of c blocks is two columns of 2c
+                // and 2c − 1 entries, 4c² multiply–adds.
+                self.counts.factor_nnz = (4 * blocks - (n / 2) as u64) as usize;
+                self.counts.factor_flops = 8 * products - 4 * blocks;
+                self.counts.matrix_nnz = 4 * a_blocks - n / 2;
+                self.counts.analyses += 1;
+                return Ok(true);
             }
+            self.block = BlockCholesky::default();
         }
 
         // The permuted upper triangle: faer's simplicial factorization reads it without a
