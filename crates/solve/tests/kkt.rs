@@ -403,6 +403,122 @@ fn run_cold_and_warm(
     }
 }
 
+/// A feasible random problem shaped like a crowd's: `people` disks, unknowns `2p, 2p + 1`
+/// (x, y), rows for a contact between two disks (`−n` on one, `n` on the other) or with a
+/// wall (`n` on one), some of them duplicated or doubled (redundant contacts).
+fn disk_instance(rng: &mut ChaCha8Rng) -> Instance {
+    let people = rng.random_range(2..=4);
+    let n = 2 * people;
+    let mut dense: Vec<Vec<f64>> = Vec::new();
+    for _ in 0..rng.random_range(1..=people + 3) {
+        let angle: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let (nx, ny) = (angle.cos(), angle.sin());
+        let a = rng.random_range(0..people);
+        let mut row = vec![0.0; n];
+        row[2 * a] = nx;
+        row[2 * a + 1] = ny;
+        if rng.random_bool(0.7) {
+            let b = (a + rng.random_range(1..people)) % people;
+            row[2 * a] = -nx;
+            row[2 * a + 1] = -ny;
+            row[2 * b] = nx;
+            row[2 * b + 1] = ny;
+        }
+        dense.push(row);
+        if rng.random_bool(0.15) {
+            let copy = dense.last().unwrap().clone();
+            let factor = if rng.random_bool(0.5) { 1.0 } else { 2.0 };
+            dense.push(copy.iter().map(|x| factor * x).collect());
+        }
+    }
+    let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let mut rows = ConstraintRows::new(n);
+    let mut b = Vec::new();
+    for (i, r) in dense.iter().enumerate() {
+        let s0 = if rng.random_bool(0.3) {
+            0.0
+        } else {
+            rng.random_range(0.0..1.0)
+        };
+        b.push(s0 - r.iter().zip(&v0).map(|(a, v)| a * v).sum::<f64>());
+        rows.push(
+            i as u64,
+            0.0,
+            r.iter()
+                .enumerate()
+                .filter(|(_, a)| **a != 0.0)
+                .map(|(c, &a)| (c, a)),
+        );
+    }
+    let w = v0.iter().map(|v| v + rng.random_range(-3.0..3.0)).collect();
+    Instance { w, rows, b }
+}
+
+/// The interior point on disks' contacts factorizes in 2×2 blocks: cold, warm on the next
+/// step's problem, and after a change of pattern (another crowd of the same size), with
+/// rows scaled 1 to 100 in every other case, checked against the KKT conditions, the exact
+/// enumerator and Clarabel's objective.
+#[test]
+fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
+    let mut rng = ChaCha8Rng::seed_from_u64(55);
+    let target = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let solve = |interior: &mut InteriorPoint,
+                     inst: &Instance,
+                     sol: &mut ProjectionSolution,
+                     name: &str| {
+        let p = ProjectionProblem {
+            w: &inst.w,
+            jacobian: &inst.rows,
+            b: &inst.b,
+        };
+        let before = interior.counts();
+        let rep = interior.solve(&p, target, sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        let after = interior.counts();
+        assert_eq!(
+            after.block_factorizations - before.block_factorizations,
+            after.factorizations - before.factorizations,
+            "{name}: a factorization was not in blocks"
+        );
+        check_kkt(inst, name, sol, rep.gap, rep.violation);
+        check_report(&p, target, name, sol, &rep);
+        assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+    };
+    for case in 0..80 {
+        let mut inst = disk_instance(&mut rng);
+        if case % 2 == 1 {
+            inst = scale_rows(&mut rng, &inst);
+        }
+        let next = perturb(&mut rng, &inst, 0.05, 0.01, false);
+        let name = format!("disks case {case}");
+        let mut sol = ProjectionSolution::default();
+        solve(&mut interior, &inst, &mut sol, &format!("{name} cold"));
+        sol.lambda = matched(&inst, &sol.lambda, &next);
+        solve(&mut interior, &next, &mut sol, &format!("{name} warm"));
+        // Another crowd of the same size: the pattern changes under the warm start.
+        let mut other = disk_instance(&mut rng);
+        while other.rows.dim() != next.rows.dim() {
+            other = disk_instance(&mut rng);
+        }
+        sol.lambda = matched(&next, &sol.lambda, &other);
+        solve(
+            &mut interior,
+            &other,
+            &mut sol,
+            &format!("{name} pattern change"),
+        );
+    }
+    assert!(
+        interior.counts().block_factorizations > 100,
+        "{:?}",
+        interior.counts()
+    );
+}
+
 #[test]
 fn random_feasible_problems_meet_kkt() {
     run_all(0, 60, 1);
