@@ -17,9 +17,10 @@ use crate::problem::{
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AutoSettings {
     /// Gauss–Seidel's budget of passes over the rows it is given before the interior point
-    /// takes the components it left unfinished. An interior-point iteration costs 20–80
-    /// passes over the same rows and a solve 9–22 iterations (benches/README.md), so 200
-    /// passes stay below one interior-point solve on every scene measured.
+    /// takes the components it left unfinished. An interior-point iteration costs 15–80
+    /// passes over the same rows (15–20 on jammed halls since the 2×2-block factorization)
+    /// and a solve 9–22 iterations (benches/README.md), so 200 passes stay at or below one
+    /// interior-point solve on every scene measured.
     pub first_order_passes: usize,
     /// After Gauss–Seidel left a component of `r` rows unfinished, components of `r` rows
     /// or more go straight to the interior point for this many solves; then Gauss–Seidel is

@@ -178,8 +178,8 @@ impl BlockCholesky {
                 let (p, end) = (p as usize, end as usize);
                 let b = values[p];
                 // The rest of column j from row k on (its rows increase).
-                for q in p..end {
-                    sub_mul_transpose(&mut work[l.row[q] as usize], &values[q], &b);
+                for (&r, v) in l.row[p..end].iter().zip(&values[p..end]) {
+                    sub_mul_transpose(&mut work[r as usize], v, &b);
                 }
             }
             // L(k, k) by the 2×2 Cholesky of the diagonal block.
@@ -196,11 +196,14 @@ impl BlockCholesky {
             let l11 = schur.sqrt();
             values[lk.start] = [l00, l10, 0.0, l11];
             // L(i, k) = W(i) L(k, k)⁻ᵀ: each row of the block solved against L(k, k)ᵀ.
-            for q in lk.start + 1..lk.end {
-                let w = work[l.row[q] as usize];
+            for (&r, out) in l.row[lk.start + 1..lk.end]
+                .iter()
+                .zip(&mut values[lk.start + 1..lk.end])
+            {
+                let w = work[r as usize];
                 let x0 = w[0] / l00; // row 0
                 let x1 = w[1] / l00; // row 1
-                values[q] = [x0, x1, (w[2] - x0 * l10) / l11, (w[3] - x1 * l10) / l11];
+                *out = [x0, x1, (w[2] - x0 * l10) / l11, (w[3] - x1 * l10) / l11];
             }
         }
         true
@@ -219,8 +222,9 @@ impl BlockCholesky {
             let y1 = (x[2 * k + 1] - d[1] * y0) / d[3];
             x[2 * k] = y0;
             x[2 * k + 1] = y1;
-            for q in lk.start + 1..lk.end {
-                let (b, i) = (&values[q], l.row[q] as usize);
+            let below = lk.start + 1..lk.end;
+            for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+                let i = i as usize;
                 x[2 * i] -= b[0] * y0 + b[2] * y1;
                 x[2 * i + 1] -= b[1] * y0 + b[3] * y1;
             }
@@ -229,8 +233,9 @@ impl BlockCholesky {
         for k in (0..n).rev() {
             let lk = l.col(k);
             let (mut r0, mut r1) = (x[2 * k], x[2 * k + 1]);
-            for q in lk.start + 1..lk.end {
-                let (b, i) = (&values[q], l.row[q] as usize);
+            let below = lk.start + 1..lk.end;
+            for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+                let i = i as usize;
                 let (x0, x1) = (x[2 * i], x[2 * i + 1]);
                 r0 -= b[0] * x0 + b[1] * x1;
                 r1 -= b[2] * x0 + b[3] * x1;

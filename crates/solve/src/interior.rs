@@ -31,7 +31,8 @@ pub struct InteriorPointSettings {
     pub max_iterations: usize,
     /// Fraction of the step to the boundary of `s, λ ≥ 0` taken each iteration, in (0, 1).
     pub step_fraction: f64,
-    /// Threads for the numeric factorization and the triangular solves.
+    /// Threads for the loops over rows and unknowns and for faer's factorizations and
+    /// triangular solves (the 2×2-block factorization of crowds is sequential).
     pub parallelism: Parallelism,
 }
 
