@@ -19,8 +19,10 @@ pub struct AutoSettings {
     /// Gauss–Seidel's budget of passes over the rows it is given before the interior point
     /// takes the components it left unfinished. An interior-point iteration costs 15–80
     /// passes over the same rows (15–20 on jammed halls since the 2×2-block factorization)
-    /// and a solve 9–22 iterations (benches/README.md), so 200 passes stay at or below one
-    /// interior-point solve on every scene measured.
+    /// and a solve 9–22 iterations (benches/README.md), so 100 passes stay near half an
+    /// interior-point solve on every scene measured (200 until the 2×2 blocks made that
+    /// solve twice as cheap: then 100 was 1.35× faster on the jammed 10,000-person hall and
+    /// 1.1× on cromosim's scene, and the same elsewhere).
     pub first_order_passes: usize,
     /// After Gauss–Seidel left a component of `r` rows unfinished, components of `r` rows
     /// or more go straight to the interior point for this many solves; then Gauss–Seidel is
@@ -40,7 +42,7 @@ pub struct AutoSettings {
 impl Default for AutoSettings {
     fn default() -> Self {
         Self {
-            first_order_passes: 200,
+            first_order_passes: 100,
             retry_after: 16,
             set_aside_factor: 1.5,
             parallelism: Parallelism::SEQUENTIAL,
