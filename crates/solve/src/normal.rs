@@ -496,7 +496,10 @@ impl NormalEquations {
             )));
         }
         // The structure analysed, in 32-bit indices (every product, so every column and row
-        // start, fits: checked above).
+        // start, fits: checked above). Until the analysis below succeeds there is none: a
+        // failed one must not leave the previous one standing for this structure.
+        self.symbolic = None;
+        self.blocked = false;
         self.j_row_start.clear();
         self.j_row_start.extend(starts.iter().map(|&s| s as Index));
         self.j_cols.clear();
@@ -546,8 +549,6 @@ impl NormalEquations {
         // Unknowns in pairs (a disk's x and y: groups of even size, so every pair 2k, 2k + 1
         // shares its rows): the factorization in 2×2 blocks, unless the factor is so dense
         // that faer's supernodal one wins.
-        self.symbolic = None;
-        self.blocked = false;
         if self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
             let blocks = self.pattern.build_blocks(j, &self.perm_inv, n);
             let a_blocks = blocks.row.len();

@@ -467,9 +467,9 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
     };
     let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
     let solve = |interior: &mut InteriorPoint,
-                     inst: &Instance,
-                     sol: &mut ProjectionSolution,
-                     name: &str| {
+                 inst: &Instance,
+                 sol: &mut ProjectionSolution,
+                 name: &str| {
         let p = ProjectionProblem {
             w: &inst.w,
             jacobian: &inst.rows,
