@@ -134,6 +134,55 @@ fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
     groups
 }
 
+/// Columns `0..n`, each with its diagonal and the entries `visit` emits as `(row, column)`,
+/// rows sorted and without repeats, into `ptr` (one more entry than columns) and `rows`.
+/// `visit` is called twice (a count, then a fill); `count` and `fill` are scratch.
+fn sorted_columns(
+    n: usize,
+    visit: impl Fn(&mut dyn FnMut(usize, usize)),
+    (count, fill): (&mut Vec<usize>, &mut Vec<Index>),
+    ptr: &mut Vec<Index>,
+    rows: &mut Vec<Index>,
+) {
+    count.clear();
+    count.resize(n, 1); // the diagonal
+    visit(&mut |_, c| count[c] += 1);
+    let mut total = 0;
+    for c in count.iter_mut() {
+        let k = *c;
+        *c = total;
+        total += k;
+    }
+    fill.clear();
+    fill.resize(total, 0);
+    for c in 0..n {
+        fill[count[c]] = c as Index;
+        count[c] += 1;
+    }
+    visit(&mut |r, c| {
+        fill[count[c]] = r as Index;
+        count[c] += 1;
+    });
+    // count[c] is now the end of column c's bucket and the start of column c + 1's.
+    ptr.clear();
+    rows.clear();
+    ptr.push(0);
+    let mut start = 0;
+    for &end in count.iter() {
+        let bucket = &mut fill[start..end];
+        bucket.sort_unstable();
+        let mut last = Index::MAX;
+        for &r in bucket.iter() {
+            if r != last {
+                rows.push(r);
+                last = r;
+            }
+        }
+        ptr.push(rows.len() as Index);
+        start = end;
+    }
+}
+
 impl NormalPattern {
     /// Builds the pattern of `j` with unknown `c` at position `at[c]` (identity without
     /// `at`), storing the upper triangle (row ≤ column) when `upper`, else the lower one;
@@ -156,49 +205,18 @@ impl NormalPattern {
             let (lo, hi) = if pa <= pb { (pa, pb) } else { (pb, pa) };
             if upper { (lo, hi) } else { (hi, lo) } // (row, column)
         };
-        // Bucket the entries by column, then sort and deduplicate each column.
-        self.count.clear();
-        self.count.resize(n, 1); // the diagonal
-        for_each_product(j, |ca, cb| self.count[place(ca, cb).1] += 1);
-        let mut total = 0;
-        for c in self.count.iter_mut() {
-            let k = *c;
-            *c = total;
-            total += k;
-        }
-        self.fill.clear();
-        self.fill.resize(total, 0);
-        {
-            let (count, fill) = (&mut self.count, &mut self.fill);
-            for c in 0..n {
-                fill[count[c]] = c as Index;
-                count[c] += 1;
-            }
-            for_each_product(j, |ca, cb| {
-                let (r, c) = place(ca, cb);
-                fill[count[c]] = r as Index;
-                count[c] += 1;
-            });
-        }
-        // count[c] is now the end of column c's bucket and the start of column c + 1's.
-        self.col_ptr.clear();
-        self.row_idx.clear();
-        let mut start = 0;
-        for c in 0..n {
-            let end = self.count[c];
-            let bucket = &mut self.fill[start..end];
-            bucket.sort_unstable();
-            self.col_ptr.push(self.row_idx.len() as Index);
-            let mut last = Index::MAX;
-            for &r in bucket.iter() {
-                if r != last {
-                    self.row_idx.push(r);
-                    last = r;
-                }
-            }
-            start = end;
-        }
-        self.col_ptr.push(self.row_idx.len() as Index);
+        sorted_columns(
+            n,
+            |f| {
+                for_each_product(j, |ca, cb| {
+                    let (r, c) = place(ca, cb);
+                    f(r, c)
+                })
+            },
+            (&mut self.count, &mut self.fill),
+            &mut self.col_ptr,
+            &mut self.row_idx,
+        );
         self.value_len = self.row_idx.len();
         self.diag.clear();
         self.slots.clear();
@@ -241,56 +259,22 @@ impl NormalPattern {
         self.n = n;
         self.col_ptr.clear();
         self.row_idx.clear();
-        // Bucket the off-diagonal blocks by column (duplicates included), then sort and
-        // deduplicate each column behind its diagonal block.
-        self.count.clear();
-        self.count.resize(nb, 1);
-        for_each_product(j, |ca, cb| {
-            let (a, b) = (at[ca] / 2, at[cb] / 2);
-            if a != b {
-                self.count[a.min(b)] += 1;
-            }
-        });
-        let mut total = 0;
-        for c in self.count.iter_mut() {
-            let k = *c;
-            *c = total;
-            total += k;
-        }
-        self.fill.clear();
-        self.fill.resize(total, 0);
-        {
-            let (count, fill) = (&mut self.count, &mut self.fill);
-            for k in 0..nb {
-                fill[count[k]] = k as Index;
-                count[k] += 1;
-            }
-            for_each_product(j, |ca, cb| {
-                let (a, b) = (at[ca] / 2, at[cb] / 2);
-                if a != b {
-                    let c = a.min(b);
-                    fill[count[c]] = a.max(b) as Index;
-                    count[c] += 1;
-                }
-            });
-        }
+        // The off-diagonal blocks by column, behind each column's diagonal block.
         let mut blocks = BlockPattern::default();
-        blocks.ptr.push(0);
-        let mut start = 0;
-        for k in 0..nb {
-            let end = self.count[k];
-            let bucket = &mut self.fill[start..end];
-            bucket.sort_unstable();
-            let mut last = Index::MAX;
-            for &r in bucket.iter() {
-                if r != last {
-                    blocks.row.push(r);
-                    last = r;
-                }
-            }
-            blocks.ptr.push(blocks.row.len() as Index);
-            start = end;
-        }
+        sorted_columns(
+            nb,
+            |f| {
+                for_each_product(j, |ca, cb| {
+                    let (a, b) = (at[ca] / 2, at[cb] / 2);
+                    if a != b {
+                        f(a.max(b), a.min(b))
+                    }
+                })
+            },
+            (&mut self.count, &mut self.fill),
+            &mut blocks.ptr,
+            &mut blocks.row,
+        );
         // The diagonal: (0, 0) or (1, 1) of the first block of its column.
         self.diag.clear();
         for &q in &at[..n] {

@@ -51,10 +51,16 @@ fn random_instance(rng: &mut ChaCha8Rng, kind: u32) -> Instance {
     if kind == 3 || kind == 4 {
         dense.push(vec![0.0; n]);
     }
-    let m = dense.len();
+    feasible(rng, n, &dense)
+}
+
+/// The problem of the dense rows `dense` over `n` unknowns made feasible at a random `v0`:
+/// `b = s0 − J v0` with `s0 ≥ 0` (some exactly 0), and `w` pushed away from `v0` so that
+/// constraints bind.
+fn feasible(rng: &mut ChaCha8Rng, n: usize, dense: &[Vec<f64>]) -> Instance {
     let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
     let mut rows = ConstraintRows::new(n);
-    let mut b = Vec::with_capacity(m);
+    let mut b = Vec::with_capacity(dense.len());
     for (i, r) in dense.iter().enumerate() {
         let s0 = if rng.random_bool(0.3) {
             0.0
@@ -72,7 +78,6 @@ fn random_instance(rng: &mut ChaCha8Rng, kind: u32) -> Instance {
                 .map(|(c, &a)| (c, a)),
         );
     }
-    // The unconstrained optimum is pushed away from v0 so that constraints bind.
     let w = v0.iter().map(|v| v + rng.random_range(-3.0..3.0)).collect();
     Instance { w, rows, b }
 }
@@ -431,27 +436,7 @@ fn disk_instance(rng: &mut ChaCha8Rng) -> Instance {
             dense.push(copy.iter().map(|x| factor * x).collect());
         }
     }
-    let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
-    let mut rows = ConstraintRows::new(n);
-    let mut b = Vec::new();
-    for (i, r) in dense.iter().enumerate() {
-        let s0 = if rng.random_bool(0.3) {
-            0.0
-        } else {
-            rng.random_range(0.0..1.0)
-        };
-        b.push(s0 - r.iter().zip(&v0).map(|(a, v)| a * v).sum::<f64>());
-        rows.push(
-            i as u64,
-            0.0,
-            r.iter()
-                .enumerate()
-                .filter(|(_, a)| **a != 0.0)
-                .map(|(c, &a)| (c, a)),
-        );
-    }
-    let w = v0.iter().map(|v| v + rng.random_range(-3.0..3.0)).collect();
-    Instance { w, rows, b }
+    feasible(rng, n, &dense)
 }
 
 /// The interior point on disks' contacts factorizes in 2×2 blocks: cold, warm on the next
