@@ -343,10 +343,12 @@ impl std::fmt::Debug for Scratch {
         f.write_str("Scratch")
     }
 }
+
 /// Multiply–adds per factor entry above which faer's supernodal factorization is used
 /// instead of the 2×2-block one: faer's own threshold between its simplicial and supernodal
 /// factorizations, and where the 2×2 blocks and faer's supernodes cross on crushes
-/// (benches/README.md: blocks 2.3× faster at 37 a entry, supernodes 1.1× at 46, 1.3× at 63).
+/// (benches/README.md: the blocks 2.3× faster at 37 multiply–adds an entry, the supernodes
+/// 1.1× faster at 46 and 1.3× at 63).
 const SUPERNODAL_FLOPS_PER_ENTRY: u64 = 40;
 
 /// The normal equations `shift·I + Jᵀ diag(d) J` of one structure of `J`: analysed once per
