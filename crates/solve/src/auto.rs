@@ -125,17 +125,13 @@ impl AutoSolver {
                 .max_passes(settings.first_order_passes)
                 .build()?,
         )?;
-        // With threads, the largest component and the others run at once, each interior
-        // point on one thread (two interior points each spreading its loops over the same
+        // Each interior point runs on one thread: with threads, the largest component and
+        // the others run at once (two interior points each spreading its loops over the same
         // cores would only contend).
         let interior = || {
             InteriorPoint::new(
                 InteriorPointSettings::builder()
-                    .parallelism(if settings.parallelism.is_sequential() {
-                        settings.parallelism
-                    } else {
-                        Parallelism::SEQUENTIAL
-                    })
+                    .parallelism(Parallelism::SEQUENTIAL)
                     .build()?,
             )
         };
