@@ -13,21 +13,21 @@ use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
 
+/// Gauss–Seidel takes components of this many rows or more one at a time, and the smaller
+/// ones in groups of about this many rows.
+const GROUP_ROWS: usize = 256;
+
 /// Settings of [`AutoSolver`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AutoSettings {
-    /// Gauss–Seidel's budget of passes over the rows it is given before the interior point
-    /// takes the components it left unfinished. An interior-point iteration costs 15–80
-    /// passes over the same rows (15–20 on jammed halls since the 2×2-block factorization)
+    /// Gauss–Seidel's budget of passes over a component (or a group of small ones) before
+    /// the interior point takes it. Gauss–Seidel gives a component up before that when its
+    /// certificates predict the budget will not be enough
+    /// ([`GaussSeidelSettings::abandon_when_slow`]): a jam's component after 18–40 passes.
+    /// An interior-point iteration costs 15–20 passes over the same rows on jammed halls
     /// and a solve 9–22 iterations (benches/README.md), so 100 passes stay near half an
-    /// interior-point solve on every scene measured (200 until the 2×2 blocks made that
-    /// solve twice as cheap: then 100 was 1.35× faster on the jammed 10,000-person hall and
-    /// 1.1× on cromosim's scene, and the same elsewhere).
+    /// interior-point solve.
     pub first_order_passes: usize,
-    /// After Gauss–Seidel left a component of `r` rows unfinished, components of `r` rows
-    /// or more go straight to the interior point for this many solves; then Gauss–Seidel is
-    /// tried on them again (a jam may have cleared).
-    pub retry_after: usize,
     /// Rows whose slack at `w` (before any correction) exceeds this factor times the
     /// larger of the previous solve's largest change of a row's slack and the largest
     /// violation at `w` are set aside: they split no component and are only checked, by
@@ -43,7 +43,6 @@ impl Default for AutoSettings {
     fn default() -> Self {
         Self {
             first_order_passes: 100,
-            retry_after: 16,
             set_aside_factor: 1.5,
             parallelism: Parallelism::SEQUENTIAL,
         }
@@ -51,13 +50,13 @@ impl Default for AutoSettings {
 }
 
 /// Splits each projection into its connected components (groups of people in contact, with
-/// their walls: independent problems whose gaps add up), gives Gauss–Seidel the components
-/// it has been finishing within its budget, warm-started, and the interior point the rest,
-/// each set as one sub-problem. Gauss–Seidel's unfinished components go on to the interior
-/// point, and components at least that large skip Gauss–Seidel for
-/// [`AutoSettings::retry_after`] solves. The choice depends only on the work counted (passes
-/// and their outcome), never on timings, so answers do not depend on the machine or the
-/// thread count.
+/// their walls: independent problems whose gaps add up), and gives each to Gauss–Seidel
+/// first, warm-started: a component on its own (the small ones in groups), so that it is
+/// swept only until it is finished, and given up as soon as its certificates show that the
+/// budget will not finish it ([`AutoSettings::first_order_passes`]). The interior point
+/// takes the components Gauss–Seidel left. The choice depends only on the work counted
+/// (passes and certificates), never on timings, so answers do not depend on the machine or
+/// the thread count.
 ///
 /// Before splitting, rows whose slack at `w` is well beyond what a correction has been
 /// moving any row's slack ([`AutoSettings::set_aside_factor`]) are set aside: in a jam they
@@ -83,14 +82,12 @@ pub struct AutoSolver {
     interiors: [InteriorPoint; 2],
     components: Components,
     parts: [SubProblem; 2],
-    // components of this many rows or more skip Gauss–Seidel (usize::MAX: none)
-    skip_from: usize,
-    // solves left before skip_from is lifted
-    skip_left: usize,
-    // per component: sent to Gauss–Seidel; finished
-    to_gs: Vec<bool>,
+    // per component: finished (by Gauss–Seidel); left to the interior point
     finished: Vec<bool>,
     to_interior: Vec<bool>,
+    // Gauss–Seidel's groups of components: group g is group[group_start[g]..group_start[g + 1]]
+    group: Vec<u32>,
+    group_start: Vec<usize>,
     warm: Vec<f64>,
     // per row: s(w); set aside
     slack_at_w: Vec<f64>,
@@ -123,6 +120,7 @@ impl AutoSolver {
         let gauss_seidel = GaussSeidel::new(
             GaussSeidelSettings::builder()
                 .max_passes(settings.first_order_passes)
+                .abandon_when_slow(true)
                 .build()?,
         )?;
         // Each interior point runs on one thread: with threads, the largest component and
@@ -141,11 +139,10 @@ impl AutoSolver {
             interiors: [interior()?, interior()?],
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
-            skip_from: usize::MAX,
-            skip_left: 0,
-            to_gs: Vec::new(),
             finished: Vec::new(),
             to_interior: Vec::new(),
+            group: Vec::new(),
+            group_start: Vec::new(),
             warm: Vec::new(),
             slack_at_w: Vec::new(),
             set_aside: Vec::new(),
@@ -194,12 +191,6 @@ impl ProjectionSolver for AutoSolver {
             });
         }
         sol.resize_for(p);
-        if self.skip_left > 0 {
-            self.skip_left -= 1;
-            if self.skip_left == 0 {
-                self.skip_from = usize::MAX;
-            }
-        }
         self.warm.clear();
         self.warm.extend_from_slice(&sol.lambda);
         // s(w) = b + Jw; rows far from binding are set aside (below).
@@ -228,43 +219,79 @@ impl ProjectionSolver for AutoSolver {
         Ok(report)
     }
 
-    /// `[skip_from, skip_left, last_change]`, finite numbers (JSON has no infinity):
-    /// `skip_from` 0 when nothing skips, `last_change` −1 before the first solve.
+    /// `[last_change]`, a finite number (JSON has no infinity): −1 before the first solve.
     fn memory(&self) -> Vec<f64> {
-        let skip_from = if self.skip_from == usize::MAX {
-            0.0
-        } else {
-            self.skip_from as f64
-        };
-        let last_change = if self.last_change.is_finite() {
+        vec![if self.last_change.is_finite() {
             self.last_change
         } else {
             -1.0
-        };
-        vec![skip_from, self.skip_left as f64, last_change]
+        }]
     }
 
+    /// Takes `[last_change]`, or the three numbers of a run saved before Gauss–Seidel gave
+    /// components up by their progress (`[skip_from, skip_left, last_change]`: the first two
+    /// no longer mean anything).
     fn set_memory(&mut self, memory: &[f64]) {
-        (self.skip_from, self.skip_left, self.last_change) = match *memory {
-            [skip_from, skip_left, last_change] => (
-                if skip_from >= 1.0 {
-                    skip_from as usize
-                } else {
-                    usize::MAX
-                },
-                skip_left as usize,
-                if last_change >= 0.0 {
-                    last_change
-                } else {
-                    f64::INFINITY
-                },
-            ),
-            _ => (usize::MAX, 0, f64::INFINITY),
+        self.last_change = match *memory {
+            [last_change] | [_, _, last_change] if last_change >= 0.0 => last_change,
+            _ => f64::INFINITY,
         };
     }
 }
 
 impl AutoSolver {
+    /// Gauss–Seidel on every component, by groups: each component of
+    /// [`GROUP_ROWS`] rows or more alone, the smaller ones together in groups of about that
+    /// many rows (so that a component stops being swept when it is finished, and one that
+    /// Gauss–Seidel will not finish is given up by its own progress). Marks the components
+    /// finished, writes their answers into `sol`, and returns the most passes a group made.
+    fn gauss_seidel_by_groups(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        sol: &mut ProjectionSolution,
+    ) -> Result<usize, SolveError> {
+        let m = p.rows();
+        let count = self.finished.len();
+        let size = |c: usize| self.components.rows_of(c).len();
+        self.group.clear();
+        self.group_start.clear();
+        self.group_start.push(0);
+        for c in (0..count).filter(|&c| size(c) >= GROUP_ROWS) {
+            self.group.push(c as u32);
+            self.group_start.push(self.group.len());
+        }
+        let mut rows = 0;
+        for c in (0..count).filter(|&c| size(c) < GROUP_ROWS) {
+            self.group.push(c as u32);
+            rows += size(c);
+            if rows >= GROUP_ROWS {
+                self.group_start.push(self.group.len());
+                rows = 0;
+            }
+        }
+        if rows > 0 {
+            self.group_start.push(self.group.len());
+        }
+        let mut most_passes = 0;
+        let part = &mut self.parts[0];
+        for g in self.group_start.windows(2) {
+            let group = &self.group[g[0]..g[1]];
+            let rows = part.gather_components(&self.components, p, &self.warm, group);
+            let rep = Self::solve_gathered(part, &mut self.gauss_seidel, m, rows, target)?;
+            most_passes = most_passes.max(rep.iterations);
+            if rep.status.is_converged() {
+                for &c in group {
+                    self.finished[c as usize] = true;
+                }
+            } else {
+                self.components.check_sub(part, target, &mut self.finished);
+            }
+            part.scatter(&self.components, sol, &self.finished);
+        }
+        Ok(most_passes)
+    }
+
     /// Whether the answer of the last [`solve_split`](Self::solve_split) violates a row that
     /// was set aside (its `J v` is in `scratch_m`).
     fn needed_a_row_set_aside(&self, p: &ProjectionProblem<'_>, target: Target) -> bool {
@@ -287,55 +314,22 @@ impl AutoSolver {
             .extend(self.slack_at_w.iter().map(|&s| s > reach));
         let any_aside = self.set_aside.iter().any(|&a| a);
         let count = self.components.split(p, &self.set_aside);
-        self.to_gs.clear();
-        self.to_gs
-            .extend((0..count).map(|c| self.components.rows_of(c).len() < self.skip_from));
         self.finished.clear();
         self.finished.resize(count, false);
 
         let mut report = SolveReport::default();
-        let mut gs_answered = false;
-        let all_gs = self.to_gs.iter().all(|&t| t);
-        if all_gs && !any_aside {
+        if count == 1 && !any_aside {
             // The whole problem: no copy.
             sol.lambda.copy_from_slice(&self.warm);
             let rep = self.gauss_seidel.solve(p, target, sol)?;
             report.add_work(&rep);
-            if rep.status.is_converged() {
-                self.finished.iter_mut().for_each(|f| *f = true);
-            } else {
-                self.components
-                    .check_whole(p, sol, target, &mut self.finished);
-            }
+            self.finished[0] = rep.status.is_converged();
         } else {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
-            if self.to_gs.iter().any(|&t| t) {
-                let part = &mut self.parts[0];
-                let rows = part.gather(&self.components, p, &self.warm, &self.to_gs);
-                let rep = Self::solve_gathered(part, &mut self.gauss_seidel, m, rows, target)?;
-                report.add_work(&rep);
-                if rep.status.is_converged() {
-                    self.finished.copy_from_slice(&self.to_gs);
-                } else {
-                    self.components
-                        .check_sub(&self.parts[0], target, &mut self.finished);
-                }
-                self.parts[0].scatter(&self.components, sol, &self.finished);
-            }
+            report.iterations += self.gauss_seidel_by_groups(p, target, sol)?;
         }
-        if self.to_gs.iter().any(|&t| t) {
-            gs_answered = self.finished.iter().any(|&f| f);
-            // The smallest component left unfinished sets the size that skips it.
-            let smallest = (0..count)
-                .filter(|&c| self.to_gs[c] && !self.finished[c])
-                .map(|c| self.components.rows_of(c).len())
-                .min();
-            if let Some(rows) = smallest {
-                self.skip_from = self.skip_from.min(rows);
-                self.skip_left = self.settings.retry_after;
-            }
-        }
+        let gs_answered = self.finished.iter().any(|&f| f);
         self.to_interior.clear();
         self.to_interior.extend(self.finished.iter().map(|&f| !f));
         let mut interior_answered = false;

@@ -140,6 +140,7 @@ impl Components {
     /// all of the violation) with the answer `sol` to the whole problem `p`, which must have
     /// `v = w + Jᵀλ` (as every solver returns it): the gap is then `Σ λ_k s_k⁺`. Sets
     /// `met[c]` for every component.
+    #[cfg(test)]
     pub fn check_whole(
         &mut self,
         p: &ProjectionProblem<'_>,
@@ -177,14 +178,20 @@ impl Components {
         self.slack.resize(b.len(), 0.0);
         j.mul(&sol.v, &mut self.slack);
         let k = self.start.len() - 1;
-        self.gap.clear();
         self.gap.resize(k, 0.0);
-        self.violation.clear();
         self.violation.resize(k, 0.0);
         let component = |r: usize| {
             let i = sub_rows.map_or(r, |rows| rows[r] as usize);
             self.row_component[i]
         };
+        // Only the components of these rows are reset: a sub-problem costs its own size.
+        for r in 0..b.len() {
+            let c = component(r);
+            if c != NONE {
+                self.gap[c as usize] = 0.0;
+                self.violation[c as usize] = 0.0;
+            }
+        }
         for (r, (&jv, &b)) in self.slack.iter().zip(b).enumerate() {
             let c = component(r);
             if c == NONE {
@@ -224,6 +231,22 @@ impl SubProblem {
             if c != NONE && take[c as usize] {
                 self.rows.push(i as u32);
             }
+        }
+        self.gather_rows(p, lambda)
+    }
+
+    /// [`gather`](Self::gather) for the components `comps`, their rows one component after
+    /// the other, in time proportional to their size.
+    pub fn gather_components(
+        &mut self,
+        parts: &Components,
+        p: &ProjectionProblem<'_>,
+        lambda: &[f64],
+        comps: &[u32],
+    ) -> usize {
+        self.rows.clear();
+        for &c in comps {
+            self.rows.extend_from_slice(parts.rows_of(c as usize));
         }
         self.gather_rows(p, lambda)
     }

@@ -11,6 +11,10 @@ use crate::problem::{
 };
 use crate::workers::Workers;
 
+/// Passes before [`GaussSeidelSettings::abandon_when_slow`] may end a solve, whatever the
+/// budget.
+const ABANDON_AFTER: usize = 16;
+
 /// The order in which a forward pass visits the rows (a backward pass reverses it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RowOrder {
@@ -43,6 +47,14 @@ pub struct GaussSeidelSettings {
     /// also taken as soon as the sweep's own running estimate (each row's multiplier times
     /// its slack as the pass found it) meets the target.
     pub certify_every: usize,
+    /// Give up before the budget when the certificates show it will not be enough: from a
+    /// quarter of the budget (and at least 16 passes) on, at each certificate the distance
+    /// to the target (the larger of gap / target gap and violation / target violation, the
+    /// least seen so far) is extrapolated at the rate it fell since the certificate at half
+    /// the passes made; when that predicts more passes than the budget has left, the solve
+    /// ends there (`MaxIterations`). Momentum makes the early passes slower than the later
+    /// ones, hence the quarter: before it, no rate measured is a prediction.
+    pub abandon_when_slow: bool,
     /// Threads for the certificate's passes and the dual objective's sums (the sweeps
     /// themselves are sequential); the same bits on any count.
     pub parallelism: Parallelism,
@@ -57,6 +69,7 @@ impl Default for GaussSeidelSettings {
             order: RowOrder::Storage,
             momentum: true,
             certify_every: 64,
+            abandon_when_slow: false,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -128,6 +141,11 @@ impl GaussSeidelSettingsBuilder {
     /// The most sweeps between two certificates.
     pub fn certify_every(mut self, n: usize) -> Self {
         self.0.certify_every = n;
+        self
+    }
+    /// Giving up when the certificates predict the budget will not be enough, on or off.
+    pub fn abandon_when_slow(mut self, on: bool) -> Self {
+        self.0.abandon_when_slow = on;
         self
     }
     /// Threads for the certificate's passes and the dual objective's sums.
@@ -313,6 +331,8 @@ pub struct GaussSeidel {
     // per-unknown scratch: v, v before the last sweep
     v: Vec<f64>,
     v_prev: Vec<f64>,
+    // (passes, least distance to the target so far) at each certificate of a solve
+    history: Vec<(usize, f64)>,
 }
 
 impl GaussSeidel {
@@ -329,6 +349,7 @@ impl GaussSeidel {
             offset_at_w: Vec::new(),
             v: Vec::new(),
             v_prev: Vec::new(),
+            history: Vec::new(),
         })
     }
 
@@ -443,6 +464,13 @@ impl ProjectionSolver for GaussSeidel {
             // The estimate must reach target × trust to trigger a certificate; halved each
             // time an estimate-triggered certificate misses.
             let mut trust = 1.0;
+            // For abandon_when_slow: each certificate's passes and the least distance to
+            // the target so far.
+            let distance =
+                |gap: f64, violation: f64| (gap / target.gap).max(violation / target.violation);
+            let abandon_from = ABANDON_AFTER.max(settings.max_passes / 4);
+            self.history.clear();
+            self.history.push((0, distance(gap, violation)));
             while passes < settings.max_passes {
                 let (made, seen) = self.sweep(settings.max_passes - passes);
                 passes += made;
@@ -458,6 +486,15 @@ impl ProjectionSolver for GaussSeidel {
                         trust *= 0.5;
                     }
                     next_certificate = sweeps + (sweeps / 4).clamp(1, settings.certify_every);
+                    let least = self.history.last().map_or(f64::INFINITY, |h| h.1);
+                    self.history
+                        .push((passes, least.min(distance(gap, violation))));
+                    if settings.abandon_when_slow
+                        && passes >= abandon_from
+                        && too_slow(&self.history, settings.max_passes)
+                    {
+                        break;
+                    }
                 }
                 if passes >= settings.max_passes {
                     break;
@@ -501,6 +538,25 @@ impl ProjectionSolver for GaussSeidel {
             ..SolveReport::default()
         })
     }
+}
+
+/// Whether the distance to the target, at the rate it fell from the certificate at half
+/// the passes made to the last one, would still be above 1 after `budget` passes in all.
+/// `history`: (passes, least distance so far) of each certificate, the warm start's first.
+fn too_slow(history: &[(usize, f64)], budget: usize) -> bool {
+    let Some(&(p1, d1)) = history.last() else {
+        return false;
+    };
+    let at_half = history.partition_point(|&(p, _)| 2 * p <= p1);
+    let (p0, d0) = history[at_half.saturating_sub(1)];
+    if !(d1 > 1.0 && d1.is_finite() && d0.is_finite()) || p1 <= p0 {
+        return false;
+    }
+    if d1 >= d0 {
+        return true;
+    }
+    let passes_needed = (p1 - p0) as f64 * d1.ln() / (d0 / d1).ln();
+    p1 as f64 + passes_needed > budget as f64
 }
 
 /// `x ← x + β(x − prev)` and `prev ← x` (its value before), in one sequential pass.
