@@ -1,8 +1,8 @@
 //! The automatic choice of solver: each connected component of a projection (rows far from
-//! binding set aside) goes to Gauss–Seidel or to the interior point, by what Gauss–Seidel
-//! was measured to cost on components of its size.
+//! binding set aside) goes to Gauss–Seidel, which gives it up when its own progress shows
+//! the budget will not finish it, and then to the interior point.
 
-use moreau_core::{Parallelism, SolveStatus};
+use moreau_core::{ConstraintKey, Parallelism, SolveStatus};
 
 use crate::certificate::certify;
 use crate::components::{Components, SubProblem};
@@ -23,11 +23,16 @@ pub struct AutoSettings {
     /// Gauss–Seidel's budget of passes over a component (or a group of small ones) before
     /// the interior point takes it. Gauss–Seidel gives a component up before that when its
     /// certificates predict the budget will not be enough
-    /// ([`GaussSeidelSettings::abandon_when_slow`]): a jam's component after 18–40 passes.
+    /// ([`GaussSeidelSettings::abandon_when_slow`]): a jam's component after 25–40 passes.
     /// An interior-point iteration costs 15–20 passes over the same rows on jammed halls
     /// and a solve 9–22 iterations (benches/README.md), so 100 passes stay near half an
     /// interior-point solve.
     pub first_order_passes: usize,
+    /// A component of [`GROUP_ROWS`] rows or more that Gauss–Seidel gave up goes straight to
+    /// the interior point for this many solves after (recognised by its rows' keys: most of
+    /// a sample of its rows were in it); then Gauss–Seidel tries it again (a jam may have
+    /// cleared). 0: Gauss–Seidel tries every component every time.
+    pub retry_after: usize,
     /// Rows whose slack at `w` (before any correction) exceeds this factor times the
     /// larger of the previous solve's largest change of a row's slack and the largest
     /// violation at `w` are set aside: they split no component and are only checked, by
@@ -43,6 +48,7 @@ impl Default for AutoSettings {
     fn default() -> Self {
         Self {
             first_order_passes: 100,
+            retry_after: 16,
             set_aside_factor: 1.5,
             parallelism: Parallelism::SEQUENTIAL,
         }
@@ -54,9 +60,12 @@ impl Default for AutoSettings {
 /// first, warm-started: a component on its own (the small ones in groups), so that it is
 /// swept only until it is finished, and given up as soon as its certificates show that the
 /// budget will not finish it ([`AutoSettings::first_order_passes`]). The interior point
-/// takes the components Gauss–Seidel left. The choice depends only on the work counted
-/// (passes and certificates), never on timings, so answers do not depend on the machine or
-/// the thread count.
+/// takes the components Gauss–Seidel left. A large component given up is remembered by
+/// its rows' keys and goes straight to the interior point for the next
+/// [`AutoSettings::retry_after`] solves (a jam's component is given up after 25–40 passes,
+/// which is 10 % of its interior-point solve, step after step). The choice depends only on
+/// the work counted (passes and certificates), never on timings, so answers do not depend
+/// on the machine or the thread count.
 ///
 /// Before splitting, rows whose slack at `w` is well beyond what a correction has been
 /// moving any row's slack ([`AutoSettings::set_aside_factor`]) are set aside: in a jam they
@@ -72,7 +81,9 @@ impl Default for AutoSettings {
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
 /// [`certify`](crate::certify). The report names the solver that answered:
-/// `gauss-seidel`, `interior`, or `gs+interior` when both answered components.
+/// `gauss-seidel`, `interior`, or `gs+interior` when both answered components; its
+/// iterations are Gauss–Seidel's work in passes over all the rows plus the interior
+/// point's iterations.
 #[derive(Debug)]
 pub struct AutoSolver {
     settings: AutoSettings,
@@ -82,9 +93,14 @@ pub struct AutoSolver {
     interiors: [InteriorPoint; 2],
     components: Components,
     parts: [SubProblem; 2],
-    // per component: finished (by Gauss–Seidel); left to the interior point
+    // per component: not tried by Gauss–Seidel; finished (by it); left to the interior point
+    skip_gs: Vec<bool>,
     finished: Vec<bool>,
     to_interior: Vec<bool>,
+    // the rows (by key, sorted) of the large components Gauss–Seidel gave up or skipped,
+    // with the solves left before it tries them again; and the next solve's
+    given_up: Vec<(ConstraintKey, u32)>,
+    next_given_up: Vec<(ConstraintKey, u32)>,
     // Gauss–Seidel's groups of components: group g is group[group_start[g]..group_start[g + 1]]
     group: Vec<u32>,
     group_start: Vec<usize>,
@@ -141,6 +157,9 @@ impl AutoSolver {
             parts: [SubProblem::default(), SubProblem::default()],
             finished: Vec::new(),
             to_interior: Vec::new(),
+            skip_gs: Vec::new(),
+            given_up: Vec::new(),
+            next_given_up: Vec::new(),
             group: Vec::new(),
             group_start: Vec::new(),
             warm: Vec::new(),
@@ -211,6 +230,8 @@ impl ProjectionSolver for AutoSolver {
             report = self.solve_split(p, target, sol, f64::INFINITY)?;
             report.add_work(&first);
         }
+        self.next_given_up.sort_unstable_by_key(|&(key, _)| key);
+        std::mem::swap(&mut self.given_up, &mut self.next_given_up);
         // How far the correction moved any row's slack, s(v) − s(w) (`scratch_m` holds J v):
         // the next solve's reach.
         self.last_change = (0..m).fold(0.0f64, |a, i| {
@@ -219,23 +240,42 @@ impl ProjectionSolver for AutoSolver {
         Ok(report)
     }
 
-    /// `[last_change]`, a finite number (JSON has no infinity): −1 before the first solve.
+    /// `[last_change, (key_high, key_low, solves_left) of each row given up…]`, finite
+    /// numbers (JSON has no infinity): `last_change` −1 before the first solve, each key in
+    /// two 32-bit halves (exact in an f64).
     fn memory(&self) -> Vec<f64> {
-        vec![if self.last_change.is_finite() {
+        let mut memory = Vec::with_capacity(1 + 3 * self.given_up.len());
+        memory.push(if self.last_change.is_finite() {
             self.last_change
         } else {
             -1.0
-        }]
+        });
+        for &(key, left) in &self.given_up {
+            memory.extend([(key >> 32) as f64, (key as u32) as f64, left as f64]);
+        }
+        memory
     }
 
-    /// Takes `[last_change]`, or the three numbers of a run saved before Gauss–Seidel gave
-    /// components up by their progress (`[skip_from, skip_left, last_change]`: the first two
-    /// no longer mean anything).
+    /// Takes what [`memory`](Self::memory) gave, or the three numbers of a run saved before
+    /// components were recognised by their rows (`[skip_from, skip_left, last_change]`: the
+    /// first two no longer mean anything).
     fn set_memory(&mut self, memory: &[f64]) {
-        self.last_change = match *memory {
-            [last_change] | [_, _, last_change] if last_change >= 0.0 => last_change,
-            _ => f64::INFINITY,
+        self.given_up.clear();
+        let (last_change, rows) = match memory {
+            [_, _, last_change] => (*last_change, &[][..]),
+            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows),
+            _ => (-1.0, &[][..]),
         };
+        self.last_change = if last_change >= 0.0 {
+            last_change
+        } else {
+            f64::INFINITY
+        };
+        self.given_up.extend(
+            rows.chunks_exact(3)
+                .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2] as u32)),
+        );
+        self.given_up.sort_unstable_by_key(|&(key, _)| key);
     }
 }
 
@@ -244,7 +284,8 @@ impl AutoSolver {
     /// [`GROUP_ROWS`] rows or more alone, the smaller ones together in groups of about that
     /// many rows (so that a component stops being swept when it is finished, and one that
     /// Gauss–Seidel will not finish is given up by its own progress). Marks the components
-    /// finished, writes their answers into `sol`, and returns the most passes a group made.
+    /// finished, writes their answers into `sol`, and returns the work done in passes over
+    /// all of `p`'s rows (rounded up).
     fn gauss_seidel_by_groups(
         &mut self,
         p: &ProjectionProblem<'_>,
@@ -257,12 +298,13 @@ impl AutoSolver {
         self.group.clear();
         self.group_start.clear();
         self.group_start.push(0);
-        for c in (0..count).filter(|&c| size(c) >= GROUP_ROWS) {
+        let skip = &self.skip_gs;
+        for c in (0..count).filter(|&c| !skip[c] && size(c) >= GROUP_ROWS) {
             self.group.push(c as u32);
             self.group_start.push(self.group.len());
         }
         let mut rows = 0;
-        for c in (0..count).filter(|&c| size(c) < GROUP_ROWS) {
+        for c in (0..count).filter(|&c| !skip[c] && size(c) < GROUP_ROWS) {
             self.group.push(c as u32);
             rows += size(c);
             if rows >= GROUP_ROWS {
@@ -273,23 +315,75 @@ impl AutoSolver {
         if rows > 0 {
             self.group_start.push(self.group.len());
         }
-        let mut most_passes = 0;
+        let mut row_passes = 0;
         let part = &mut self.parts[0];
         for g in self.group_start.windows(2) {
             let group = &self.group[g[0]..g[1]];
             let rows = part.gather_components(&self.components, p, &self.warm, group);
             let rep = Self::solve_gathered(part, &mut self.gauss_seidel, m, rows, target)?;
-            most_passes = most_passes.max(rep.iterations);
+            row_passes += rep.iterations * rows;
             if rep.status.is_converged() {
                 for &c in group {
                     self.finished[c as usize] = true;
                 }
             } else {
                 self.components.check_sub(part, target, &mut self.finished);
+                if let [c] = *group {
+                    let c = c as usize;
+                    let rows = self.components.rows_of(c);
+                    if !self.finished[c] && rows.len() >= GROUP_ROWS {
+                        let again = self.settings.retry_after as u32;
+                        Self::remember(&mut self.next_given_up, p, rows, again);
+                    }
+                }
             }
             part.scatter(&self.components, sol, &self.finished);
         }
-        Ok(most_passes)
+        Ok(row_passes.div_ceil(m.max(1)))
+    }
+
+    /// Decides which components skip Gauss–Seidel: those of [`GROUP_ROWS`] rows or more
+    /// whose rows were mostly (in a sample of up to 16) in a component given up, with
+    /// solves left before the retry; their rows are remembered for the next solve with one
+    /// solve fewer.
+    fn choose_skips(&mut self, p: &ProjectionProblem<'_>) {
+        const SAMPLES: usize = 16;
+        let count = self.finished.len();
+        self.skip_gs.clear();
+        self.skip_gs.resize(count, false);
+        if self.given_up.is_empty() {
+            return;
+        }
+        let keys = p.jacobian.keys();
+        for c in 0..count {
+            let rows = self.components.rows_of(c);
+            if rows.len() < GROUP_ROWS {
+                continue;
+            }
+            let (mut found, mut left) = (0, u32::MAX);
+            for k in 0..SAMPLES {
+                let key = keys[rows[k * rows.len() / SAMPLES] as usize];
+                if let Ok(at) = self.given_up.binary_search_by_key(&key, |&(key, _)| key) {
+                    found += 1;
+                    left = left.min(self.given_up[at].1);
+                }
+            }
+            if 2 * found > SAMPLES && left > 0 {
+                self.skip_gs[c] = true;
+                Self::remember(&mut self.next_given_up, p, rows, left - 1);
+            }
+        }
+    }
+
+    /// Adds `rows` (by key) with `left` solves before Gauss–Seidel tries them again.
+    fn remember(
+        into: &mut Vec<(ConstraintKey, u32)>,
+        p: &ProjectionProblem<'_>,
+        rows: &[u32],
+        left: u32,
+    ) {
+        let keys = p.jacobian.keys();
+        into.extend(rows.iter().map(|&i| (keys[i as usize], left)));
     }
 
     /// Whether the answer of the last [`solve_split`](Self::solve_split) violates a row that
@@ -316,14 +410,26 @@ impl AutoSolver {
         let count = self.components.split(p, &self.set_aside);
         self.finished.clear();
         self.finished.resize(count, false);
+        self.next_given_up.clear();
+        self.choose_skips(p);
 
         let mut report = SolveReport::default();
-        if count == 1 && !any_aside {
+        if count == 1 && !any_aside && self.skip_gs[0] {
+            // Straight to the interior point (below).
+        } else if count == 1 && !any_aside {
             // The whole problem: no copy.
             sol.lambda.copy_from_slice(&self.warm);
             let rep = self.gauss_seidel.solve(p, target, sol)?;
             report.add_work(&rep);
             self.finished[0] = rep.status.is_converged();
+            if !self.finished[0] && m >= GROUP_ROWS {
+                Self::remember(
+                    &mut self.next_given_up,
+                    p,
+                    self.components.rows_of(0),
+                    self.settings.retry_after as u32,
+                );
+            }
         } else {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
@@ -415,5 +521,31 @@ impl AutoSolver {
             .filter(|&i| sol.lambda[i] > p.b[i] + self.scratch_m[i])
             .count();
         Ok(report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Keys above 2⁵³ (a crowd's contact keys use all 64 bits) survive the trip through
+    /// the f64 memory, and a run saved before the keys were remembered still restores.
+    #[test]
+    fn the_memory_keeps_every_bit_of_the_keys_and_reads_the_old_form() {
+        let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
+        auto.last_change = 0.25;
+        auto.given_up = vec![(7, 0), ((1 << 53) + 1, 5), (u64::MAX - 2, 16)];
+        let memory = auto.memory();
+        assert_eq!(memory.len(), 1 + 3 * 3);
+        let mut restored = AutoSolver::new(AutoSettings::default()).unwrap();
+        restored.set_memory(&memory);
+        assert_eq!(restored.given_up, auto.given_up);
+        assert_eq!(restored.last_change, 0.25);
+        // [skip_from, skip_left, last_change] of the earlier form.
+        restored.set_memory(&[120.0, 3.0, 0.5]);
+        assert!(restored.given_up.is_empty());
+        assert_eq!(restored.last_change, 0.5);
+        restored.set_memory(&[-1.0]);
+        assert_eq!(restored.last_change, f64::INFINITY);
     }
 }

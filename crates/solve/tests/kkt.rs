@@ -628,7 +628,9 @@ fn side_by_side(blocks: &[(Vec<f64>, ConstraintRows, Vec<f64>)]) -> Instance {
 
 /// A crush beside small random problems: Gauss–Seidel finishes the small ones within a
 /// budget of 20 passes and not the crush, which the interior point then answers; the
-/// whole answer is Clarabel's, and each block is the exact projection of the enumerator.
+/// whole answer is Clarabel's, each block is the exact projection of the enumerator, and
+/// the crush, recognised by its rows' keys, skips Gauss–Seidel for `retry_after` solves,
+/// then is tried again; a solver given the first one's memory does the same.
 #[test]
 fn auto_answers_each_component_with_the_solver_that_finishes_it() {
     let mut rng = ChaCha8Rng::seed_from_u64(41);
@@ -649,17 +651,18 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
         gap: 1e-8,
         violation: 1e-9,
     };
-    let mut auto = AutoSolver::new(AutoSettings {
+    let settings = AutoSettings {
         first_order_passes: 20,
+        retry_after: 3,
         ..AutoSettings::default()
-    })
-    .unwrap();
-    let mut cold = || {
+    };
+    let mut auto = AutoSolver::new(settings).unwrap();
+    let cold = |auto: &mut AutoSolver| {
         let mut sol = ProjectionSolution::default();
         let rep = auto.solve(&p, t, &mut sol).unwrap();
         (rep, sol)
     };
-    let (first, sol) = cold();
+    let (first, sol) = cold(&mut auto);
     assert_eq!(first.status, SolveStatus::Converged, "{first:?}");
     assert_eq!(first.solver, "gs+interior", "{first:?}");
     check_report(&p, t, "auto", &sol, &first);
@@ -676,6 +679,19 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
             );
         }
         shift += v.len();
+    }
+    // The next `retry_after` solves skip Gauss–Seidel on the crush: fewer passes; then it
+    // is tried again and spends its budget as the first time.
+    let mut restored = AutoSolver::new(settings).unwrap();
+    restored.set_memory(&auto.memory());
+    for (name, solver) in [("auto", &mut auto), ("restored", &mut restored)] {
+        let next: Vec<usize> = (0..4).map(|_| cold(&mut *solver).0.iterations).collect();
+        assert!(
+            next[..3].iter().all(|&it| it < first.iterations),
+            "{name}: {next:?} vs {}",
+            first.iterations
+        );
+        assert_eq!(next[3], first.iterations, "{name}: {next:?}");
     }
 }
 
