@@ -59,6 +59,20 @@ pub trait ConstraintSet {
         f64::INFINITY
     }
 
+    /// Whether every constraint left out of `assemble(t, q, margin, …)` is certainly violated
+    /// by no more than `tol` at `(t, q_next)`, from how far the state moved: a proof that
+    /// lets the step skip [`ConstraintSet::crossed_outside`]. The default cannot tell.
+    fn left_out_stay_feasible(
+        &self,
+        _t: f64,
+        _q: &[f64],
+        _q_next: &[f64],
+        _margin: f64,
+        _tol: f64,
+    ) -> bool {
+        false
+    }
+
     /// After a step: how many constraints that were *not* assembled are violated at `(t, q)`
     /// by more than `tol`. A nonzero answer means the step must be redone with a wider margin.
     ///

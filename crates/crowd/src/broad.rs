@@ -46,8 +46,13 @@ impl BroadPhase for BruteForce {
 #[derive(Debug, Clone, Default)]
 pub struct CellGrid {
     cell_start: Vec<u32>,
-    sorted: Vec<u32>,
+    fill: Vec<u32>,
     cell_of: Vec<u32>,
+    // The disks in cell order: their indices, and their x, y and radius side by side (the
+    // pair tests then read memory in order, not scattered by index).
+    sorted: Vec<u32>,
+    packed: Vec<[f64; 3]>,
+    sort: PairSort,
 }
 
 impl BroadPhase for CellGrid {
@@ -93,23 +98,56 @@ impl BroadPhase for CellGrid {
         }
         self.sorted.clear();
         self.sorted.resize(n, 0);
-        let mut fill = self.cell_start.clone();
+        self.packed.clear();
+        self.packed.resize(n, [0.0; 3]);
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.cell_start);
         for i in 0..n {
             let c = self.cell_of[i] as usize;
-            self.sorted[fill[c] as usize] = i as u32;
-            fill[c] += 1;
+            let at = self.fill[c] as usize;
+            self.sorted[at] = i as u32;
+            self.packed[at] = [pos[2 * i], pos[2 * i + 1], radius[i]];
+            self.fill[c] += 1;
         }
+        // The gap test of `close`, on the packed copies, with the lower index first (the
+        // same arithmetic as every backend, so the same answers). Pairs farther apart than
+        // `reach` (the largest sum of radii and the margin, grown well beyond rounding) fail
+        // it for certain and are dropped without the square root.
+        let reach = 2.0 * rmax + margin;
+        let reach2 = if reach > 0.0 {
+            let reach = reach + 1e-9 * (4.0 * rmax + margin.abs());
+            reach * reach
+        } else {
+            f64::INFINITY
+        };
+        let (sorted, packed) = (&self.sorted, &self.packed);
+        let mut test = |a: usize, b: usize| {
+            let (dx, dy) = (packed[a][0] - packed[b][0], packed[a][1] - packed[b][1]);
+            if dx * dx + dy * dy > reach2 {
+                return;
+            }
+            let (i, j) = (sorted[a], sorted[b]);
+            let (p, q) = if i < j {
+                (&packed[a], &packed[b])
+            } else {
+                (&packed[b], &packed[a])
+            };
+            let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
+            if (dx * dx + dy * dy).sqrt() - p[2] - q[2] <= margin {
+                out.push((i.min(j), i.max(j)));
+            }
+        };
         // Each disk against its own cell (later entries) and four forward neighbours.
+        let range = |c: usize| self.cell_start[c] as usize..self.cell_start[c + 1] as usize;
         for cy in 0..ny {
             for cx in 0..nx {
-                let c = cy * nx + cx;
-                let own =
-                    &self.sorted[self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
-                for (a, &i) in own.iter().enumerate() {
-                    for &j in &own[a + 1..] {
-                        if close(pos, radius, i as usize, j as usize, margin) {
-                            out.push((i.min(j), i.max(j)));
-                        }
+                let own = range(cy * nx + cx);
+                if own.is_empty() {
+                    continue;
+                }
+                for a in own.clone() {
+                    for b in a + 1..own.end {
+                        test(a, b);
                     }
                 }
                 for (dx, dy) in [(1i64, 0i64), (-1, 1), (0, 1), (1, 1)] {
@@ -117,20 +155,55 @@ impl BroadPhase for CellGrid {
                     if ox < 0 || oy < 0 || ox >= nx as i64 || oy >= ny as i64 {
                         continue;
                     }
-                    let o = oy as usize * nx + ox as usize;
-                    let other =
-                        &self.sorted[self.cell_start[o] as usize..self.cell_start[o + 1] as usize];
-                    for &i in own {
-                        for &j in other {
-                            if close(pos, radius, i as usize, j as usize, margin) {
-                                out.push((i.min(j), i.max(j)));
-                            }
+                    let other = range(oy as usize * nx + ox as usize);
+                    for a in own.clone() {
+                        for b in other.clone() {
+                            test(a, b);
                         }
                     }
                 }
             }
         }
-        out.sort_unstable();
+        self.sort.sort(n, out);
+    }
+}
+
+/// Sorts pairs `(i, j)` of `i < n` in linear time: a counting sort on `i`, then each `i`'s
+/// few partners. Keeps its buffers from call to call.
+#[derive(Debug, Clone, Default)]
+struct PairSort {
+    end: Vec<u32>,
+    scratch: Vec<(u32, u32)>,
+}
+
+impl PairSort {
+    fn sort(&mut self, n: usize, pairs: &mut Vec<(u32, u32)>) {
+        // end[i + 1] counts i's pairs, then (prefix sums) is where i's pairs begin.
+        self.end.clear();
+        self.end.resize(n + 1, 0);
+        for &(i, _) in pairs.iter() {
+            self.end[i as usize + 1] += 1;
+        }
+        for i in 0..n {
+            self.end[i + 1] += self.end[i];
+        }
+        self.scratch.clear();
+        self.scratch.resize(pairs.len(), (0, 0));
+        // Placing i's pairs moves end[i] from where they begin to where they end.
+        for &(i, j) in pairs.iter() {
+            let at = &mut self.end[i as usize];
+            self.scratch[*at as usize] = (i, j);
+            *at += 1;
+        }
+        let mut begin = 0;
+        for &end in &self.end[..n] {
+            let end = end as usize;
+            if end - begin > 1 {
+                self.scratch[begin..end].sort_unstable();
+            }
+            begin = end;
+        }
+        std::mem::swap(pairs, &mut self.scratch);
     }
 }
 

@@ -70,6 +70,13 @@ pub trait ContactSource: std::fmt::Debug + Send {
     fn name(&self) -> &'static str;
     /// Appends the rows to `rows`.
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows);
+    /// How many people's positions each of this source's gaps depends on, each
+    /// 1-Lipschitz in it at a fixed time (a gap then moves by at most that many times the
+    /// farthest anyone moved), or `None` when the source cannot say: then the check after
+    /// every step assembles the contacts again.
+    fn people_per_gap(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// Pairs of people found by a [`BroadPhase`].
@@ -121,6 +128,11 @@ impl ContactSource for PersonPairs {
             );
         }
     }
+
+    /// `|q_i − q_j| − r_i − r_j`.
+    fn people_per_gap(&self) -> Option<usize> {
+        Some(2)
+    }
 }
 
 /// People against wall segments, through the walls' grid index: the cost follows the walls
@@ -137,6 +149,11 @@ impl ContactSource for PersonWalls {
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
         push_segment_rows(ContactKind::PersonWall, at, at.walls, &mut self.near, rows);
+    }
+
+    /// `dist(q_i, wall) − r_i`.
+    fn people_per_gap(&self) -> Option<usize> {
+        Some(1)
     }
 }
 
@@ -191,6 +208,14 @@ impl ContactSources {
             check: ConstraintRows::default(),
             crossed: Vec::new(),
         }
+    }
+
+    /// The most people's positions any source's gap depends on, or `None` if a source
+    /// cannot say ([`ContactSource::people_per_gap`]).
+    pub fn people_per_gap(&self) -> Option<usize> {
+        self.sources
+            .iter()
+            .try_fold(0, |most, s| Some(most.max(s.people_per_gap()?)))
     }
 
     /// Appends every source's rows with `g ≤ margin` at `(t, q)`.
@@ -273,6 +298,38 @@ impl ConstraintSet for CrowdContacts<'_> {
         let crossed = count_outside(&check, assembled, tol, &mut self.sources.crossed);
         self.sources.check = check;
         crossed
+    }
+
+    /// True when the farthest anyone moved from `q` to `q_next`, times the most people a
+    /// gap depends on, stays below `margin + tol` (with room for rounding): a gap left out
+    /// was above `margin` at `q`, and moves by at most that much.
+    fn left_out_stay_feasible(
+        &self,
+        _t: f64,
+        q: &[f64],
+        q_next: &[f64],
+        margin: f64,
+        tol: f64,
+    ) -> bool {
+        let Some(people) = self.sources.people_per_gap() else {
+            return false;
+        };
+        if q.len() != q_next.len() {
+            return false;
+        }
+        let (mut moved2, mut scale) = (0.0f64, 0.0f64);
+        for (a, b) in q.chunks_exact(2).zip(q_next.chunks_exact(2)) {
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let d2 = dx * dx + dy * dy;
+            // NaN makes the answer false.
+            if !(d2 <= moved2) {
+                moved2 = d2;
+            }
+            scale = scale.max(a[0].abs()).max(a[1].abs());
+        }
+        let rounding =
+            1e-12 * (1.0 + scale + self.people.radius.iter().fold(0.0, |m, &r| r.max(m)));
+        people as f64 * moved2.sqrt() * (1.0 + 1e-9) + rounding <= margin + tol
     }
 }
 

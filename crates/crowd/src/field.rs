@@ -169,12 +169,13 @@ impl DistanceField {
     }
 
     fn cell_of(&self, p: [f64; 2]) -> Option<(usize, usize)> {
-        let fx = ((p[0] - self.origin[0]) / self.cell).floor();
-        let fy = ((p[1] - self.origin[1]) / self.cell).floor();
-        if fx < 0.0 || fy < 0.0 || fx >= self.nx as f64 || fy >= self.ny as f64 {
-            None
-        } else {
+        let fx = (p[0] - self.origin[0]) / self.cell;
+        let fy = (p[1] - self.origin[1]) / self.cell;
+        // Truncation is the floor where it is taken (f ≥ 0).
+        if fx >= 0.0 && fy >= 0.0 && fx < self.nx as f64 && fy < self.ny as f64 {
             Some((fx as usize, fy as usize))
+        } else {
+            None
         }
     }
 
@@ -189,7 +190,7 @@ impl DistanceField {
     pub fn direction(&self, p: [f64; 2]) -> [f64; 2] {
         let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
         let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
-        let (x0, y0) = (fx.floor(), fy.floor());
+        let (x0, y0) = (floor(fx), floor(fy));
         let (tx, ty) = (fx - x0, fy - y0);
         let mut acc = [0.0; 2];
         for (dx, dy, w) in [
@@ -213,6 +214,14 @@ impl DistanceField {
             [0.0, 0.0]
         }
     }
+}
+
+/// `x.floor()` inlined (x86-64 has no floor instruction before SSE4.1, and the call into libm
+/// was 3 % of a step at a million people); exact for |x| < 2⁶³.
+#[inline]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
 }
 
 /// The distance fields a person's place leads to: exit `e`'s own, and its target area's.
@@ -355,5 +364,24 @@ mod tests {
             f.distance(q2),
             f.distance(p)
         );
+    }
+
+    #[test]
+    fn the_inlined_floor_is_the_floor() {
+        let mut x = -7.0f64;
+        while x <= 7.0 {
+            for v in [x, x.next_up(), x.next_down()] {
+                assert_eq!(floor(v), v.floor(), "{v}");
+            }
+            x += 0.125;
+        }
+        for v in [
+            1e15 + 0.5,
+            -1e15 - 0.5,
+            4503599627370497.0,
+            -4503599627370497.0,
+        ] {
+            assert_eq!(floor(v), v.floor(), "{v}");
+        }
     }
 }

@@ -382,6 +382,11 @@ impl ContactSource for PersonMovingWalls {
         );
         self.at = self.index.take_segments();
     }
+
+    /// `dist(q_i, segment(t)) − r_i`, at a fixed time.
+    fn people_per_gap(&self) -> Option<usize> {
+        Some(1)
+    }
 }
 
 #[cfg(test)]

@@ -493,6 +493,17 @@ impl Simulation {
         p.contacts.crossed_outside(t, p.q, assembled, tol)
     }
 
+    /// Whether every contact left out of an assembly at the current configuration with
+    /// `margin` is certainly violated by no more than `tol` at `q_next`: the bound on how far
+    /// people moved that spares a step the check of [`crossed_outside`](Self::crossed_outside).
+    pub fn left_out_stay_feasible(&mut self, q_next: &[f64], margin: f64, tol: f64) -> bool {
+        use moreau_core::ConstraintSet;
+        let t = self.t;
+        let p = self.parts();
+        p.contacts
+            .left_out_stay_feasible(t, p.q, q_next, margin, tol)
+    }
+
     /// Whether exit `e` is open.
     pub fn exit_open(&self, e: usize) -> Option<bool> {
         self.exits.exits.get(e).map(|x| x.open)

@@ -78,13 +78,11 @@ impl Walls {
     /// The cells `[first, last]` along axis `k` that `[a, b]` overlaps, clamped to the grid.
     fn cell_range(&self, a: f64, b: f64, k: usize) -> (usize, usize) {
         let n = if k == 0 { self.nx } else { self.ny };
+        // Truncation is the floor here (f ≥ 0), without a call into libm (x86-64 has no
+        // floor instruction before SSE4.1): 5 % of a step at a million people.
         let to_cell = |x: f64| -> usize {
-            let f = ((x - self.origin[k]) / self.cell).floor();
-            if f.is_nan() || f < 0.0 {
-                0
-            } else {
-                (f as usize).min(n - 1)
-            }
+            let f = (x - self.origin[k]) / self.cell;
+            if f >= 0.0 { (f as usize).min(n - 1) } else { 0 }
         };
         (to_cell(a), to_cell(b))
     }

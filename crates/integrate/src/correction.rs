@@ -285,8 +285,11 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
                 q_next[i] = q[i] + mu * self.solution.v[i];
             }
             let verify_start = Instant::now();
-            let crossed = if margin.is_finite() {
-                constraints.crossed_outside(t_next, q_next, &self.rows, self.settings.max_violation)
+            let tol = self.settings.max_violation;
+            let crossed = if margin.is_finite()
+                && !constraints.left_out_stay_feasible(t_next, q, q_next, margin, tol)
+            {
+                constraints.crossed_outside(t_next, q_next, &self.rows, tol)
             } else {
                 0
             };
