@@ -202,14 +202,30 @@ impl<S: ProjectionSolver> LinearizedProjection<S> {
     }
 
     fn start_from_previous(&mut self) {
+        let (keys, previous) = (self.rows.keys(), &self.previous);
         let lam = &mut self.solution.lambda;
         lam.clear();
-        lam.extend(self.rows.keys().iter().map(|k| {
-            match self.previous.binary_search_by_key(k, |e| e.0) {
-                Ok(j) => self.previous[j].1,
-                Err(_) => 0.0,
-            }
-        }));
+        if keys.is_sorted() {
+            // Both in key order (a crowd's rows are): one merge, memory read in order.
+            let mut j = 0;
+            lam.extend(keys.iter().map(|&k| {
+                while j < previous.len() && previous[j].0 < k {
+                    j += 1;
+                }
+                match previous.get(j) {
+                    Some(&(key, l)) if key == k => l,
+                    _ => 0.0,
+                }
+            }));
+        } else {
+            lam.extend(
+                keys.iter()
+                    .map(|k| match previous.binary_search_by_key(k, |e| e.0) {
+                        Ok(j) => previous[j].1,
+                        Err(_) => 0.0,
+                    }),
+            );
+        }
     }
 
     fn remember(&mut self) {
@@ -308,6 +324,42 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
             }
             report.redone += 1;
             margin *= 2.0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use moreau_solve::InteriorPoint;
+
+    /// The warm start finds each row's multiplier by key whether the rows come in key order
+    /// (the merge) or not (the search), and starts new rows at zero.
+    #[test]
+    fn the_warm_start_reads_each_rows_multiplier_by_key_in_either_order() {
+        let solver = InteriorPoint::new(Default::default()).unwrap();
+        let settings = LinearizedSettings {
+            max_violation: 1e-6,
+            max_redo: 1,
+        };
+        let mut correction = LinearizedProjection::new(solver, settings).unwrap();
+        correction.set_warm_start(&[(2, 0.5), (5, 1.5), (9, 2.5), (11, 3.5)]);
+        for keys in [[1u64, 2, 5, 10, 11], [11, 1, 5, 10, 2]] {
+            correction.rows = ConstraintRows::new(1);
+            for &k in &keys {
+                correction.rows.push(k, 0.0, [(0, 1.0)]);
+            }
+            correction.start_from_previous();
+            let expected: Vec<f64> = keys
+                .iter()
+                .map(|k| match k {
+                    2 => 0.5,
+                    5 => 1.5,
+                    11 => 3.5,
+                    _ => 0.0,
+                })
+                .collect();
+            assert_eq!(correction.solution.lambda, expected, "{keys:?}");
         }
     }
 }
