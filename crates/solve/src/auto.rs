@@ -4,7 +4,7 @@
 
 use moreau_core::{ConstraintKey, Parallelism, SolveStatus};
 
-use crate::certificate::certify;
+use crate::certificate::certify_given;
 use crate::components::{Components, SubProblem};
 use crate::error::SolveError;
 use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
@@ -105,8 +105,8 @@ pub struct AutoSolver {
     group: Vec<u32>,
     group_start: Vec<usize>,
     warm: Vec<f64>,
-    // per row: s(w); set aside
-    slack_at_w: Vec<f64>,
+    // per row: J w (the slack at w is b + J w); set aside
+    jw: Vec<f64>,
     set_aside: Vec<bool>,
     // the previous answer's largest |J_i (v − w)| (infinite before the first)
     last_change: f64,
@@ -163,7 +163,7 @@ impl AutoSolver {
             group: Vec::new(),
             group_start: Vec::new(),
             warm: Vec::new(),
-            slack_at_w: Vec::new(),
+            jw: Vec::new(),
             set_aside: Vec::new(),
             last_change: f64::INFINITY,
             scratch_m: Vec::new(),
@@ -213,13 +213,9 @@ impl ProjectionSolver for AutoSolver {
         self.warm.clear();
         self.warm.extend_from_slice(&sol.lambda);
         // s(w) = b + Jw; rows far from binding are set aside (below).
-        self.slack_at_w.resize(m, 0.0);
-        p.jacobian.mul(p.w, &mut self.slack_at_w);
-        let mut worst_at_w = 0.0f64;
-        for (s, b) in self.slack_at_w.iter_mut().zip(p.b) {
-            *s += b;
-            worst_at_w = worst_at_w.max(-*s);
-        }
+        self.jw.resize(m, 0.0);
+        p.jacobian.mul(p.w, &mut self.jw);
+        let worst_at_w = (self.jw.iter().zip(p.b)).fold(0.0f64, |a, (jw, b)| a.max(-(jw + b)));
         let reach = self.settings.set_aside_factor * self.last_change.max(worst_at_w);
         let screened = self.settings.set_aside_factor.is_finite() && self.last_change.is_finite();
         let mut report =
@@ -235,7 +231,7 @@ impl ProjectionSolver for AutoSolver {
         // How far the correction moved any row's slack, s(v) − s(w) (`scratch_m` holds J v):
         // the next solve's reach.
         self.last_change = (0..m).fold(0.0f64, |a, i| {
-            a.max((p.b[i] + self.scratch_m[i] - self.slack_at_w[i]).abs())
+            a.max((p.b[i] + self.scratch_m[i] - (self.jw[i] + p.b[i])).abs())
         });
         Ok(report)
     }
@@ -405,7 +401,7 @@ impl AutoSolver {
         let m = p.rows();
         self.set_aside.clear();
         self.set_aside
-            .extend(self.slack_at_w.iter().map(|&s| s > reach));
+            .extend(self.jw.iter().zip(p.b).map(|(jw, b)| jw + b > reach));
         let any_aside = self.set_aside.iter().any(|&a| a);
         let count = self.components.split(p, &self.set_aside);
         self.finished.clear();
@@ -494,10 +490,11 @@ impl AutoSolver {
         // Unknowns in no row have v = w; the whole answer is certified here.
         self.scratch_m.resize(m, 0.0);
         self.scratch_n.resize(p.dim(), 0.0);
-        let cert = certify(
+        let cert = certify_given(
             p,
             &sol.v,
             &sol.lambda,
+            Some(&self.jw),
             &mut self.scratch_m,
             &mut self.scratch_n,
         );
@@ -516,7 +513,7 @@ impl AutoSolver {
         // Active as the interior point counts it (a multiplier above its slack), whichever
         // solver answered the row: Gauss–Seidel's λ > 0 would count rows at a tiny
         // multiplier with their slack open.
-        p.jacobian.mul(&sol.v, &mut self.scratch_m);
+        // (`scratch_m` holds J v.)
         report.active = (0..m)
             .filter(|&i| sol.lambda[i] > p.b[i] + self.scratch_m[i])
             .count();

@@ -27,6 +27,19 @@ pub fn certify(
     scratch: &mut [f64],
     scratch_n: &mut [f64],
 ) -> Certificate {
+    certify_given(problem, v, lambda, None, scratch, scratch_n)
+}
+
+/// [`certify`], with `J w` when the caller has it (the same numbers, a pass fewer; `scratch`
+/// then holds `J v` at the end).
+pub(crate) fn certify_given(
+    problem: &ProjectionProblem<'_>,
+    v: &[f64],
+    lambda: &[f64],
+    jw: Option<&[f64]>,
+    scratch: &mut [f64],
+    scratch_n: &mut [f64],
+) -> Certificate {
     let j = problem.jacobian;
     // s = b + J v
     j.mul(v, scratch);
@@ -44,9 +57,15 @@ pub fn certify(
         lam_bprime += l * (problem.b[i] + relax);
     }
     // J w
-    j.mul(problem.w, scratch);
+    let jw = match jw {
+        Some(jw) => jw,
+        None => {
+            j.mul(problem.w, scratch);
+            scratch
+        }
+    };
     let lam_jw: f64 = (0..problem.rows())
-        .map(|i| lambda[i].max(0.0) * scratch[i])
+        .map(|i| lambda[i].max(0.0) * jw[i])
         .sum();
     // Jᵀλ
     scratch_n.iter_mut().for_each(|x| *x = 0.0);
