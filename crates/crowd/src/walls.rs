@@ -17,9 +17,17 @@ pub struct Walls {
 }
 
 impl Walls {
-    /// The index over `segments`: about four cells per wall (at most `4 walls + 16`), each
-    /// listing every wall that passes within its circumscribed circle (a superset of the walls
-    /// that cross it).
+    /// The side (m) of the cells when four per wall would be larger: a person's query then
+    /// looks at the walls within a few metres, not at those of a tenth of a large hall
+    /// (at a million people the coarse cells cost 7 % of a step).
+    pub const FINE_CELL: f64 = 2.0;
+    /// The most cells [`FINE_CELL`](Self::FINE_CELL) makes.
+    pub const MAX_CELLS: f64 = (1 << 18) as f64;
+
+    /// The index over `segments`: about four cells per wall (at most `4 walls + 16`), or
+    /// cells of [`FINE_CELL`](Self::FINE_CELL) where that makes more (at most
+    /// [`MAX_CELLS`](Self::MAX_CELLS)), each listing every wall that passes within its
+    /// circumscribed circle (a superset of the walls that cross it).
     pub fn new(segments: Vec<Segment>) -> Self {
         let mut walls = Self {
             segments,
@@ -38,7 +46,8 @@ impl Walls {
             }
         }
         let span = [(hi[0] - lo[0]).max(1e-9), (hi[1] - lo[1]).max(1e-9)];
-        let budget = (4 * walls.segments.len() + 16) as f64;
+        let fine = (span[0] * span[1] / (Self::FINE_CELL * Self::FINE_CELL)).min(Self::MAX_CELLS);
+        let budget = ((4 * walls.segments.len() + 16) as f64).max(fine);
         let mut cell = (span[0] * span[1] / budget).sqrt().max(1e-9);
         // Rounding up each side can exceed the budget on thin boxes: grow the cells until not.
         while (span[0] / cell).ceil() * (span[1] / cell).ceil() > budget {
@@ -155,10 +164,13 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// Every wall within reach of a point is listed (and no wall twice), on many walls in a
+    /// small area and on a few long ones, diagonals among them, around a large hall (cells
+    /// of about `FINE_CELL`).
     #[test]
     fn near_finds_every_wall_within_reach() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
-        let segments: Vec<Segment> = (0..300)
+        let many: Vec<Segment> = (0..300)
             .map(|_| {
                 let a = [rng.random_range(0.0..50.0), rng.random_range(0.0..20.0)];
                 let len = if rng.random_bool(0.1) { 30.0 } else { 1.0 };
@@ -169,10 +181,62 @@ mod tests {
                 Segment { a, b }
             })
             .collect();
-        let walls = Walls::new(segments.clone());
+        let hall = vec![
+            Segment {
+                a: [0.0, 0.0],
+                b: [600.0, 0.0],
+            },
+            Segment {
+                a: [600.0, 0.0],
+                b: [600.0, 400.0],
+            },
+            Segment {
+                a: [600.0, 400.0],
+                b: [0.0, 400.0],
+            },
+            Segment {
+                a: [0.0, 400.0],
+                b: [0.0, 0.0],
+            },
+            Segment {
+                a: [100.0, 100.0],
+                b: [350.0, 310.0],
+            },
+            Segment {
+                a: [500.0, 20.0],
+                b: [480.0, 390.0],
+            },
+        ];
+        let coarse = Walls::new(many.clone());
+        check_near(&coarse, &many, [-10.0, 60.0], [-10.0, 30.0], &mut rng);
+        let fine = Walls::new(hall.clone());
+        assert!(
+            fine.cell <= 2.0 * Walls::FINE_CELL,
+            "cells of {} m",
+            fine.cell
+        );
+        check_near(&fine, &hall, [-10.0, 610.0], [-10.0, 410.0], &mut rng);
+    }
+
+    fn check_near(
+        walls: &Walls,
+        segments: &[Segment],
+        x: [f64; 2],
+        y: [f64; 2],
+        rng: &mut ChaCha8Rng,
+    ) {
         let mut near = Vec::new();
-        for _ in 0..2000 {
-            let p = [rng.random_range(-10.0..60.0), rng.random_range(-10.0..30.0)];
+        for k in 0..20_000 {
+            let mut p = [rng.random_range(x[0]..x[1]), rng.random_range(y[0]..y[1])];
+            if k % 2 == 0 {
+                // Near a wall.
+                let s = &segments[k % segments.len()];
+                let t = rng.random_range(0.0..1.0);
+                p = [
+                    s.a[0] + t * (s.b[0] - s.a[0]) + rng.random_range(-3.0..3.0),
+                    s.a[1] + t * (s.b[1] - s.a[1]) + rng.random_range(-3.0..3.0),
+                ];
+            }
             let reach = rng.random_range(0.0..3.0);
             walls.near(p, reach, &mut near);
             assert!(near.windows(2).all(|w| w[0] < w[1]));
