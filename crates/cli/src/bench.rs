@@ -85,8 +85,12 @@ struct Row {
     /// Within the solve: numeric factorizations and triangular solves.
     ms_factorize: f64,
     ms_other: f64,
-    /// Solver iterations per step, mean (for the Newton-type solvers: factorizations).
+    /// Solver iterations per step, mean (`auto`: Gauss–Seidel's passes over all the rows
+    /// plus the interior point's iterations).
     iterations: f64,
+    /// Numeric factorizations per step, mean (Newton-type solvers).
+    #[serde(default)]
+    factorizations: f64,
     max_eps: f64,
     max_violation: f64,
     peak_rss_mb: f64,
@@ -231,6 +235,7 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
         ms_factorize: median(factorize),
         ms_other: t - a - s,
         iterations: stats.iterations_per_step(),
+        factorizations: stats.factorizations_per_step(),
         max_eps: stats.max_eps,
         max_violation: stats.max_violation,
         peak_rss_mb: peak_rss_mb(),
@@ -301,7 +306,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(
-        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>9} {:>9} {:>8} {:>7}",
+        "{:>9} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>6} {:>9} {:>9} {:>8} {:>7}",
         "people",
         "m²",
         "rows",
@@ -314,6 +319,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         "factor",
         "other",
         "iter",
+        "fact",
         "max ε",
         "max viol",
         "RSS MB",
@@ -366,7 +372,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         let row: Row = serde_json::from_slice(&out.stdout)?;
         println!(
-            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>7.1} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
+            "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>7.1} {:>6.1} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
             row.people,
             row.area_m2,
             row.rows_per_step,
@@ -379,6 +385,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             row.ms_factorize,
             row.ms_other,
             row.iterations,
+            row.factorizations,
             row.max_eps,
             row.max_violation,
             row.peak_rss_mb,

@@ -84,6 +84,8 @@ pub struct StepReport {
     pub violation: f64,
     /// Iterations of the projection solver.
     pub iterations: usize,
+    /// Numeric factorizations of the projection solver (Newton-type solvers).
+    pub factorizations: usize,
     /// Constraints assembled into the projection problem.
     pub assembled: usize,
     /// Constraints with a positive multiplier.
@@ -111,6 +113,8 @@ pub struct RunStats {
     pub redone: usize,
     /// Solver iterations.
     pub iterations: usize,
+    /// Numeric factorizations.
+    pub factorizations: usize,
     /// The largest certified ε (squared length).
     pub max_eps: f64,
     /// The largest violation (length).
@@ -128,6 +132,7 @@ impl RunStats {
         self.rejected += r.rejected;
         self.redone += r.redone;
         self.iterations += r.iterations;
+        self.factorizations += r.factorizations;
         self.max_eps = self.max_eps.max(r.eps);
         self.max_violation = self.max_violation.max(r.violation);
         self.timings.add(&r.timings);
@@ -140,5 +145,10 @@ impl RunStats {
     /// Solver iterations per step.
     pub fn iterations_per_step(&self) -> f64 {
         self.iterations as f64 / self.steps.max(1) as f64
+    }
+
+    /// Numeric factorizations per step.
+    pub fn factorizations_per_step(&self) -> f64 {
+        self.factorizations as f64 / self.steps.max(1) as f64
     }
 }

@@ -245,6 +245,7 @@ impl StepController {
         self.saved.clear();
         self.saved.extend_from_slice(q);
         let (mut rejected, mut iterations, mut redone) = (0usize, 0usize, 0usize);
+        let mut factorizations = 0usize;
         loop {
             // Land on t_end rather than leave a sliver after it.
             let mut mu = self.mu.min(s.mu_max).max(s.mu_min);
@@ -255,8 +256,9 @@ impl StepController {
             let trial = self.trial(scheme, field, set, k, t, q, mu);
             let smallest = mu <= s.mu_min * (1.0 + 1e-12) || mu == remaining && mu < s.mu_min;
             match trial {
-                Ok((mut report, error, its)) => {
+                Ok((mut report, error, (its, factors))) => {
                     iterations += its;
+                    factorizations += factors;
                     redone += report.redone;
                     if error <= s.tol || smallest {
                         let grown = (mu * self.factor(error)).clamp(s.mu_min, s.mu_max);
@@ -274,6 +276,7 @@ impl StepController {
                                 .extend(q.iter().zip(&self.saved).map(|(a, b)| (a - b) / mu));
                         }
                         report.iterations = iterations;
+                        report.factorizations = factorizations;
                         report.redone = redone;
                         report.mu = mu;
                         if mu == remaining {
@@ -308,7 +311,7 @@ impl StepController {
     }
 
     /// One trial of size `mu` from `q` (which holds `saved`): the state it reaches, the report
-    /// to keep, the error estimate and the iterations spent.
+    /// to keep, the error estimate and the iterations and factorizations spent.
     fn trial<F: Field + ?Sized, C: Correction>(
         &mut self,
         scheme: &mut Scheme<C>,
@@ -318,7 +321,7 @@ impl StepController {
         t: f64,
         q: &mut [f64],
         mu: f64,
-    ) -> Result<(StepReport, f64, usize), IntegrateError> {
+    ) -> Result<(StepReport, f64, (usize, usize)), IntegrateError> {
         match self.settings.estimate {
             ErrorEstimate::StepDoubling => {
                 let whole = scheme.step(field, set, k, t, q, mu)?;
@@ -332,7 +335,10 @@ impl StepController {
                     .zip(&self.full)
                     .map(|(a, b)| (a - b).abs())
                     .fold(0.0, f64::max);
-                let its = whole.iterations + first.iterations + second.iterations;
+                let its = (
+                    whole.iterations + first.iterations + second.iterations,
+                    whole.factorizations + first.factorizations + second.factorizations,
+                );
                 second.redone += whole.redone + first.redone;
                 second.eps = second.eps.max(first.eps);
                 second.violation = second.violation.max(first.violation);
@@ -352,7 +358,7 @@ impl StepController {
                 } else {
                     0.0
                 };
-                let its = report.iterations;
+                let its = (report.iterations, report.factorizations);
                 Ok((report, error, its))
             }
         }

@@ -279,6 +279,7 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
             report.solver = rep.solver;
             report.timings.solve += solve_start.elapsed().as_secs_f64();
             report.iterations += rep.iterations;
+            report.factorizations += rep.factorizations;
             report.timings.solve_analyse += rep.time_analyse;
             report.timings.solve_factorize += rep.time_factorize;
             report.status = rep.status;

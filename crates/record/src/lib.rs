@@ -77,6 +77,8 @@ pub struct Summary {
     pub steps_per_second: f64,
     /// Solver iterations per step.
     pub iterations_per_step: f64,
+    /// Numeric factorizations per step (Newton-type solvers).
+    pub factorizations_per_step: f64,
     /// The largest certified ε (m²).
     pub max_eps: f64,
     /// The largest violation (m).
@@ -118,6 +120,7 @@ impl Summary {
             ms_per_step: 1e3 * wall / stats.steps.max(1) as f64,
             steps_per_second: stats.steps as f64 / wall.max(1e-12),
             iterations_per_step: stats.iterations_per_step(),
+            factorizations_per_step: stats.factorizations_per_step(),
             max_eps: stats.max_eps,
             max_violation: stats.max_violation,
             steps_redone: stats.redone,

@@ -57,6 +57,8 @@ pub(crate) struct StageTimes {
     pub(crate) analyse: f64,
     /// Numeric factorizations and triangular solves.
     pub(crate) factorize: f64,
+    /// Numeric factorizations (a count).
+    pub(crate) factorizations: usize,
 }
 
 impl StageTimes {
@@ -65,6 +67,7 @@ impl StageTimes {
         StageTimes {
             analyse: self.analyse - earlier.analyse,
             factorize: self.factorize - earlier.factorize,
+            factorizations: self.factorizations - earlier.factorizations,
         }
     }
 
@@ -72,6 +75,7 @@ impl StageTimes {
     pub(crate) fn report_into(self, report: &mut SolveReport) {
         report.time_analyse = self.analyse;
         report.time_factorize = self.factorize;
+        report.factorizations = self.factorizations;
     }
 }
 
@@ -630,6 +634,7 @@ impl NormalEquations {
     pub(crate) fn factorize(&mut self, j: &ConstraintRows, shift: f64, d: &[f64]) -> bool {
         self.pattern.assemble(j, shift, d, &mut self.h);
         let clock = Instant::now();
+        self.times.factorizations += 1;
         if self.blocked {
             self.counts.factorizations += 1;
             self.counts.block_factorizations += 1;

@@ -97,6 +97,8 @@ pub struct SolveReport {
     pub violation: f64,
     /// Iterations spent.
     pub iterations: usize,
+    /// Numeric factorizations spent (the Newton-type solvers' linear systems).
+    pub factorizations: usize,
     /// Rows with `λ_i > 0`.
     pub active: usize,
     /// Seconds in orderings and symbolic analyses (sparse factorizations only).
@@ -107,9 +109,10 @@ pub struct SolveReport {
 
 impl SolveReport {
     /// Adds the work of `earlier` (an attempt on the same problem before this one: a chain's
-    /// first solver, auto's first choice): its iterations and stage times.
+    /// first solver, auto's first choice): its iterations, factorizations and stage times.
     pub fn add_work(&mut self, earlier: &SolveReport) {
         self.iterations += earlier.iterations;
+        self.factorizations += earlier.factorizations;
         self.time_analyse += earlier.time_analyse;
         self.time_factorize += earlier.time_factorize;
     }

@@ -665,6 +665,10 @@ fn auto_answers_each_component_with_the_solver_that_finishes_it() {
     let (first, sol) = cold(&mut auto);
     assert_eq!(first.status, SolveStatus::Converged, "{first:?}");
     assert_eq!(first.solver, "gs+interior", "{first:?}");
+    assert!(
+        first.factorizations > 0,
+        "the interior point's are counted: {first:?}"
+    );
     check_report(&p, t, "auto", &sol, &first);
     assert_clarabel_objective(&p, "auto", &sol, first.gap, &clarabel_answer(&p, t));
     // Each small block: the exact projection (its unknowns follow the crush's 450).
@@ -973,6 +977,10 @@ fn a_small_crush_matches_clarabel() {
         );
         check_report(&p, t, name, &sol, &cold);
         assert_clarabel_objective(&p, name, &sol, cold.gap, &reference);
+        assert_eq!(
+            cold.factorizations, 0,
+            "{name}: Gauss–Seidel factorizes nothing"
+        );
         // Warm from its own answer: certified before any sweep.
         let warm = solver.solve(&p, t, &mut sol).unwrap();
         assert_eq!(
@@ -981,6 +989,16 @@ fn a_small_crush_matches_clarabel() {
             "{name}: {warm:?}"
         );
     }
+    // The interior point on the same crush: a factorization (at least) per iteration, and
+    // each counted.
+    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut sol = ProjectionSolution::default();
+    let rep = interior.solve(&p, t, &mut sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+    assert!(
+        rep.factorizations >= rep.iterations && rep.factorizations <= 3 * rep.iterations + 3,
+        "{rep:?}"
+    );
 }
 
 /// Gauss–Seidel giving up by its progress, on the small crush from cold (it needs `P`
