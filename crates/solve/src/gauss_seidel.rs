@@ -444,7 +444,7 @@ impl ProjectionSolver for GaussSeidel {
         let mut status = SolveStatus::MaxIterations;
         if infeasible {
             status = SolveStatus::Infeasible;
-        } else if meets(gap, violation) {
+        } else if meets(gap, violation) && std::env::var("MOREAU_MIN_SWEEP").is_err() {
             status = SolveStatus::Converged;
         } else {
             if settings.momentum {
