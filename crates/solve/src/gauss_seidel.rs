@@ -309,10 +309,11 @@ impl SweepRows {
 /// O'Donoghue–Candès' restart does, fired every two or three sweeps on a crush and kept the
 /// momentum near zero; never starting it again let over-relaxed sweeps diverge.)
 ///
-/// After sweeps 1, 2, 4, 8, … the multipliers are certified from scratch: `v = w + Jᵀλ` gathered anew
-/// (which also removes the rounding the incremental updates accumulate), `s = b + Jv`, the
-/// gap `Σ λ_k s_k⁺` and the violation `max (−s_k)⁺` — what [`certify`](crate::certify)
-/// computes for that pair. The returned pair is always a certified one.
+/// After sweeps 1, 2, 4, 8, … the multipliers are certified from scratch: `v = w + Jᵀλ`
+/// gathered anew (which also removes the rounding the incremental updates accumulate),
+/// `s = b + Jv`, the gap `Σ λ_k s_k⁺` and the violation `max (−s_k)⁺` — what
+/// [`certify`](crate::certify) computes for that pair. The returned pair is always a
+/// certified one.
 ///
 /// Single-threaded where it matters: the sweeps are sequential (a colouring of the rows
 /// would let the rows of one colour go in parallel; not done). The certificate's passes and
@@ -444,7 +445,7 @@ impl ProjectionSolver for GaussSeidel {
         let mut status = SolveStatus::MaxIterations;
         if infeasible {
             status = SolveStatus::Infeasible;
-        } else if meets(gap, violation) && std::env::var("MOREAU_MIN_SWEEP").is_err() {
+        } else if meets(gap, violation) {
             status = SolveStatus::Converged;
         } else {
             if settings.momentum {
