@@ -636,12 +636,14 @@ impl CrowdModel {
 mod tests {
     use super::*;
 
-    /// The room, with its scene file rewritten into a scratch directory.
+    /// The room, with its scene file rewritten into a scratch directory (one per name,
+    /// emptied first: nothing piles up in the temporary directory).
     fn model(edit: impl Fn(&mut Scene), name: &str) -> CrowdModel {
         let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/scenes/room-150.toml");
         let mut scene = Scene::from_file(root).unwrap();
         edit(&mut scene);
-        let dir = std::env::temp_dir().join(format!("moreau-fmu-{}-{name}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("moreau-fmu-test-{name}"));
+        let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("scene.toml");
         std::fs::write(&path, scene.to_toml()).unwrap();

@@ -10,9 +10,10 @@ use moreau_io::{
     ContactRow, FailPoint, IoError, Overwrite, RunFile, RunHeader, RunWriter, partial_path,
 };
 
-/// `name` in a directory of its own (tests run in parallel).
+/// `name` in a directory of its own (tests run in parallel), under cargo's scratch directory
+/// for integration tests (in `target/`), emptied first: nothing piles up in /tmp.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("moreau-io-rb-{}-{name}.d", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("moreau-io-rb-{name}.d"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)

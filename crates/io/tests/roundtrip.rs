@@ -7,9 +7,11 @@ use moreau_core::{SolveStatus, StepReport};
 use moreau_io::{ContactRow, IoError, Overwrite, RunFile, RunHeader, RunWriter};
 
 /// `name` in a directory of its own: tests run in parallel, and one checks that its directory
-/// holds no `.partial` file while another may be laying one out.
+/// holds no `.partial` file while another may be laying one out. Under cargo's scratch
+/// directory for integration tests (in `target/`), emptied first: nothing piles up in /tmp.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("moreau-io-{}-{name}.d", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("moreau-io-{name}.d"));
+    let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join(name);
     let _ = std::fs::remove_file(&p);

@@ -8,8 +8,10 @@ use moreau_crowd::{Scene, Simulation};
 use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
 use moreau_record::{Record, header, run_to_horizon};
 
+/// `name` in a directory of its own, under cargo's scratch directory for integration tests
+/// (in `target/`), emptied first: nothing piles up in /tmp.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("moreau-record-{}-{name}.d", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("moreau-record-{name}.d"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
