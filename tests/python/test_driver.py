@@ -135,10 +135,16 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
     """SIGKILL at random moments (some during a frame's write): the file always opens and is
     a whole number of frames."""
     rng = np.random.default_rng(7)
+    # The dense hall for 40 s instead of 10: the whole run took 1.4 s once the solver got
+    # faster, and the last kill (1.5 s in) found it finished. A kill must land mid-run.
+    long = tmp_path / "dense-40s.toml"
+    text = DENSE.read_text()
+    assert "horizon = 10.0" in text
+    long.write_text(text.replace("horizon = 10.0", "horizon = 40.0"))
     for k in range(6):
         out = tmp_path / f"kill-{k}.h5"
         partial = tmp_path / f".kill-{k}.h5.partial"
-        proc = subprocess.Popen([str(MOREAU), "run", str(DENSE), "-o", str(out), "--quiet"],
+        proc = subprocess.Popen([str(MOREAU), "run", str(long), "-o", str(out), "--quiet"],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 300
@@ -146,9 +152,11 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
             while not partial.exists() and time.monotonic() < deadline:
                 time.sleep(0.01)
             time.sleep(0.05 + float(rng.uniform(0.0, 1.5)))  # past the layout
+            alive = proc.poll() is None
         finally:
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait()
+        assert alive, "the run ended before the kill: the test's scene is too short"
         assert not out.exists()
         run = moreau_run.load(partial)
         assert run.status == "running"
