@@ -163,3 +163,18 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
         per_frame = np.bincount(run.trajectory["frame"], minlength=len(run.time))
         np.testing.assert_array_equal(per_frame, run.count)
         assert len(run.positions) == len(run.time)
+
+
+def test_bench_names_its_slowest_steps():
+    """`moreau bench` says which steps make a mean above the median: the three slowest,
+    slowest first, none faster than the median or any step left out."""
+    import json
+    proc = moreau("bench", "--one", "1000", "--warmup", "0", "--steps", "12",
+                  "--compare-at", "0", "--kind", "auto", timeout=300)
+    row = json.loads(proc.stdout.strip().splitlines()[-1])
+    slow = row["slowest"]
+    assert len(slow) == 3
+    ms = [s["ms"] for s in slow]
+    assert ms == sorted(ms, reverse=True) and min(ms) >= row["ms_median"], row
+    assert ms[0] >= row["ms_mean"] and len({s["step"] for s in slow}) == 3, row
+    assert all(s["solver"] and s["rows"] >= 0 for s in slow), row

@@ -96,7 +96,21 @@ struct Row {
     peak_rss_mb: f64,
     setup_s: f64,
     solvers: Vec<(String, usize)>,
+    /// The three slowest measured steps, slowest first.
+    #[serde(default)]
+    slowest: Vec<SlowStep>,
     comparison: Option<Comparison>,
+}
+
+/// A measured step, to say where a mean far above the median comes from.
+#[derive(Debug, Serialize, Deserialize)]
+struct SlowStep {
+    step: usize,
+    ms: f64,
+    solver: String,
+    iterations: usize,
+    factorizations: usize,
+    rows: usize,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -221,6 +235,20 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     } else {
         None
     };
+    let mut slowest: Vec<SlowStep> = measured
+        .0
+        .iter()
+        .map(|r| SlowStep {
+            step: r.step,
+            ms: 1e3 * r.timings.total,
+            solver: r.solver.to_string(),
+            iterations: r.iterations,
+            factorizations: r.factorizations,
+            rows: r.assembled,
+        })
+        .collect();
+    slowest.sort_by(|a, b| b.ms.total_cmp(&a.ms));
+    slowest.truncate(3);
     let (t, a, s) = (median(total), median(assemble), median(solve));
     Ok(Row {
         people: n,
@@ -245,6 +273,7 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
             .iter()
             .map(|&(s, n)| (s.to_string(), n))
             .collect(),
+        slowest,
         comparison,
     })
 }
@@ -415,6 +444,19 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             row.people,
             solvers.join(", ")
         );
+        if !row.slowest.is_empty() {
+            let slow: Vec<String> = row
+                .slowest
+                .iter()
+                .map(|s| {
+                    format!(
+                        "step {} {:.1} ms ({}, {} it, {} fact, {} rows)",
+                        s.step, s.ms, s.solver, s.iterations, s.factorizations, s.rows
+                    )
+                })
+                .collect();
+            println!("{} people: slowest {}", row.people, slow.join("; "));
+        }
         if let Some(c) = &row.comparison {
             println!(
                 "{} people, one projection to gap ≤ {:.2e}: the step's own (warm) {:.1} ms by {} ({} iterations, gap {:.2e})",
