@@ -450,7 +450,16 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
         gap: 1e-8,
         violation: 1e-9,
     };
-    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    // The default, and Gondzio's correctors on every solve (by default they wait for factors
+    // denser than these small crowds make).
+    let mut interiors = [
+        InteriorPointSettings::default(),
+        InteriorPointSettings::builder()
+            .corrector_threshold(0.0)
+            .build()
+            .unwrap(),
+    ]
+    .map(|s| InteriorPoint::new(s).unwrap());
     let solve = |interior: &mut InteriorPoint,
                  inst: &Instance,
                  sol: &mut ProjectionSolution,
@@ -479,29 +488,33 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
             inst = scale_rows(&mut rng, &inst);
         }
         let next = perturb(&mut rng, &inst, 0.05, 0.01, false);
-        let name = format!("disks case {case}");
-        let mut sol = ProjectionSolution::default();
-        solve(&mut interior, &inst, &mut sol, &format!("{name} cold"));
-        sol.lambda = matched(&inst, &sol.lambda, &next);
-        solve(&mut interior, &next, &mut sol, &format!("{name} warm"));
         // Another crowd of the same size: the pattern changes under the warm start.
         let mut other = disk_instance(&mut rng);
         while other.rows.dim() != next.rows.dim() {
             other = disk_instance(&mut rng);
         }
-        sol.lambda = matched(&next, &sol.lambda, &other);
-        solve(
-            &mut interior,
-            &other,
-            &mut sol,
-            &format!("{name} pattern change"),
+        for (k, interior) in interiors.iter_mut().enumerate() {
+            let name = format!("disks case {case}, interior point {k}");
+            let mut sol = ProjectionSolution::default();
+            solve(interior, &inst, &mut sol, &format!("{name} cold"));
+            sol.lambda = matched(&inst, &sol.lambda, &next);
+            solve(interior, &next, &mut sol, &format!("{name} warm"));
+            sol.lambda = matched(&next, &sol.lambda, &other);
+            solve(
+                interior,
+                &other,
+                &mut sol,
+                &format!("{name} pattern change"),
+            );
+        }
+    }
+    for interior in &interiors {
+        assert!(
+            interior.counts().block_factorizations > 100,
+            "{:?}",
+            interior.counts()
         );
     }
-    assert!(
-        interior.counts().block_factorizations > 100,
-        "{:?}",
-        interior.counts()
-    );
 }
 
 #[test]
@@ -994,6 +1007,36 @@ fn a_small_crush_matches_clarabel() {
     assert!(
         rep.factorizations >= rep.iterations && rep.factorizations <= 3 * rep.iterations + 3,
         "{rep:?}"
+    );
+    check_report(&p, t, "interior", &sol, &rep);
+    assert_clarabel_objective(&p, "interior", &sol, rep.gap, &reference);
+    // With Gondzio's correctors on every iteration: the same answer, certified.
+    let mut corrected = InteriorPoint::new(
+        InteriorPointSettings::builder()
+            .corrector_threshold(0.0)
+            .max_correctors(3)
+            .build()
+            .unwrap(),
+    )
+    .unwrap();
+    let mut sol = ProjectionSolution::default();
+    let rep = corrected.solve(&p, t, &mut sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+    check_report(&p, t, "interior with correctors", &sol, &rep);
+    assert_clarabel_objective(&p, "interior with correctors", &sol, rep.gap, &reference);
+    // And they do what they are for: longer steps, fewer factorizations than without.
+    let plain = InteriorPoint::new(
+        InteriorPointSettings::builder()
+            .max_correctors(0)
+            .build()
+            .unwrap(),
+    )
+    .unwrap()
+    .solve(&p, t, &mut ProjectionSolution::default())
+    .unwrap();
+    assert!(
+        rep.factorizations < plain.factorizations,
+        "with correctors {rep:?}, without {plain:?}"
     );
 }
 
