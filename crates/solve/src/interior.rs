@@ -1,5 +1,6 @@
 //! A primal–dual interior point in velocity space: Newton systems `I + Jᵀ D J` factorized by
-//! faer's sparse Cholesky, the symbolic analysis reused while the contact pattern holds.
+//! [`NormalEquations`] (in 2×2 blocks, or by faer's supernodal Cholesky where the factor is
+//! dense), the symbolic analysis reused while the contact pattern holds.
 //!
 //! The problem `min ½|v − w|² s.t. s = b + J v ≥ 0` has the KKT system
 //! `v − w − Jᵀλ = 0`, `s − b − J v = 0`, `s ∘ λ = 0`, `s, λ ≥ 0`. Eliminating `Δs` and `Δλ`
@@ -7,7 +8,8 @@
 //! `D = diag(λ / s)`: symmetric positive definite for every `D ≥ 0` (it is at least the
 //! identity), so redundant contacts — more active rows than a jammed person has degrees of
 //! freedom — cost nothing, where the dual Hessian `J Jᵀ` of an active-set method is singular.
-//! Mehrotra's predictor–corrector takes two solves per factorization.
+//! Mehrotra's predictor–corrector takes two solves per factorization, and where the factor
+//! is dense (a crush's) Gondzio's centrality correctors up to two more.
 //!
 //! The normal equations (ordering, pattern, symbolic analysis reused while the columns of
 //! `J`'s rows hold, a numeric factorization every iteration) are [`NormalEquations`]'s; this
@@ -35,7 +37,7 @@ pub struct InteriorPointSettings {
     /// (the previous step's) multipliers; 0: Mehrotra's start alone. The previous step's
     /// multipliers are no starting point (too close to the boundary), but their scale is
     /// what the pressure of a packed crowd needs, three orders of magnitude above the
-    /// slacks Mehrotra's start goes by: measured on crushes, 1.2–2.3× fewer iterations from
+    /// slacks Mehrotra's start goes by: measured on crushes, 1.1–2.3× fewer iterations from
     /// the second step on, halls unchanged to within 5 % (benches/README.md, session 11).
     pub warm_scale: f64,
     /// Gondzio's centrality correctors tried per iteration (each a pair of triangular solves
@@ -43,8 +45,9 @@ pub struct InteriorPointSettings {
     pub max_correctors: usize,
     /// The correctors are tried only when a factorization costs more than this many
     /// multiply–adds per entry of its factor, so that a pair of triangular solves is cheap
-    /// beside it (crushes, large jams; 0: always). Measured: 10 % a step on the crush of
-    /// 100,000, nothing on halls, where they save factorizations but cost as much in solves.
+    /// beside it (crushes; 0: always). Measured: 6–10 % a step on crushes of 40,000 and
+    /// 100,000; halls stay below it, where they save factorizations but cost as much in
+    /// solves (benches/README.md, sessions 8 and 11).
     pub corrector_threshold: f64,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential).
