@@ -166,8 +166,8 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
 
 
 def test_bench_names_its_slowest_steps():
-    """`moreau bench` says which steps make a mean above the median: the three slowest,
-    slowest first, none faster than the median or any step left out."""
+    """`moreau bench` says which steps make a mean above the median: three distinct steps,
+    slowest first, none faster than the median, the first not faster than the mean."""
     import json
     proc = moreau("bench", "--one", "1000", "--warmup", "0", "--steps", "12",
                   "--compare-at", "0", "--kind", "auto", timeout=300)
@@ -177,4 +177,4 @@ def test_bench_names_its_slowest_steps():
     ms = [s["ms"] for s in slow]
     assert ms == sorted(ms, reverse=True) and min(ms) >= row["ms_median"], row
     assert ms[0] >= row["ms_mean"] and len({s["step"] for s in slow}) == 3, row
-    assert all(s["solver"] and s["rows"] >= 0 for s in slow), row
+    assert all(s["solver"] and s["ms"] > 0 for s in slow), row
