@@ -255,6 +255,15 @@ impl InteriorPoint {
         w.map(&mut self.dl, |i, _| (rc[i] - lam[i] * ds[i]) / s[i]);
     }
 
+    /// Exchanges the direction and its complementarity right-hand side with the kept ones.
+    fn swap_kept(&mut self) {
+        let [ds, dl, rc] = &mut self.kept_m;
+        std::mem::swap(&mut self.ds, ds);
+        std::mem::swap(&mut self.dl, dl);
+        std::mem::swap(&mut self.rc, rc);
+        std::mem::swap(&mut self.dv, &mut self.kept_n);
+    }
+
     /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0` and `λ + αΔλ ≥ 0`.
     fn max_step(w: &Workers, s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
         let ratio = |x: f64, dx: f64| if dx < 0.0 { -x / dx } else { f64::INFINITY };
@@ -440,28 +449,25 @@ impl ProjectionSolver for InteriorPoint {
                 // pushed back into [0.1 σμ, 10 σμ] (the large ones by at most 10 σμ).
                 let trial = (1.5 * alpha_max).min(1.0);
                 let (lo, hi) = (0.1 * sigma * mu, 10.0 * sigma * mu);
-                self.kept_m[0].copy_from_slice(&self.ds);
-                self.kept_m[1].copy_from_slice(&self.dl);
-                self.kept_m[2].copy_from_slice(&self.rc);
-                self.kept_n.copy_from_slice(&self.dv);
                 {
-                    let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
+                    // The corrected right-hand side into the kept buffers, then the current
+                    // direction and right-hand side swapped there, in case the new one is
+                    // not taken.
+                    let (s, ds, dl, rc) = (&self.s, &self.ds, &self.dl, &self.rc);
                     let lam: &[f64] = lam;
-                    self.normal.workers().map(&mut self.rc, |i, rc| {
+                    self.normal.workers().map(&mut self.kept_m[2], |i, _| {
                         let v = (s[i] + trial * ds[i]) * (lam[i] + trial * dl[i]);
-                        rc + (v.clamp(lo, hi) - v).max(-hi)
+                        rc[i] + (v.clamp(lo, hi) - v).max(-hi)
                     });
                 }
+                self.swap_kept();
                 self.direction(j, lam);
                 let wk = self.normal.workers();
                 let next = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
                 if next >= 1.01 * alpha_max && self.dv.iter().all(|x| x.is_finite()) {
                     alpha_max = next;
                 } else {
-                    std::mem::swap(&mut self.ds, &mut self.kept_m[0]);
-                    std::mem::swap(&mut self.dl, &mut self.kept_m[1]);
-                    std::mem::swap(&mut self.rc, &mut self.kept_m[2]);
-                    std::mem::swap(&mut self.dv, &mut self.kept_n);
+                    self.swap_kept();
                     break;
                 }
             }
