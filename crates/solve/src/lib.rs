@@ -16,6 +16,7 @@ mod certificate;
 mod chain;
 mod clarabel_ref;
 mod components;
+mod dissection;
 mod error;
 mod gauss_seidel;
 mod interior;

@@ -26,6 +26,7 @@ use faer::{Conj, MatMut, Par, Side};
 use moreau_core::{ConstraintRows, Parallelism};
 
 use crate::blocked::{BlockCholesky, BlockPattern};
+use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
@@ -48,6 +49,8 @@ pub struct FactorizationCounts {
     /// `Σ_j c_j (c_j + 1) / 2` over the factor's column counts `c_j`: the cost a factorization
     /// will have, known before any numeric work.
     pub factor_flops: u64,
+    /// Analyses that ordered by nested dissection (the rest by minimum degree alone).
+    pub dissections: usize,
 }
 
 /// Seconds spent per stage of the factorization machinery, accumulated.
@@ -355,6 +358,14 @@ impl std::fmt::Debug for Scratch {
 /// 1.1× faster at 46 and 1.3× at 63).
 const SUPERNODAL_FLOPS_PER_ENTRY: u64 = 40;
 
+/// Nested dissection is tried on patterns of at least this many groups of unknowns …
+const DISSECTION_MIN_GROUPS: usize = 2048;
+
+/// … whose minimum-degree factor has at least this many multiply–adds per entry (counted on
+/// the groups): a crush's factor has ~50 at 10⁴ people, a jammed hall's ~4
+/// (benches/README.md, session 12).
+const DISSECTION_MIN_PRODUCTS_PER_ENTRY: u64 = 16;
+
 /// The normal equations `shift·I + Jᵀ diag(d) J` of one structure of `J`: analysed once per
 /// structure, factorized for any values, solved in the unknowns' natural order.
 ///
@@ -376,6 +387,10 @@ pub(crate) struct NormalEquations {
     group_start: Vec<usize>,
     group_perm: Vec<Index>,
     group_perm_inv: Vec<Index>,
+    dissection: Dissection,
+    fill: FillCount,
+    nd_perm: Vec<Index>,
+    nd_perm_inv: Vec<Index>,
     jt: Transpose,
     pattern: NormalPattern,
     symbolic: Option<SymbolicCholesky<Index>>,
@@ -408,6 +423,10 @@ impl NormalEquations {
             group_start: Vec::new(),
             group_perm: Vec::new(),
             group_perm_inv: Vec::new(),
+            dissection: Dissection::default(),
+            fill: FillCount::default(),
+            nd_perm: Vec::new(),
+            nd_perm_inv: Vec::new(),
             jt: Transpose::default(),
             pattern: NormalPattern::default(),
             symbolic: None,
@@ -515,6 +534,30 @@ impl NormalEquations {
             MemStack::new(&mut mem),
         )
         .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        // A large pattern whose minimum-degree factor is dense (a crush: wide fronts) is also
+        // ordered by nested dissection, and the ordering whose factor costs fewer multiply–adds
+        // is kept. Its count is exact for the 2×2 blocks when every group is a pair.
+        let mut fill = None;
+        if groups >= DISSECTION_MIN_GROUPS {
+            let natural = self.natural.symbolic();
+            let (mut products, mut entries) = self.fill.count(natural, &self.group_perm_inv);
+            if products >= DISSECTION_MIN_PRODUCTS_PER_ENTRY * entries {
+                self.nd_perm.clear();
+                self.nd_perm.resize(groups, 0);
+                self.nd_perm_inv.clear();
+                self.nd_perm_inv.resize(groups, 0);
+                self.dissection
+                    .order(natural, &mut self.nd_perm, &mut self.nd_perm_inv)?;
+                let (p, e) = self.fill.count(natural, &self.nd_perm_inv);
+                if p < products {
+                    std::mem::swap(&mut self.nd_perm, &mut self.group_perm);
+                    std::mem::swap(&mut self.nd_perm_inv, &mut self.group_perm_inv);
+                    (products, entries) = (p, e);
+                    self.counts.dissections += 1;
+                }
+            }
+            fill = Some((products, entries));
+        }
         // Expand: the groups in their order, each group's unknowns in theirs.
         self.group_start.clear();
         self.group_start.resize(groups + 1, 0);
@@ -539,14 +582,21 @@ impl NormalEquations {
         // Unknowns in pairs (a disk's x and y: groups of even size, so every pair 2k, 2k + 1
         // shares its rows): the factorization in 2×2 blocks, unless the factor is so dense
         // that faer's supernodal one wins.
-        if self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
+        // The blocks' own analysis is skipped when the count above already says their factor
+        // is too dense (groups all pairs: group columns are block columns).
+        let pairs = self.group_start.windows(2).all(|w| w[1] - w[0] == 2);
+        let dense = |(products, entries): (u64, u64)| {
+            8 * products > SUPERNODAL_FLOPS_PER_ENTRY * 4 * entries
+        };
+        let known_dense = pairs && fill.is_some_and(dense);
+        if !known_dense && self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
             let blocks = self.pattern.build_blocks(j, &self.perm_inv, n);
             let a_blocks = blocks.row.len();
             self.block.analyse(blocks);
             let products = self.block.factor_block_products();
             let blocks = self.block.factor_blocks() as u64;
             // faer's measure, multiply–adds per factor entry, in scalar equivalents.
-            if 8 * products <= SUPERNODAL_FLOPS_PER_ENTRY * 4 * blocks {
+            if !dense((products, blocks)) {
                 self.blocked = true;
                 self.mem = Scratch(MemBuffer::new(StackReq::EMPTY));
                 self.l = Vec::new();
@@ -798,5 +848,70 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_crush_is_ordered_by_nested_dissection_and_solved() {
+        // 10,000 disks in a hexagonal packing, each row a contact between neighbours: the
+        // minimum-degree factor is dense, nested dissection's has fewer multiply–adds
+        // (dissection.rs), and faer's supernodal factorization solves the system.
+        let side = 100;
+        let at = |r: usize, c: usize| r * side + c;
+        let mut j = ConstraintRows::new(2 * side * side);
+        let mut contact = |a: usize, b: usize, (nx, ny): (f64, f64)| {
+            let key = j.len() as u64;
+            j.push(
+                key,
+                0.0,
+                [(2 * a, -nx), (2 * a + 1, -ny), (2 * b, nx), (2 * b + 1, ny)],
+            );
+        };
+        let h = 3f64.sqrt() / 2.0;
+        for r in 0..side {
+            for c in 0..side {
+                if c + 1 < side {
+                    contact(at(r, c), at(r, c + 1), (1.0, 0.0));
+                }
+                if r + 1 < side {
+                    let (right, left) = if r % 2 == 1 {
+                        (c + 1, c)
+                    } else {
+                        (c, c.wrapping_sub(1))
+                    };
+                    if right < side {
+                        contact(at(r, c), at(r + 1, right), (0.5, h));
+                    }
+                    if left < side {
+                        contact(at(r, c), at(r + 1, left), (-0.5, h));
+                    }
+                }
+            }
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let d: Vec<f64> = (0..j.len()).map(|_| rng.random_range(0.0..1e4)).collect();
+        let b: Vec<f64> = (0..j.dim()).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let shift = 1.0;
+        let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
+        ne.analyse(&j).unwrap();
+        assert!(ne.factorize(&j, shift, &d));
+        let mut x = b.clone();
+        ne.solve_in_place(&mut x);
+        let counts = ne.counts();
+        assert_eq!((counts.dissections, counts.block_factorizations), (1, 0));
+        // shift·x + Jᵀ D J x = b, row by row of J.
+        let mut ax: Vec<f64> = x.iter().map(|v| shift * v).collect();
+        for i in 0..j.len() {
+            let (cols, coefs) = j.row(i);
+            let jx: f64 = cols.iter().zip(coefs).map(|(&c, a)| a * x[c]).sum();
+            for (&c, a) in cols.iter().zip(coefs) {
+                ax[c] += d[i] * a * jx;
+            }
+        }
+        let worst = ax
+            .iter()
+            .zip(&b)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst <= 1e-8, "residual {worst}");
     }
 }
