@@ -17,7 +17,7 @@
 
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 
-use crate::certificate::certify;
+use crate::certificate::{Certificate, certify};
 use crate::error::SolveError;
 use crate::normal::{FactorizationCounts, NormalEquations};
 use crate::problem::{
@@ -49,6 +49,19 @@ pub struct InteriorPointSettings {
     /// 100,000; halls stay below it, where they save factorizations but cost as much in
     /// solves (benches/README.md, sessions 8 and 11).
     pub corrector_threshold: f64,
+    /// Penalty `ρ` of the warm polish (0: never tried): when the previous solve ended with
+    /// at most `polish_changes` of its rows changing sides from its warm start, the caller's
+    /// active set is tried first, as equalities: one factorization of `I + J_Aᵀ D J_A` with
+    /// `D_i = ρ / |J_i|²` on the rows whose multiplier is positive, then the method of
+    /// multipliers with it, and the interior point only if that does not certify. A settled
+    /// crush then costs one factorization a step instead of nine (benches/README.md,
+    /// session 12).
+    pub polish_penalty: f64,
+    /// Fraction of rows whose activity changed in the last solve up to which the polish is
+    /// tried (jams: 3–4 %, where it would rarely certify; a settled crush: 0).
+    pub polish_changes: f64,
+    /// Multiplier updates of the polish (each a pair of triangular solves).
+    pub polish_updates: usize,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential).
     pub parallelism: Parallelism,
@@ -62,6 +75,9 @@ impl Default for InteriorPointSettings {
             warm_scale: 3.0,
             max_correctors: 2,
             corrector_threshold: 32.0,
+            polish_penalty: 1e6,
+            polish_changes: 0.005,
+            polish_updates: 4,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -103,6 +119,20 @@ impl InteriorPointSettings {
                 reason: "must be ≥ 0",
             });
         }
+        if !(self.polish_penalty >= 0.0 && self.polish_penalty.is_finite()) {
+            return Err(SolveError::InvalidSetting {
+                field: "polish_penalty",
+                value: self.polish_penalty.to_string(),
+                reason: "must be finite and ≥ 0",
+            });
+        }
+        if !(0.0..=1.0).contains(&self.polish_changes) {
+            return Err(SolveError::InvalidSetting {
+                field: "polish_changes",
+                value: self.polish_changes.to_string(),
+                reason: "must be in [0, 1]",
+            });
+        }
         Ok(())
     }
 }
@@ -135,6 +165,21 @@ impl InteriorPointSettingsBuilder {
     /// Multiply–adds per factor entry above which the correctors are tried.
     pub fn corrector_threshold(mut self, t: f64) -> Self {
         self.0.corrector_threshold = t;
+        self
+    }
+    /// Penalty of the warm polish (0: never tried).
+    pub fn polish_penalty(mut self, rho: f64) -> Self {
+        self.0.polish_penalty = rho;
+        self
+    }
+    /// Fraction of rows changing sides in the last solve up to which the polish is tried.
+    pub fn polish_changes(mut self, f: f64) -> Self {
+        self.0.polish_changes = f;
+        self
+    }
+    /// Multiplier updates of the polish.
+    pub fn polish_updates(mut self, n: usize) -> Self {
+        self.0.polish_updates = n;
         self
     }
     /// Threads for the factorization.
@@ -172,6 +217,10 @@ pub struct InteriorPoint {
     // the direction before a centrality corrector, kept in case it is not taken
     kept_m: [Vec<f64>; 3],
     kept_n: Vec<f64>,
+    // the caller's multipliers, and the fraction of rows whose activity the last solve changed
+    warm: Vec<f64>,
+    warm_floor: f64,
+    last_changes: Option<f64>,
 }
 
 impl InteriorPoint {
@@ -195,6 +244,9 @@ impl InteriorPoint {
             scratch_n: Vec::new(),
             kept_m: [Vec::new(), Vec::new(), Vec::new()],
             kept_n: Vec::new(),
+            warm: Vec::new(),
+            warm_floor: 0.0,
+            last_changes: None,
         })
     }
 
@@ -214,6 +266,7 @@ impl InteriorPoint {
             &mut self.ds_aff,
             &mut self.dl_aff,
             &mut self.scratch_m,
+            &mut self.warm,
         ] {
             v.clear();
             v.resize(m, 0.0);
@@ -253,6 +306,86 @@ impl InteriorPoint {
         w.map(&mut self.ds, |i, _| row_dot(j, dv, i) - rp[i]);
         let ds = &self.ds;
         w.map(&mut self.dl, |i, _| (rc[i] - lam[i] * ds[i]) / s[i]);
+    }
+
+    /// The warm polish (see [`InteriorPointSettings::polish_penalty`]) from the caller's
+    /// multipliers in `lam`: `(I + J_Aᵀ D J_A) v = w + J_Aᵀ(λ − D b)`, `λ ← λ − D (b + J v)`
+    /// on the rows `A` with `λ > 0`, whose fixed point has those rows tight and
+    /// `v = w + J_Aᵀλ`. Multipliers at most `warm_floor` count as zero. The certificate when
+    /// the solve's `v` and `λ⁺` meet `target` after an update (then in `v`, `lam`); `None` as soon
+    /// as an update does not halve the largest residual of those rows, or after
+    /// `polish_updates`.
+    fn polish(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        v: &mut [f64],
+        lam: &mut [f64],
+    ) -> Option<Certificate> {
+        let j = p.jacobian;
+        let m = p.rows();
+        let penalty = self.settings.polish_penalty;
+        let floor = self.warm_floor;
+        self.normal.workers().map(lam, |_, l| if l > floor { l } else { 0.0 });
+        {
+            let lam: &[f64] = lam;
+            self.normal.workers().map(&mut self.d, |i, _| {
+                if lam[i] > 0.0 {
+                    penalty / j.row_norm_sq(i)
+                } else {
+                    0.0
+                }
+            });
+        }
+        if !self.normal.factorize(j, 1.0, &self.d) {
+            return None;
+        }
+        let mut last = f64::INFINITY;
+        for _ in 0..self.settings.polish_updates {
+            let wk = self.normal.workers();
+            let d = &self.d;
+            {
+                let lam: &[f64] = lam;
+                wk.map(&mut self.scratch_m, |i, _| lam[i] - d[i] * p.b[i]);
+            }
+            let (y, jt, coefs) = (&self.scratch_m, self.normal.transpose(), j.coefficients());
+            wk.map(&mut self.dv, |c, _| p.w[c] + jt.dot(coefs, y, c));
+            self.normal.solve_in_place(&mut self.dv);
+            let (wk, d, dv) = (self.normal.workers(), &self.d, &self.dv);
+            wk.map(&mut self.rp, |i, _| {
+                if d[i] > 0.0 {
+                    p.b[i] + row_dot(j, dv, i)
+                } else {
+                    0.0
+                }
+            });
+            let rp = &self.rp;
+            let residual = -wk.min(m, |i| -rp[i].abs());
+            wk.map(lam, |i, l| (l - d[i] * rp[i]).max(0.0));
+            // The solve's velocity is `w + J_Aᵀλ` for the updated multipliers (to rounding:
+            // recomputing it from them would add the rounding of `D r`, up to 10⁻¹⁰ a row,
+            // to the slacks), and its slacks are the residuals just computed.
+            v.copy_from_slice(dv);
+            let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+            if c.gap <= target.gap && c.violation <= target.violation {
+                return Some(c);
+            }
+            if !(residual <= 0.5 * last) {
+                return None;
+            }
+            last = residual;
+        }
+        None
+    }
+
+    /// The fraction of rows whose activity differs between the caller's multipliers (in
+    /// `self.warm`) and the answer's.
+    fn changes(&self, lam: &[f64], active: impl Fn(usize) -> bool) -> f64 {
+        let m = lam.len();
+        let changed = (0..m)
+            .filter(|&i| (self.warm[i] > self.warm_floor) != active(i))
+            .count();
+        changed as f64 / m.max(1) as f64
     }
 
     /// Exchanges the direction and its complementarity right-hand side with the kept ones.
@@ -317,6 +450,7 @@ impl ProjectionSolver for InteriorPoint {
         j.mul_transpose_add(lam, v);
         let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         if c.gap <= target.gap && c.violation <= target.violation {
+            self.last_changes = Some(0.0);
             return Ok(SolveReport {
                 solver: self.name(),
                 status: SolveStatus::Converged,
@@ -328,10 +462,33 @@ impl ProjectionSolver for InteriorPoint {
             });
         }
         let warm_mean = lam.iter().sum::<f64>() / m as f64;
-        v.copy_from_slice(p.w);
+        self.warm.copy_from_slice(lam);
+        // An interior point leaves every multiplier positive, those of the inactive rows
+        // ~μ/s: the caller's active rows are those above a millionth of the mean.
+        self.warm_floor = 1e-6 * warm_mean;
 
         let times = self.normal.times();
         self.normal.analyse(j)?;
+        let settled = self
+            .last_changes
+            .is_some_and(|c| c <= self.settings.polish_changes);
+        if self.settings.polish_penalty > 0.0 && warm_mean > 0.0 && settled {
+            if let Some(cert) = self.polish(p, target, v, lam) {
+                self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
+                let mut report = SolveReport {
+                    solver: self.name(),
+                    status: SolveStatus::Converged,
+                    gap: cert.gap,
+                    violation: cert.violation,
+                    iterations: 1,
+                    active: cert.active,
+                    ..SolveReport::default()
+                };
+                self.normal.times().since(times).report_into(&mut report);
+                return Ok(report);
+            }
+        }
+        v.copy_from_slice(p.w);
 
         // Starting point (Mehrotra's heuristic on v = w): shift the slacks of the
         // unconstrained velocity into the interior, then balance s and λ. The caller's
@@ -484,6 +641,7 @@ impl ProjectionSolver for InteriorPoint {
         let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         // Active: rows whose multiplier dominates their slack (complementarity decides).
         let active = (0..m).filter(|&i| lam[i] > self.s[i]).count();
+        self.last_changes = Some(self.changes(lam, |i| lam[i] > self.s[i]));
         let mut report = SolveReport {
             solver: self.name(),
             status,

@@ -1040,6 +1040,72 @@ fn a_small_crush_matches_clarabel() {
     );
 }
 
+/// A settled crush: the small crush solved again and again from the previous answer's
+/// multipliers (the integrator's warm start), everyone pushing 2 % harder each time, so that
+/// the contacts stay and only their multipliers move. Once a solve ends with the active set
+/// it started from, the next is answered by the warm polish in one factorization; every
+/// answer is Clarabel's. Then everyone pulls away: the polish is tried, fails, and the
+/// interior point answers.
+#[test]
+fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
+    let (w, rows, b) = small_crush();
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let pushes: Vec<Vec<f64>> = (0..4)
+        .map(|k| w.iter().map(|x| (1.0 + 0.02 * k as f64) * x).collect())
+        .collect();
+    let settled = |settings: InteriorPointSettings| {
+        let mut interior = InteriorPoint::new(settings).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let mut reports = Vec::new();
+        for (k, push) in pushes.iter().enumerate() {
+            let p = ProjectionProblem {
+                w: push,
+                jacobian: &rows,
+                b: &b,
+            };
+            let rep = interior.solve(&p, t, &mut sol).unwrap();
+            let name = format!("push {k}");
+            assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+            check_report(&p, t, &name, &sol, &rep);
+            assert_clarabel_objective(&p, &name, &sol, rep.gap, &clarabel_answer(&p, t));
+            reports.push(rep);
+        }
+        (interior, sol, reports)
+    };
+    let (mut interior, mut sol, reports) = settled(InteriorPointSettings::default());
+    // Cold, then warm by the interior point (its warm start not yet known to be settled),
+    // then polished.
+    assert!(reports[0].factorizations > 5, "{:?}", reports[0]);
+    assert!(reports[1].factorizations > 1, "{:?}", reports[1]);
+    for rep in &reports[2..] {
+        assert_eq!((rep.iterations, rep.factorizations), (1, 1), "{rep:?}");
+    }
+    // Without the polish the settled solves take the interior point's iterations.
+    let (_, _, plain) = settled(
+        InteriorPointSettings::builder()
+            .polish_penalty(0.0)
+            .build()
+            .unwrap(),
+    );
+    assert!(plain[3].factorizations > 3, "{:?}", plain[3]);
+
+    // Everyone pulls away from the centre: no contact stays active.
+    let away: Vec<f64> = w.iter().map(|x| -x).collect();
+    let q = ProjectionProblem {
+        w: &away,
+        jacobian: &rows,
+        b: &b,
+    };
+    let rep = interior.solve(&q, t, &mut sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+    assert!(rep.factorizations > 1, "{rep:?}");
+    check_report(&q, t, "pulled away", &sol, &rep);
+    assert_clarabel_objective(&q, "pulled away", &sol, rep.gap, &clarabel_answer(&q, t));
+}
+
 /// Gauss–Seidel giving up by its progress, on the small crush from cold (it needs `P`
 /// passes, slowly at first: the distance to the target falls ninefold in its first 18
 /// passes and 3·10⁷-fold in the next 170): with a budget of 3P it still finishes, with the same
