@@ -58,7 +58,8 @@ pub struct InteriorPointSettings {
     /// session 12).
     pub polish_penalty: f64,
     /// Fraction of rows whose activity changed in the last solve up to which the polish is
-    /// tried (jams: 3–4 %, where it would rarely certify; a settled crush: 0).
+    /// tried (jams: 3–4 %, where it would rarely certify; a settled crush: 0). After `k`
+    /// failures in a row, the next `2ᵏ − 1` such solves skip it (`k ≤ 6`).
     pub polish_changes: f64,
     /// Multiplier updates of the polish (each a pair of triangular solves).
     pub polish_updates: usize,
@@ -221,6 +222,9 @@ pub struct InteriorPoint {
     warm: Vec<f64>,
     warm_floor: f64,
     last_changes: Option<f64>,
+    // Polishes that failed in a row, and the settled solves still to skip because of them.
+    polish_failures: u32,
+    polish_skips: usize,
 }
 
 impl InteriorPoint {
@@ -247,6 +251,8 @@ impl InteriorPoint {
             warm: Vec::new(),
             warm_floor: 0.0,
             last_changes: None,
+            polish_failures: 0,
+            polish_skips: 0,
         })
     }
 
@@ -472,8 +478,21 @@ impl ProjectionSolver for InteriorPoint {
         let settled = self
             .last_changes
             .is_some_and(|c| c <= self.settings.polish_changes);
-        if self.settings.polish_penalty > 0.0 && warm_mean > 0.0 && settled {
-            if let Some(cert) = self.polish(p, target, v, lam) {
+        let tried = self.settings.polish_penalty > 0.0 && warm_mean > 0.0 && settled;
+        if tried && self.polish_skips > 0 {
+            self.polish_skips -= 1;
+        } else if tried {
+            let polished = self.polish(p, target, v, lam);
+            // After k failures in a row the next 2ᵏ − 1 settled solves skip it (at most 63):
+            // where it keeps failing (a crush of 40,000 whose contacts still open and close
+            // by the handful) it costs a factorization every ~2ᵏ solves, not every solve.
+            self.polish_failures = if polished.is_some() {
+                0
+            } else {
+                (self.polish_failures + 1).min(6)
+            };
+            self.polish_skips = (1 << self.polish_failures) - 1;
+            if let Some(cert) = polished {
                 self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
                 let mut report = SolveReport {
                     solver: self.name(),
