@@ -28,7 +28,7 @@ pub struct AutoSettings {
     /// and a solve 9–22 iterations (benches/README.md), so 100 passes stay near half an
     /// interior-point solve.
     pub first_order_passes: usize,
-    /// A component of [`GROUP_ROWS`] rows or more that Gauss–Seidel gave up goes straight to
+    /// A component of 256 rows or more (`GROUP_ROWS`) that Gauss–Seidel gave up goes straight to
     /// the interior point for this many solves after (recognised by its rows' keys: most of
     /// a sample of its rows were in it); then Gauss–Seidel tries it again (a jam may have
     /// cleared). 0: Gauss–Seidel tries every component every time.

@@ -332,7 +332,9 @@ impl InteriorPoint {
         let m = p.rows();
         let penalty = self.settings.polish_penalty;
         let floor = self.warm_floor;
-        self.normal.workers().map(lam, |_, l| if l > floor { l } else { 0.0 });
+        self.normal
+            .workers()
+            .map(lam, |_, l| if l > floor { l } else { 0.0 });
         {
             let lam: &[f64] = lam;
             self.normal.workers().map(&mut self.d, |i, _| {

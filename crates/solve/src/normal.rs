@@ -5,7 +5,9 @@
 //! spent in each.
 //!
 //! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
-//! rows, a person's x and y), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
+//! rows, a person's x and y; on large patterns whose minimum-degree factor is dense, a
+//! crush's, also nested dissection ([`crate::dissection`]), keeping whichever factor costs
+//! fewer multiply–adds), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
 //! row's products land, and faer's *symbolic* Cholesky — all three redone only when the
 //! columns of `J`'s rows change — and the *numeric* factorization, as often as the caller
 //! asks. The matrix is `shift·I + Jᵀ D J` for any `D ≥ 0` and `shift > 0`: symmetric positive
