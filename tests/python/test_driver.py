@@ -165,6 +165,31 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
         assert len(run.positions) == len(run.time)
 
 
+def test_bench_measures_the_same_steps_from_a_saved_state(tmp_path):
+    """`moreau bench --save-state` after the warm-up, then `--from-state` instead of it: the
+    same steps are measured (rows, iterations, factorizations and certified ε identical), so
+    that before/after comparisons need not depend on where a warm-up ends; a state saved
+    from another scene (another solver) is refused by name, and nothing is written then."""
+    import json
+    state = tmp_path / "jam-{n}.state"
+
+    def row(*args, check=True):
+        proc = moreau("bench", "--one", "1000", "--steps", "6", "--compare-at", "0", *args,
+                      timeout=300, check=check)
+        return proc if not check else json.loads(proc.stdout.strip().splitlines()[-1])
+
+    saved = row("--warmup", "40", "--kind", "auto", "--save-state", state)
+    assert (tmp_path / "jam-1000.state").is_file()
+    again = row("--kind", "auto", "--from-state", state)
+    keys = ("rows_per_step", "active_per_step", "iterations", "factorizations", "max_eps",
+            "max_violation")
+    assert {k: saved[k] for k in keys} == {k: again[k] for k in keys}
+    assert saved["rows_per_step"] > 1000 and saved["factorizations"] > 0, saved
+    other = row("--kind", "interior", "--from-state", state, check=False)
+    assert other.returncode != 0 and "scene_hash" in other.stderr, other.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["jam-1000.state"]
+
+
 def test_bench_names_its_slowest_steps():
     """`moreau bench` says which steps make a mean above the median: three distinct steps,
     slowest first, none faster than the median, the first not faster than the mean."""

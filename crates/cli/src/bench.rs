@@ -6,13 +6,14 @@
 //! at one size, the step's own (warm) projection against cold solves of the same projection
 //! by each solver asked for (Clarabel among them).
 
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use moreau_core::{Parallelism, StepReport};
 use moreau_crowd::{
-    Crush, Hall, Observer, ObserverError, Scene, Simulation, SolverKind, SolverSettings,
+    Crush, Hall, Observer, ObserverError, Scene, SimState, Simulation, SolverKind, SolverSettings,
 };
 use moreau_solve::{ProjectionSolution, Target};
 use serde::{Deserialize, Serialize};
@@ -65,6 +66,15 @@ pub struct BenchArgs {
     /// Threads for the projection (0: every core).
     #[arg(long, default_value_t = 1)]
     threads: usize,
+    /// After the warm-up, save the simulation's state here (`{n}` in the path: the crowd
+    /// size), so that later measurements can start from the very same jam.
+    #[arg(long)]
+    save_state: Option<PathBuf>,
+    /// Start from this saved state (`{n}`: the crowd size) instead of the warm-up: a
+    /// `--save-state` of the same scene, size, density and solver. Before/after comparisons
+    /// then measure the same steps, not states a few steps apart.
+    #[arg(long, conflicts_with = "save_state")]
+    from_state: Option<PathBuf>,
     /// Internal: measure one size in this process and print its JSON row.
     #[arg(long, hide = true)]
     one: Option<usize>,
@@ -137,7 +147,11 @@ struct Cold {
 /// `κ μ³ = (1e-3 r_min)²`, and violation ≤ 1e-4 r_min, with r_min = 0.18 m.
 fn scene(args: &BenchArgs, n: usize) -> Result<Scene> {
     let r_min: f64 = 0.18;
-    let horizon = 0.05 * (args.warmup + args.steps + 1) as f64;
+    // Far beyond any measured step, and the same whatever --warmup and --steps are: the
+    // horizon is part of the scene (its hash), so a state saved after one warm-up can be
+    // restored to measure any number of steps. (Measured steps do not depend on it: the
+    // rows, iterations and certified ε of the scale table's rows are unchanged.)
+    let horizon = 1000.0;
     let solver = |side: f64| SolverSettings {
         kind: args.kind,
         threads: args.threads,
@@ -184,6 +198,25 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// `path` with `{n}` replaced by the crowd size.
+fn for_size(path: &Path, n: usize) -> PathBuf {
+    PathBuf::from(path.to_string_lossy().replace("{n}", &n.to_string()))
+}
+
+/// Writes `state` to `target` whole or not at all (beside it, then moved over it).
+fn save_state(target: &Path, state: &SimState) -> Result<()> {
+    let name = target
+        .file_name()
+        .map_or("state".into(), |n| n.to_string_lossy());
+    let temporary = target.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+    let written = std::fs::write(&temporary, state.to_bytes())
+        .and_then(|()| std::fs::rename(&temporary, target));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&temporary);
+    }
+    written.with_context(|| format!("saving the state to '{}'", target.display()))
+}
+
 /// Keeps every step report.
 #[derive(Default)]
 struct Reports(Vec<StepReport>);
@@ -207,9 +240,27 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     };
     let mut sim = Simulation::new(scene)?;
     let setup = start.elapsed().as_secs_f64();
-    sim.advance_to(0.05 * args.warmup as f64, &mut ())?;
+    let end = match &args.from_state {
+        Some(path) => {
+            let path = for_size(path, n);
+            let bytes = std::fs::read(&path)
+                .with_context(|| format!("reading the state '{}'", path.display()))?;
+            let state = SimState::from_bytes(&bytes)
+                .and_then(|state| sim.restore(&state))
+                .with_context(|| format!("restoring the state '{}'", path.display()));
+            state?;
+            sim.time() + 0.05 * args.steps as f64
+        }
+        None => {
+            sim.advance_to(0.05 * args.warmup as f64, &mut ())?;
+            0.05 * (args.warmup + args.steps) as f64
+        }
+    };
+    if let Some(path) = &args.save_state {
+        save_state(&for_size(path, n), &sim.state())?;
+    }
     let mut measured = Reports::default();
-    sim.advance_to(0.05 * (args.warmup + args.steps) as f64, &mut measured)?;
+    sim.advance_to(end, &mut measured)?;
     let mut stats = moreau_core::RunStats::default();
     let (mut rows, mut active) = (0.0, 0.0);
     let (mut total, mut assemble, mut solve) = (Vec::new(), Vec::new(), Vec::new());
@@ -389,6 +440,12 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         if args.compare_alone {
             cmd.arg("--compare-alone");
+        }
+        if let Some(path) = &args.save_state {
+            cmd.arg("--save-state").arg(path);
+        }
+        if let Some(path) = &args.from_state {
+            cmd.arg("--from-state").arg(path);
         }
         let out = cmd
             .output()
