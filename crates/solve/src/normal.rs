@@ -62,7 +62,7 @@ pub(crate) struct StageTimes {
     pub(crate) analyse: f64,
     /// Numeric factorizations and triangular solves.
     pub(crate) factorize: f64,
-    /// Numeric factorizations (a count).
+    /// Numeric factorizations (a count: [`FactorizationCounts::factorizations`] when read).
     pub(crate) factorizations: usize,
 }
 
@@ -461,7 +461,11 @@ impl NormalEquations {
 
     /// Seconds spent so far, per stage.
     pub(crate) fn times(&self) -> StageTimes {
-        self.times
+        // The count is the factorization counts' own (one counter, read here).
+        StageTimes {
+            factorizations: self.counts.factorizations,
+            ..self.times
+        }
     }
 
     fn par(&self) -> Par {
@@ -686,7 +690,6 @@ impl NormalEquations {
     pub(crate) fn factorize(&mut self, j: &ConstraintRows, shift: f64, d: &[f64]) -> bool {
         self.pattern.assemble(j, shift, d, &mut self.h);
         let clock = Instant::now();
-        self.times.factorizations += 1;
         if self.blocked {
             self.counts.factorizations += 1;
             self.counts.block_factorizations += 1;
