@@ -19,8 +19,35 @@ const LEAF: usize = 64;
 /// more multiply–adds on crushes of 10⁴–4·10⁴).
 const BALANCE: f64 = 0.4;
 
+/// AMD's scratch for the leaves, grown to the largest leaf seen (not allocated per leaf).
+#[derive(Default)]
+struct LeafScratch {
+    sized_for: (usize, usize),
+    mem: Option<MemBuffer>,
+}
+
+impl std::fmt::Debug for LeafScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "LeafScratch{:?}", self.sized_for)
+    }
+}
+
+impl LeafScratch {
+    fn for_amd(&mut self, n: usize, nnz: usize) -> &mut MemBuffer {
+        let (sn, snnz) = self.sized_for;
+        if self.mem.is_none() || n > sn || nnz > snnz {
+            self.sized_for = (n.max(sn), nnz.max(snnz));
+            let (n, nnz) = self.sized_for;
+            self.mem = Some(MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(
+                n, nnz,
+            )));
+        }
+        self.mem.as_mut().expect("sized above")
+    }
+}
+
 /// Scratch of the ordering, sized by the largest graph seen.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Default)]
 pub(crate) struct Dissection {
     // The full adjacency (both triangles, no diagonal) in compressed rows.
     adj_start: Vec<usize>,
@@ -40,6 +67,7 @@ pub(crate) struct Dissection {
     leaf_idx: Vec<Index>,
     leaf_perm: Vec<Index>,
     leaf_perm_inv: Vec<Index>,
+    leaf_mem: LeafScratch,
 }
 
 impl Dissection {
@@ -304,16 +332,13 @@ impl Dissection {
         self.leaf_perm.resize(m, 0);
         self.leaf_perm_inv.clear();
         self.leaf_perm_inv.resize(m, 0);
-        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(
-            m,
-            self.leaf_idx.len(),
-        ));
+        let mem = self.leaf_mem.for_amd(m, self.leaf_idx.len());
         amd::order_maybe_unsorted(
             &mut self.leaf_perm,
             &mut self.leaf_perm_inv,
             pattern,
             amd::Control::default(),
-            MemStack::new(&mut mem),
+            MemStack::new(mem),
         )
         .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
         self.split.clear();
@@ -504,6 +529,9 @@ mod tests {
         // A path, a star, disconnected pieces and isolated nodes, a hexagonal packing.
         let path: Vec<_> = (0..999).map(|v| (v, v + 1)).collect();
         let star: Vec<_> = (1..700).map(|v| (0, v)).collect();
+        let clique: Vec<_> = (0..300)
+            .flat_map(|a| (a + 1..300).map(move |b| (a, b)))
+            .collect();
         let mut pieces = hexagonal(20);
         pieces.extend((0..300).map(|v| (400 + v, 400 + (v + 1) % 300)));
         for (n, edges) in [
