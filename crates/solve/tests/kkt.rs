@@ -450,12 +450,18 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
         gap: 1e-8,
         violation: 1e-9,
     };
-    // The default, and Gondzio's correctors on every solve (by default they wait for factors
-    // denser than these small crowds make).
+    // The default, Gondzio's correctors on every solve (by default they wait for factors
+    // denser than these small crowds make), and the warm polish tried on every warm solve its
+    // back-off allows (by default only after a solve that changed ≤ 0.5 % of its rows'
+    // sides).
     let mut interiors = [
         InteriorPointSettings::default(),
         InteriorPointSettings::builder()
             .corrector_threshold(0.0)
+            .build()
+            .unwrap(),
+        InteriorPointSettings::builder()
+            .polish_changes(1.0)
             .build()
             .unwrap(),
     ]
@@ -481,7 +487,11 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
         check_kkt(inst, name, sol, rep.gap, rep.violation);
         check_report(&p, target, name, sol, &rep);
         assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+        rep
     };
+    // Warm solves the polish answered (one factorization and no interior-point iteration
+    // after it: its report says 1 and 1), for the last variant.
+    let mut polished = 0;
     for case in 0..80 {
         let mut inst = disk_instance(&mut rng);
         if case % 2 == 1 {
@@ -498,16 +508,36 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
             let mut sol = ProjectionSolution::default();
             solve(interior, &inst, &mut sol, &format!("{name} cold"));
             sol.lambda = matched(&inst, &sol.lambda, &next);
-            solve(interior, &next, &mut sol, &format!("{name} warm"));
-            sol.lambda = matched(&next, &sol.lambda, &other);
-            solve(
+            let warm = solve(interior, &next, &mut sol, &format!("{name} warm"));
+            // The same contacts, everyone pushing 1 % harder: the active set holds.
+            let harder = Instance {
+                w: next.w.iter().map(|w| 1.01 * w).collect(),
+                ..next.clone()
+            };
+            let held = solve(
+                interior,
+                &harder,
+                &mut sol,
+                &format!("{name} pushed harder"),
+            );
+            sol.lambda = matched(&harder, &sol.lambda, &other);
+            let changed = solve(
                 interior,
                 &other,
                 &mut sol,
                 &format!("{name} pattern change"),
             );
+            if k == 2 {
+                polished += [warm, held, changed]
+                    .iter()
+                    .filter(|r| (r.iterations, r.factorizations) == (1, 1))
+                    .count();
+            }
         }
     }
+    // Most of the 80 solves pushed harder should be polished (89 warm solves in all when
+    // written), each of them checked above against the enumerator and Clarabel.
+    assert!(polished >= 40, "the polish answered {polished} warm solves");
     for interior in &interiors {
         assert!(
             interior.counts().block_factorizations > 100,
