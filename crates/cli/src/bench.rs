@@ -203,20 +203,6 @@ fn for_size(path: &Path, n: usize) -> PathBuf {
     PathBuf::from(path.to_string_lossy().replace("{n}", &n.to_string()))
 }
 
-/// Writes `state` to `target` whole or not at all (beside it, then moved over it).
-fn save_state(target: &Path, state: &SimState) -> Result<()> {
-    let name = target
-        .file_name()
-        .map_or("state".into(), |n| n.to_string_lossy());
-    let temporary = target.with_file_name(format!(".{name}.{}.partial", std::process::id()));
-    let written = std::fs::write(&temporary, state.to_bytes())
-        .and_then(|()| std::fs::rename(&temporary, target));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&temporary);
-    }
-    written.with_context(|| format!("saving the state to '{}'", target.display()))
-}
-
 /// Keeps every step report.
 #[derive(Default)]
 struct Reports(Vec<StepReport>);
@@ -245,10 +231,9 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
             let path = for_size(path, n);
             let bytes = std::fs::read(&path)
                 .with_context(|| format!("reading the state '{}'", path.display()))?;
-            let state = SimState::from_bytes(&bytes)
+            SimState::from_bytes(&bytes)
                 .and_then(|state| sim.restore(&state))
-                .with_context(|| format!("restoring the state '{}'", path.display()));
-            state?;
+                .with_context(|| format!("restoring the state '{}'", path.display()))?;
             sim.time() + 0.05 * args.steps as f64
         }
         None => {
@@ -257,7 +242,9 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
         }
     };
     if let Some(path) = &args.save_state {
-        save_state(&for_size(path, n), &sim.state())?;
+        let path = for_size(path, n);
+        crate::run::write_whole(&path, &sim.state().to_bytes())
+            .with_context(|| format!("saving the state to '{}'", path.display()))?;
     }
     let mut measured = Reports::default();
     sim.advance_to(end, &mut measured)?;

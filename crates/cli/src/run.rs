@@ -421,16 +421,23 @@ fn write_summary(target: &Path, json: &str) -> Result<()> {
         writeln!(out, "{json}")?;
         return Ok(());
     }
-    // Whole or not at all: written beside it, then moved over it (checked before the run:
-    // replacing an existing file was allowed with --force).
+    // Whole or not at all (checked before the run: replacing an existing file was allowed
+    // with --force).
+    write_whole(target, format!("{json}\n").as_bytes())
+        .with_context(|| format!("writing the summary to '{}'", target.display()))
+}
+
+/// Writes `bytes` to `target` whole or not at all: beside it, then moved over it; nothing is
+/// left beside it on failure.
+pub(crate) fn write_whole(target: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let name = target
         .file_name()
-        .map_or("summary".into(), |n| n.to_string_lossy());
+        .map_or("file".into(), |n| n.to_string_lossy());
     let temporary = target.with_file_name(format!(".{name}.{}.partial", std::process::id()));
-    let written = std::fs::write(&temporary, format!("{json}\n"))
-        .and_then(|()| std::fs::rename(&temporary, target));
+    let written =
+        std::fs::write(&temporary, bytes).and_then(|()| std::fs::rename(&temporary, target));
     if written.is_err() {
         let _ = std::fs::remove_file(&temporary);
     }
-    written.with_context(|| format!("writing the summary to '{}'", target.display()))
+    written
 }

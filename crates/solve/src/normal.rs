@@ -263,7 +263,7 @@ impl NormalPattern {
     /// pattern, and `slots` and the diagonal as positions among the blocks' values (four per
     /// block, column order). A pair's entry outside the products stays zero.
     fn build_blocks(&mut self, j: &ConstraintRows, at: &[usize], n: usize) -> BlockPattern {
-        debug_assert!(n % 2 == 0);
+        debug_assert!(n.is_multiple_of(2));
         let nb = n / 2;
         self.n = n;
         self.col_ptr.clear();
@@ -595,6 +595,9 @@ impl NormalEquations {
             8 * products > SUPERNODAL_FLOPS_PER_ENTRY * 4 * entries
         };
         let known_dense = pairs && fill.is_some_and(dense);
+        if known_dense {
+            self.block = BlockCholesky::default();
+        }
         if !known_dense && self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
             let blocks = self.pattern.build_blocks(j, &self.perm_inv, n);
             let a_blocks = blocks.row.len();
