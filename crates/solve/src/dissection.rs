@@ -526,7 +526,8 @@ mod tests {
 
     #[test]
     fn every_node_is_ordered_once_whatever_the_graph() {
-        // A path, a star, disconnected pieces and isolated nodes, a hexagonal packing.
+        // A path, a star, a clique, disconnected pieces and isolated nodes, a hexagonal
+        // packing.
         let path: Vec<_> = (0..999).map(|v| (v, v + 1)).collect();
         let star: Vec<_> = (1..700).map(|v| (0, v)).collect();
         let clique: Vec<_> = (0..300)
@@ -537,6 +538,7 @@ mod tests {
         for (n, edges) in [
             (1000, path),
             (700, star),
+            (300, clique),
             (1000, pieces),
             (2500, hexagonal(50)),
         ] {
