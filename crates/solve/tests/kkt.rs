@@ -1074,8 +1074,8 @@ fn a_small_crush_matches_clarabel() {
 /// multipliers (the integrator's warm start), everyone pushing 2 % harder each time, so that
 /// the contacts stay and only their multipliers move. Once a solve ends with the active set
 /// it started from, the next is answered by the warm polish in one factorization; every
-/// answer is Clarabel's. Then everyone pulls away: the polish is tried, fails, and the
-/// interior point answers.
+/// answer is Clarabel's, and the same on two threads. Then everyone pulls away: the polish is
+/// tried, fails, and the interior point answers.
 #[test]
 fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
     let (w, rows, b) = small_crush();
@@ -1106,6 +1106,19 @@ fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
         (interior, sol, reports)
     };
     let (mut interior, mut sol, reports) = settled(InteriorPointSettings::default());
+    // The same answers, bit for bit, on two threads (the loops sum in fixed chunks; the 2×2
+    // blocks factorize sequentially).
+    let (_, two_threads, _) = settled(
+        InteriorPointSettings::builder()
+            .parallelism(Parallelism::threads(2))
+            .build()
+            .unwrap(),
+    );
+    assert_eq!(
+        (&sol.v, &sol.lambda),
+        (&two_threads.v, &two_threads.lambda),
+        "one thread and two"
+    );
     // Cold, then warm by the interior point (its warm start not yet known to be settled),
     // then polished.
     assert!(reports[0].factorizations > 5, "{:?}", reports[0]);
