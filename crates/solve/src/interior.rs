@@ -127,6 +127,13 @@ impl InteriorPointSettings {
                 reason: "must be finite and ≥ 0",
             });
         }
+        if self.polish_penalty > 0.0 && self.polish_updates == 0 {
+            return Err(SolveError::InvalidSetting {
+                field: "polish_updates",
+                value: "0".into(),
+                reason: "must be ≥ 1 while polish_penalty > 0 (else each polish is a wasted factorization)",
+            });
+        }
         if !(0.0..=1.0).contains(&self.polish_changes) {
             return Err(SolveError::InvalidSetting {
                 field: "polish_changes",
@@ -900,5 +907,32 @@ mod tests {
             .build()
             .unwrap_err();
         assert!(e.to_string().contains("corrector_threshold"), "{e}");
+        let e = InteriorPointSettings::builder()
+            .polish_updates(0)
+            .build()
+            .unwrap_err();
+        assert!(e.to_string().contains("polish_updates"), "{e}");
+        assert!(
+            InteriorPointSettings::builder()
+                .polish_penalty(0.0)
+                .polish_updates(0)
+                .build()
+                .is_ok()
+        );
+        for (field, e) in [
+            (
+                "polish_penalty",
+                InteriorPointSettings::builder()
+                    .polish_penalty(-1.0)
+                    .build(),
+            ),
+            (
+                "polish_changes",
+                InteriorPointSettings::builder().polish_changes(1.5).build(),
+            ),
+        ] {
+            let e = e.unwrap_err();
+            assert!(e.to_string().contains(field), "{e}");
+        }
     }
 }
