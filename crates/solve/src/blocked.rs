@@ -9,20 +9,25 @@
 //! product (8 multiply–adds). Measured on jammed halls in benches/README.md.
 //!
 //! Storage: block columns of the lower triangle, the diagonal block first, blocks in column
-//! order `[a₀₀, a₁₀, a₀₁, a₁₁]`. Of a diagonal block only `a₀₀, a₁₀, a₁₁` are read.
+//! order `[a₀₀, a₁₀, a₀₁, a₁₁]`. Of a diagonal block of `A` only `a₀₀, a₁₀, a₁₁` are read;
+//! the factor keeps its diagonal blocks as `[1/l₀₀, l₁₀, 0, 1/l₁₁]`, so that no division is
+//! left in the numeric factorization's columns or in the triangular solves.
 
 use crate::products::Index;
 
 /// A 2×2 block in column order `[a₀₀, a₁₀, a₀₁, a₁₁]`.
 type Block = [f64; 4];
 
-/// `w −= l bᵀ` for 2×2 blocks.
+/// `w −= l bᵀ` for 2×2 blocks, `b` given by its entries `[b₀₀, b₁₀, b₀₁, b₁₁]`. Written
+/// column by column (`w(:, 0) −= l(:, 0) b₀₀ + l(:, 1) b₀₁`, `w(:, 1) −= l(:, 0) b₁₀ +
+/// l(:, 1) b₁₁`) so that each line is one pair of lanes: the same operations, in the same
+/// order, as entry by entry, and compiled to packed arithmetic.
 #[inline(always)]
-fn sub_mul_transpose(w: &mut Block, l: &Block, b: &Block) {
-    w[0] -= l[0] * b[0] + l[2] * b[2];
-    w[1] -= l[1] * b[0] + l[3] * b[2];
-    w[2] -= l[0] * b[1] + l[2] * b[3];
-    w[3] -= l[1] * b[1] + l[3] * b[3];
+fn sub_mul_transpose(w: &mut Block, l: &Block, [b0, b1, b2, b3]: [f64; 4]) {
+    let (l0, l1) = ([l[0], l[1]], [l[2], l[3]]);
+    let c0 = [l0[0] * b0 + l1[0] * b2, l0[1] * b0 + l1[1] * b2];
+    let c1 = [l0[0] * b1 + l1[0] * b3, l0[1] * b1 + l1[1] * b3];
+    *w = [w[0] - c0[0], w[1] - c0[1], w[2] - c1[0], w[3] - c1[1]];
 }
 
 /// The block structure of a lower triangle (`ptr`, `row`: block columns, diagonal first).
@@ -179,10 +184,12 @@ impl BlockCholesky {
                 let b = values[p];
                 // The rest of column j from row k on (its rows increase).
                 for (&r, v) in l.row[p..end].iter().zip(&values[p..end]) {
-                    sub_mul_transpose(&mut work[r as usize], v, &b);
+                    sub_mul_transpose(&mut work[r as usize], v, b);
                 }
             }
-            // L(k, k) by the 2×2 Cholesky of the diagonal block.
+            // L(k, k) by the 2×2 Cholesky of the diagonal block, kept as
+            // `[1/l₀₀, l₁₀, 0, 1/l₁₁]`: the divisions of the column below and of every
+            // triangular solve become multiplications.
             let d = work[k];
             if !(d[0] > 0.0) {
                 return false;
@@ -193,17 +200,16 @@ impl BlockCholesky {
             if !(schur > 0.0) {
                 return false;
             }
-            let l11 = schur.sqrt();
-            values[lk.start] = [l00, l10, 0.0, l11];
+            let (i00, i11) = (1.0 / l00, 1.0 / schur.sqrt());
+            values[lk.start] = [i00, l10, 0.0, i11];
             // L(i, k) = W(i) L(k, k)⁻ᵀ: each row of the block solved against L(k, k)ᵀ.
             for (&r, out) in l.row[lk.start + 1..lk.end]
                 .iter()
                 .zip(&mut values[lk.start + 1..lk.end])
             {
                 let w = work[r as usize];
-                let x0 = w[0] / l00; // row 0
-                let x1 = w[1] / l00; // row 1
-                *out = [x0, x1, (w[2] - x0 * l10) / l11, (w[3] - x1 * l10) / l11];
+                let (x0, x1) = (w[0] * i00, w[1] * i00); // rows 0 and 1
+                *out = [x0, x1, (w[2] - x0 * l10) * i11, (w[3] - x1 * l10) * i11];
             }
         }
         true
@@ -214,35 +220,39 @@ impl BlockCholesky {
         let (l, values) = (&self.l, &self.values);
         let n = l.columns();
         debug_assert_eq!(x.len(), 2 * n);
-        // L y = b, column by column.
+        // L y = b, column by column; each update is one pair of lanes.
         for k in 0..n {
             let lk = l.col(k);
-            let d = values[lk.start];
-            let y0 = x[2 * k] / d[0];
-            let y1 = (x[2 * k + 1] - d[1] * y0) / d[3];
+            let [i00, l10, _, i11] = values[lk.start];
+            let y0 = x[2 * k] * i00;
+            let y1 = (x[2 * k + 1] - l10 * y0) * i11;
             x[2 * k] = y0;
             x[2 * k + 1] = y1;
             let below = lk.start + 1..lk.end;
             for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
-                let i = i as usize;
-                x[2 * i] -= b[0] * y0 + b[2] * y1;
-                x[2 * i + 1] -= b[1] * y0 + b[3] * y1;
+                let i = 2 * i as usize;
+                let t = [b[0] * y0 + b[2] * y1, b[1] * y0 + b[3] * y1];
+                let xi = &mut x[i..i + 2];
+                xi[0] -= t[0];
+                xi[1] -= t[1];
             }
         }
-        // Lᵀ x = y, column by column backwards.
+        // Lᵀ x = y, column by column backwards: [r₀, r₁] −= bᵀ x_i as one pair of lanes.
         for k in (0..n).rev() {
             let lk = l.col(k);
-            let (mut r0, mut r1) = (x[2 * k], x[2 * k + 1]);
+            let mut r = [x[2 * k], x[2 * k + 1]];
             let below = lk.start + 1..lk.end;
             for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
-                let i = i as usize;
-                let (x0, x1) = (x[2 * i], x[2 * i + 1]);
-                r0 -= b[0] * x0 + b[1] * x1;
-                r1 -= b[2] * x0 + b[3] * x1;
+                let i = 2 * i as usize;
+                let (x0, x1) = (x[i], x[i + 1]);
+                r = [
+                    r[0] - (b[0] * x0 + b[1] * x1),
+                    r[1] - (b[2] * x0 + b[3] * x1),
+                ];
             }
-            let d = values[lk.start];
-            let x1 = r1 / d[3];
-            let x0 = (r0 - d[1] * x1) / d[0];
+            let [i00, l10, _, i11] = values[lk.start];
+            let x1 = r[1] * i11;
+            let x0 = (r[0] - l10 * x1) * i00;
             x[2 * k] = x0;
             x[2 * k + 1] = x1;
         }
