@@ -41,8 +41,9 @@ const HEADER: usize = 8 + 4 + 8;
 
 impl Snapshot {
     /// The layout version of the serialized form (of the header and of what follows it);
-    /// bumped whenever a field changes meaning (2: the moving bodies' inputs).
-    pub const FORMAT: u32 = 2;
+    /// bumped whenever a field changes meaning (3: the simulation's state format 5, whose
+    /// solver memory holds the interior points'; 2: the moving bodies' inputs).
+    pub const FORMAT: u32 = 3;
 
     /// The hash of the scene the state was taken from.
     pub fn scene_hash(&self) -> u64 {

@@ -53,14 +53,15 @@ pub struct SimState {
     pub multipliers: Vec<(ConstraintKey, f64)>,
     /// What the projection solver carries from one solve to the next
     /// ([`ProjectionSolver::memory`](moreau_solve::ProjectionSolver::memory): `auto`'s
-    /// choices).
+    /// choices, the interior point's kept iterate and polish history).
     pub solver_memory: Vec<f64>,
 }
 
 impl SimState {
-    /// The layout version; bumped whenever a field changes meaning (4: `solver_memory`;
-    /// 3: `inflow`, `moving`, `fields_built`; 2 was written by builds with only some of them).
-    pub const FORMAT: u32 = 4;
+    /// The layout version; bumped whenever a field changes meaning (5: `solver_memory` holds
+    /// the interior points' memory too; 4: `solver_memory`; 3: `inflow`, `moving`,
+    /// `fields_built`; 2 was written by builds with only some of them).
+    pub const FORMAT: u32 = 5;
 
     /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of
     /// the scene it was saved from.

@@ -236,31 +236,52 @@ impl ProjectionSolver for AutoSolver {
         Ok(report)
     }
 
-    /// `[last_change, (key_high, key_low, solves_left) of each row given up…]`, finite
-    /// numbers (JSON has no infinity): `last_change` −1 before the first solve, each key in
-    /// two 32-bit halves (exact in an f64).
+    /// `[−2, last_change, G, (key_high, key_low, solves_left) of each of the G rows given
+    /// up…, L₀, the first interior point's memory (L₀ numbers), L₁, the second's]`, finite
+    /// numbers (JSON has no infinity): −2 marks this layout, `last_change` is −1 before the
+    /// first solve, each key in two 32-bit halves (exact in an f64).
     fn memory(&self) -> Vec<f64> {
-        let mut memory = Vec::with_capacity(1 + 3 * self.given_up.len());
+        let interiors = self.interiors.each_ref().map(|i| i.memory());
+        let mut memory = Vec::with_capacity(
+            3 + 3 * self.given_up.len() + interiors.iter().map(|m| 1 + m.len()).sum::<usize>(),
+        );
+        memory.push(MEMORY_LAYOUT);
         memory.push(if self.last_change.is_finite() {
             self.last_change
         } else {
             -1.0
         });
+        memory.push(self.given_up.len() as f64);
         for &(key, left) in &self.given_up {
             memory.extend([(key >> 32) as f64, (key as u32) as f64, left as f64]);
+        }
+        for m in &interiors {
+            memory.push(m.len() as f64);
+            memory.extend_from_slice(m);
         }
         memory
     }
 
-    /// Takes what [`memory`](Self::memory) gave, or the three numbers of a run saved before
-    /// components were recognised by their rows (`[skip_from, skip_left, last_change]`: the
-    /// first two no longer mean anything).
+    /// Takes what [`memory`](Self::memory) gave. The layouts of earlier builds are read too
+    /// (`[last_change, (key_high, key_low, solves_left)…]`, and `[skip_from, skip_left,
+    /// last_change]` from before components were recognised by their rows), with the
+    /// interior points as new; anything else leaves the solver as new.
     fn set_memory(&mut self, memory: &[f64]) {
         self.given_up.clear();
-        let (last_change, rows) = match memory {
-            [_, _, last_change] => (*last_change, &[][..]),
-            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows),
-            _ => (-1.0, &[][..]),
+        for interior in &mut self.interiors {
+            interior.set_memory(&[]);
+        }
+        let (last_change, rows, interiors) = match memory {
+            [layout, last_change, given_up, rest @ ..] if *layout == MEMORY_LAYOUT => {
+                let g = *given_up as usize;
+                match (rest.get(..3 * g), rest.get(3 * g..)) {
+                    (Some(rows), Some(interiors)) => (*last_change, rows, interiors),
+                    _ => (-1.0, &[][..], &[][..]),
+                }
+            }
+            [_, _, last_change] => (*last_change, &[][..], &[][..]),
+            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows, &[][..]),
+            _ => (-1.0, &[][..], &[][..]),
         };
         self.last_change = if last_change >= 0.0 {
             last_change
@@ -272,8 +293,23 @@ impl ProjectionSolver for AutoSolver {
                 .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2] as u32)),
         );
         self.given_up.sort_unstable_by_key(|&(key, _)| key);
+        let mut rest = interiors;
+        for interior in &mut self.interiors {
+            let Some((&len, after)) = rest.split_first() else {
+                break;
+            };
+            let Some(own) = after.get(..len as usize) else {
+                break;
+            };
+            interior.set_memory(own);
+            rest = &after[len as usize..];
+        }
     }
 }
+
+/// The first number of [`AutoSolver`]'s memory in its current layout (earlier layouts began
+/// with `last_change`, at least −1).
+const MEMORY_LAYOUT: f64 = -2.0;
 
 impl AutoSolver {
     /// Gauss–Seidel on every component, by groups: each component of
@@ -526,18 +562,28 @@ mod tests {
     use super::*;
 
     /// Keys above 2⁵³ (a crowd's contact keys use all 64 bits) survive the trip through
-    /// the f64 memory, and a run saved before the keys were remembered still restores.
+    /// the f64 memory, and the layouts of earlier builds still restore.
     #[test]
     fn the_memory_keeps_every_bit_of_the_keys_and_reads_the_old_form() {
         let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
         auto.last_change = 0.25;
         auto.given_up = vec![(7, 0), ((1 << 53) + 1, 5), (u64::MAX - 2, 16)];
         let memory = auto.memory();
-        assert_eq!(memory.len(), 1 + 3 * 3);
+        // The layout mark, last_change, the rows given up, and each interior point's (new:
+        // its head alone).
+        assert_eq!(memory.len(), 3 + 3 * 3 + 2 * (1 + 6));
         let mut restored = AutoSolver::new(AutoSettings::default()).unwrap();
         restored.set_memory(&memory);
         assert_eq!(restored.given_up, auto.given_up);
         assert_eq!(restored.last_change, 0.25);
+        assert_eq!(restored.memory(), memory);
+        // [last_change, rows given up…] of the previous layout.
+        let previous: Vec<f64> = std::iter::once(0.75)
+            .chain(memory[3..12].iter().copied())
+            .collect();
+        restored.set_memory(&previous);
+        assert_eq!(restored.given_up, auto.given_up);
+        assert_eq!(restored.last_change, 0.75);
         // [skip_from, skip_left, last_change] of the earlier form.
         restored.set_memory(&[120.0, 3.0, 0.5]);
         assert!(restored.given_up.is_empty());

@@ -15,7 +15,7 @@
 //! `J`'s rows hold, a numeric factorization every iteration) are [`NormalEquations`]'s; this
 //! module is the interior-point loop.
 
-use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
+use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, SolveStatus};
 
 use crate::certificate::{Certificate, certify};
 use crate::error::SolveError;
@@ -63,6 +63,18 @@ pub struct InteriorPointSettings {
     pub polish_changes: f64,
     /// Multiplier updates of the polish (each a pair of triangular solves).
     pub polish_updates: usize,
+    /// The start from a kept iterate (0: never; Mehrotra's start every time): each solve
+    /// keeps its first iterate whose `sᵀλ` is at most this multiple of the target gap — on
+    /// the central path, well before the end — with its rows' keys, and the next solve starts
+    /// from it (rows matched by key; a new row at its slack at `w`), with `v = w + Jᵀλ` and
+    /// each slack raised to the row's slack at that `v`. Gondzio and Grothey's re-optimization
+    /// start: the iterations that take `sᵀλ` from the cold start's down to that level are
+    /// skipped while the problem moves little (cromosim's scene: 13–14 iterations a solve →
+    /// 8–10). Where it moves more than that iterate's centrality allows (a jam of a dense
+    /// hall) it costs iterations instead: a start from it that takes at least as many
+    /// iterations as the last cold start makes the next `2ᵏ − 1` solves start cold after `k`
+    /// such losses in a row (`k ≤ 6`), and one that does not converge is redone cold.
+    pub warm_iterate: f64,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential).
     pub parallelism: Parallelism,
@@ -79,6 +91,7 @@ impl Default for InteriorPointSettings {
             polish_penalty: 1e6,
             polish_changes: 0.005,
             polish_updates: 4,
+            warm_iterate: 1e7,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -132,6 +145,13 @@ impl InteriorPointSettings {
                 field: "polish_updates",
                 value: "0".into(),
                 reason: "must be ≥ 1 while polish_penalty > 0 (else each polish is a wasted factorization)",
+            });
+        }
+        if !(self.warm_iterate >= 0.0 && self.warm_iterate.is_finite()) {
+            return Err(SolveError::InvalidSetting {
+                field: "warm_iterate",
+                value: self.warm_iterate.to_string(),
+                reason: "must be finite and ≥ 0",
             });
         }
         if !(0.0..=1.0).contains(&self.polish_changes) {
@@ -190,6 +210,12 @@ impl InteriorPointSettingsBuilder {
         self.0.polish_updates = n;
         self
     }
+    /// Multiple of the target gap at which the iterate the next solve starts from is kept
+    /// (0: never).
+    pub fn warm_iterate(mut self, k: f64) -> Self {
+        self.0.warm_iterate = k;
+        self
+    }
     /// Threads for the factorization.
     pub fn parallelism(mut self, p: Parallelism) -> Self {
         self.0.parallelism = p;
@@ -232,6 +258,13 @@ pub struct InteriorPoint {
     // Polishes that failed in a row, and the settled solves still to skip because of them.
     polish_failures: u32,
     polish_skips: usize,
+    // The iterate kept for the next start (row key, s, λ; sorted by key), the iterations of
+    // the last cold start, and the kept-iterate starts that lost in a row and the solves still
+    // to start cold because of them.
+    kept_iterate: Vec<(ConstraintKey, f64, f64)>,
+    cold_iterations: Option<usize>,
+    warm_failures: u32,
+    warm_skips: usize,
 }
 
 impl InteriorPoint {
@@ -260,6 +293,10 @@ impl InteriorPoint {
             last_changes: None,
             polish_failures: 0,
             polish_skips: 0,
+            kept_iterate: Vec::new(),
+            cold_iterations: None,
+            warm_failures: 0,
+            warm_skips: 0,
         })
     }
 
@@ -412,6 +449,219 @@ impl InteriorPoint {
         std::mem::swap(&mut self.dv, &mut self.kept_n);
     }
 
+    /// Mehrotra's starting point on `v = w`: the slacks of the unconstrained velocity shifted
+    /// into the interior, then `s` and `λ` balanced. The caller's multipliers are not the
+    /// start (measured on jammed crowds, starting from them cost 2–4× more iterations,
+    /// benches/README.md); only their scale is, through `warm_scale` (`warm_mean`: their
+    /// mean).
+    fn cold_start(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        v: &mut [f64],
+        lam: &mut [f64],
+        warm_mean: f64,
+    ) {
+        let (m, j) = (p.rows(), p.jacobian);
+        v.copy_from_slice(p.w);
+        j.mul(p.w, &mut self.s);
+        let mut min_s = f64::INFINITY;
+        let mut mean_abs = 0.0;
+        for (s, b) in self.s.iter_mut().zip(p.b) {
+            *s += b;
+            min_s = min_s.min(*s);
+            mean_abs += s.abs();
+        }
+        mean_abs /= m as f64;
+        let scale = if mean_abs > 0.0 { mean_abs } else { 1.0 };
+        let shift = (-1.5 * min_s).max(0.0);
+        self.s.iter_mut().for_each(|s| *s += shift);
+        let lam0 = scale.max(self.settings.warm_scale * warm_mean);
+        lam.iter_mut().for_each(|l| *l = lam0);
+        let sl: f64 = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum();
+        let (sum_s, sum_l): (f64, f64) = (self.s.iter().sum(), lam.iter().sum());
+        let (bump_s, bump_l) = (0.5 * sl / sum_l, 0.5 * sl / sum_s.max(f64::MIN_POSITIVE));
+        for (s, l) in self.s.iter_mut().zip(lam.iter_mut()) {
+            *s = (*s + bump_s).max(1e-8 * scale);
+            *l += bump_l;
+        }
+    }
+
+    /// The predictor–corrector iterations from the start in `v`, `self.s`, `lam` until the
+    /// certificate meets `target` or `budget` iterations are spent; the status and the
+    /// iterations.
+    fn iterate(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        (v, lam): (&mut [f64], &mut [f64]),
+        correctors: usize,
+        budget: usize,
+    ) -> (SolveStatus, usize) {
+        let (m, j) = (p.rows(), p.jacobian);
+        let tau = self.settings.step_fraction;
+        let level = self.settings.warm_iterate * target.gap;
+        let mut kept = false;
+        let mut iterations = 0;
+        let status = loop {
+            // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
+            let (wk, jt, coefs) = (
+                self.normal.workers(),
+                self.normal.transpose(),
+                j.coefficients(),
+            );
+            {
+                let (v, lam): (&[f64], &[f64]) = (v, lam);
+                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(coefs, lam, c));
+                let s = &self.s;
+                wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
+            }
+            // Once the residuals vanish the certificate is sᵀλ: below the target gap is
+            // when it is worth computing.
+            let sl = {
+                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
+                wk.sum(m, |i| s[i] * lam[i])
+            };
+            let last = iterations == budget;
+            if sl <= target.gap || last {
+                let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+                if c.gap <= target.gap && c.violation <= target.violation {
+                    break SolveStatus::Converged;
+                }
+                if last {
+                    break SolveStatus::MaxIterations;
+                }
+            }
+            if !kept && iterations > 0 && sl <= level {
+                kept = true;
+                self.keep_iterate(j, lam);
+            }
+            iterations += 1;
+            let mu = sl / m as f64;
+            {
+                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
+                self.normal.workers().map(&mut self.d, |i, _| lam[i] / s[i]);
+                // Predictor (affine scaling).
+                self.normal
+                    .workers()
+                    .map(&mut self.rc, |i, _| -s[i] * lam[i]);
+            }
+            if !self.normal.factorize(j, 1.0, &self.d) {
+                break SolveStatus::NumericalError;
+            }
+            self.direction(j, lam);
+            let wk = self.normal.workers();
+            let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
+            let alpha_aff = Self::max_step(wk, s, ds, lam, dl);
+            let lam_ref: &[f64] = lam;
+            let mu_aff = wk.sum(m, |i| {
+                (s[i] + alpha_aff * ds[i]) * (lam_ref[i] + alpha_aff * dl[i])
+            }) / m as f64;
+            // (μ = 0 only when sᵀλ underflowed: no centring then, not a NaN.)
+            let sigma = if mu > 0.0 {
+                (mu_aff / mu).clamp(0.0, 1.0).powi(3)
+            } else {
+                0.0
+            };
+            std::mem::swap(&mut self.ds, &mut self.ds_aff);
+            std::mem::swap(&mut self.dl, &mut self.dl_aff);
+            // Corrector (centring and second order).
+            {
+                let (s, dsa, dla) = (&self.s, &self.ds_aff, &self.dl_aff);
+                let lam: &[f64] = lam;
+                self.normal.workers().map(&mut self.rc, |i, _| {
+                    -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu
+                });
+            }
+            self.direction(j, lam);
+            let wk = self.normal.workers();
+            let mut alpha_max = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
+            for _ in 0..correctors {
+                if alpha_max >= 1.0 {
+                    break;
+                }
+                // Gondzio's centrality corrector: the products s∘λ at a longer trial step,
+                // pushed back into [0.1 σμ, 10 σμ] (the large ones by at most 10 σμ).
+                let trial = (1.5 * alpha_max).min(1.0);
+                let (lo, hi) = (0.1 * sigma * mu, 10.0 * sigma * mu);
+                {
+                    // The corrected right-hand side into the kept buffers, then the current
+                    // direction and right-hand side swapped there, in case the new one is
+                    // not taken.
+                    let (s, ds, dl, rc) = (&self.s, &self.ds, &self.dl, &self.rc);
+                    let lam: &[f64] = lam;
+                    self.normal.workers().map(&mut self.kept_m[2], |i, _| {
+                        let v = (s[i] + trial * ds[i]) * (lam[i] + trial * dl[i]);
+                        rc[i] + (v.clamp(lo, hi) - v).max(-hi)
+                    });
+                }
+                self.swap_kept();
+                self.direction(j, lam);
+                let wk = self.normal.workers();
+                let next = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
+                if next >= 1.01 * alpha_max && self.dv.iter().all(|x| x.is_finite()) {
+                    alpha_max = next;
+                } else {
+                    self.swap_kept();
+                    break;
+                }
+            }
+            let wk = self.normal.workers();
+            let alpha = tau * alpha_max;
+            if !(alpha > 0.0) || self.dv.iter().any(|x| !x.is_finite()) {
+                break SolveStatus::NumericalError;
+            }
+            let (dv, ds, dl) = (&self.dv, &self.ds, &self.dl);
+            wk.map(v, |k, x| x + alpha * dv[k]);
+            wk.map(&mut self.s, |i, x| x + alpha * ds[i]);
+            wk.map(lam, |i, x| x + alpha * dl[i]);
+        };
+        (status, iterations)
+    }
+
+    /// Keeps the iterate `(s, λ)` with its rows' keys for the next solve's start.
+    fn keep_iterate(&mut self, j: &ConstraintRows, lam: &[f64]) {
+        let keys = j.keys();
+        self.kept_iterate.clear();
+        self.kept_iterate
+            .extend((0..lam.len()).map(|i| (keys[i], self.s[i], lam[i])));
+        self.kept_iterate.sort_unstable_by_key(|e| e.0);
+    }
+
+    /// The start from the kept iterate (see [`InteriorPointSettings::warm_iterate`]): each row
+    /// found by its key takes its kept `s` and `λ`; a new row its slack at `w`, at least
+    /// `√μ` of the kept iterate, and `λ = μ / s`. Then `v = w + Jᵀλ` (no dual residual) and
+    /// each slack is raised to its row's slack at that `v` where that is larger (a contact
+    /// opening since). False, with nothing changed that the cold start does not overwrite,
+    /// when fewer than half of the rows are found.
+    fn kept_start(&mut self, p: &ProjectionProblem<'_>, v: &mut [f64], lam: &mut [f64]) -> bool {
+        let (m, j) = (p.rows(), p.jacobian);
+        let kept = &self.kept_iterate;
+        let mu = kept.iter().map(|e| e.1 * e.2).sum::<f64>() / kept.len() as f64;
+        if !(mu > 0.0 && mu.is_finite()) {
+            return false;
+        }
+        let keys = j.keys();
+        let mut found = 0;
+        for i in 0..m {
+            if let Ok(k) = kept.binary_search_by_key(&keys[i], |e| e.0) {
+                (self.s[i], lam[i]) = (kept[k].1, kept[k].2);
+                found += 1;
+            } else {
+                self.s[i] = (p.b[i] + row_dot(j, p.w, i)).max(mu.sqrt());
+                lam[i] = mu / self.s[i];
+            }
+        }
+        if 2 * found < m {
+            return false;
+        }
+        v.copy_from_slice(p.w);
+        j.mul_transpose_add(lam, v);
+        for i in 0..m {
+            self.s[i] = self.s[i].max(p.b[i] + row_dot(j, v, i));
+        }
+        true
+    }
+
     /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0` and `λ + αΔλ ≥ 0`.
     fn max_step(w: &Workers, s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
         let ratio = |x: f64, dx: f64| if dx < 0.0 { -x / dx } else { f64::INFINITY };
@@ -516,36 +766,6 @@ impl ProjectionSolver for InteriorPoint {
                 return Ok(report);
             }
         }
-        v.copy_from_slice(p.w);
-
-        // Starting point (Mehrotra's heuristic on v = w): shift the slacks of the
-        // unconstrained velocity into the interior, then balance s and λ. The caller's
-        // multipliers are not the start (measured on jammed crowds, starting from them cost
-        // 2–4× more iterations, benches/README.md); only their scale is, through
-        // `warm_scale`.
-        j.mul(p.w, &mut self.s);
-        let mut min_s = f64::INFINITY;
-        let mut mean_abs = 0.0;
-        for (s, b) in self.s.iter_mut().zip(p.b) {
-            *s += b;
-            min_s = min_s.min(*s);
-            mean_abs += s.abs();
-        }
-        mean_abs /= m as f64;
-        let scale = if mean_abs > 0.0 { mean_abs } else { 1.0 };
-        let shift = (-1.5 * min_s).max(0.0);
-        self.s.iter_mut().for_each(|s| *s += shift);
-        let lam0 = scale.max(self.settings.warm_scale * warm_mean);
-        lam.iter_mut().for_each(|l| *l = lam0);
-        let sl: f64 = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum();
-        let (sum_s, sum_l): (f64, f64) = (self.s.iter().sum(), lam.iter().sum());
-        let (bump_s, bump_l) = (0.5 * sl / sum_l, 0.5 * sl / sum_s.max(f64::MIN_POSITIVE));
-        for (s, l) in self.s.iter_mut().zip(lam.iter_mut()) {
-            *s = (*s + bump_s).max(1e-8 * scale);
-            *l += bump_l;
-        }
-
-        let tau = self.settings.step_fraction;
         let correctors = {
             let c = self.normal.counts();
             let dense =
@@ -556,116 +776,41 @@ impl ProjectionSolver for InteriorPoint {
                 0
             }
         };
-        let mut iterations = 0;
-        let status = loop {
-            // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
-            let (wk, jt, coefs) = (
-                self.normal.workers(),
-                self.normal.transpose(),
-                j.coefficients(),
-            );
-            {
-                let (v, lam): (&[f64], &[f64]) = (v, lam);
-                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(coefs, lam, c));
-                let s = &self.s;
-                wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
-            }
-            // Once the residuals vanish the certificate is sᵀλ: below the target gap is
-            // when it is worth computing.
-            let sl = {
-                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
-                wk.sum(m, |i| s[i] * lam[i])
-            };
-            let last = iterations == self.settings.max_iterations;
-            if sl <= target.gap || last {
-                let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
-                if c.gap <= target.gap && c.violation <= target.violation {
-                    break SolveStatus::Converged;
-                }
-                if last {
-                    break SolveStatus::MaxIterations;
-                }
-            }
-            iterations += 1;
-            let mu = sl / m as f64;
-            {
-                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
-                self.normal.workers().map(&mut self.d, |i, _| lam[i] / s[i]);
-                // Predictor (affine scaling).
-                self.normal
-                    .workers()
-                    .map(&mut self.rc, |i, _| -s[i] * lam[i]);
-            }
-            if !self.normal.factorize(j, 1.0, &self.d) {
-                break SolveStatus::NumericalError;
-            }
-            self.direction(j, lam);
-            let wk = self.normal.workers();
-            let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
-            let alpha_aff = Self::max_step(wk, s, ds, lam, dl);
-            let lam_ref: &[f64] = lam;
-            let mu_aff = wk.sum(m, |i| {
-                (s[i] + alpha_aff * ds[i]) * (lam_ref[i] + alpha_aff * dl[i])
-            }) / m as f64;
-            // (μ = 0 only when sᵀλ underflowed: no centring then, not a NaN.)
-            let sigma = if mu > 0.0 {
-                (mu_aff / mu).clamp(0.0, 1.0).powi(3)
-            } else {
-                0.0
-            };
-            std::mem::swap(&mut self.ds, &mut self.ds_aff);
-            std::mem::swap(&mut self.dl, &mut self.dl_aff);
-            // Corrector (centring and second order).
-            {
-                let (s, dsa, dla) = (&self.s, &self.ds_aff, &self.dl_aff);
-                let lam: &[f64] = lam;
-                self.normal.workers().map(&mut self.rc, |i, _| {
-                    -s[i] * lam[i] - dsa[i] * dla[i] + sigma * mu
-                });
-            }
-            self.direction(j, lam);
-            let wk = self.normal.workers();
-            let mut alpha_max = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
-            for _ in 0..correctors {
-                if alpha_max >= 1.0 {
-                    break;
-                }
-                // Gondzio's centrality corrector: the products s∘λ at a longer trial step,
-                // pushed back into [0.1 σμ, 10 σμ] (the large ones by at most 10 σμ).
-                let trial = (1.5 * alpha_max).min(1.0);
-                let (lo, hi) = (0.1 * sigma * mu, 10.0 * sigma * mu);
-                {
-                    // The corrected right-hand side into the kept buffers, then the current
-                    // direction and right-hand side swapped there, in case the new one is
-                    // not taken.
-                    let (s, ds, dl, rc) = (&self.s, &self.ds, &self.dl, &self.rc);
-                    let lam: &[f64] = lam;
-                    self.normal.workers().map(&mut self.kept_m[2], |i, _| {
-                        let v = (s[i] + trial * ds[i]) * (lam[i] + trial * dl[i]);
-                        rc[i] + (v.clamp(lo, hi) - v).max(-hi)
-                    });
-                }
-                self.swap_kept();
-                self.direction(j, lam);
-                let wk = self.normal.workers();
-                let next = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
-                if next >= 1.01 * alpha_max && self.dv.iter().all(|x| x.is_finite()) {
-                    alpha_max = next;
-                } else {
-                    self.swap_kept();
-                    break;
-                }
-            }
-            let wk = self.normal.workers();
-            let alpha = tau * alpha_max;
-            if !(alpha > 0.0) || self.dv.iter().any(|x| !x.is_finite()) {
-                break SolveStatus::NumericalError;
-            }
-            let (dv, ds, dl) = (&self.dv, &self.ds, &self.dl);
-            wk.map(v, |k, x| x + alpha * dv[k]);
-            wk.map(&mut self.s, |i, x| x + alpha * ds[i]);
-            wk.map(lam, |i, x| x + alpha * dl[i]);
+        // The kept iterate's start, unless the last ones lost (see `warm_iterate`); redone
+        // cold when it does not converge.
+        let kept = self.settings.warm_iterate > 0.0 && !self.kept_iterate.is_empty();
+        let from_kept = if kept && self.warm_skips > 0 {
+            self.warm_skips -= 1;
+            false
+        } else {
+            kept && self.kept_start(p, v, lam)
         };
+        // A start from the kept iterate that takes twice the last cold start's iterations
+        // has lost already: it is stopped there and redone cold.
+        let max = self.settings.max_iterations;
+        let (mut status, mut iterations) = if from_kept {
+            let budget = self.cold_iterations.map_or(max, |c| (2 * c).clamp(1, max));
+            self.iterate(p, target, (v, lam), correctors, budget)
+        } else {
+            (SolveStatus::MaxIterations, 0)
+        };
+        if from_kept {
+            let lost = !status.is_converged()
+                || self.cold_iterations.is_some_and(|cold| iterations >= cold);
+            self.warm_failures = if lost {
+                (self.warm_failures + 1).min(6)
+            } else {
+                0
+            };
+            self.warm_skips = (1 << self.warm_failures) - 1;
+        }
+        if !from_kept || !status.is_converged() {
+            self.cold_start(p, v, lam, warm_mean);
+            let (cold_status, cold_iterations) = self.iterate(p, target, (v, lam), correctors, max);
+            status = cold_status;
+            iterations += cold_iterations;
+            self.cold_iterations = Some(cold_iterations);
+        }
         let cert = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
         // Active: rows whose multiplier dominates their slack (complementarity decides).
         let active = (0..m).filter(|&i| lam[i] > self.s[i]).count();
@@ -682,7 +827,62 @@ impl ProjectionSolver for InteriorPoint {
         self.normal.times().since(times).report_into(&mut report);
         Ok(report)
     }
+
+    /// `[last_changes, polish_failures, polish_skips, cold_iterations, warm_failures,
+    /// warm_skips, (key_high, key_low, s, λ) of each row of the kept iterate…]`: what decides
+    /// the next solve's polish and start (`-1` for none yet; each key in two 32-bit halves,
+    /// exact in an f64).
+    fn memory(&self) -> Vec<f64> {
+        let mut memory = Vec::with_capacity(MEMORY_HEAD + 4 * self.kept_iterate.len());
+        memory.extend([
+            self.last_changes.unwrap_or(-1.0),
+            self.polish_failures as f64,
+            self.polish_skips as f64,
+            self.cold_iterations.map_or(-1.0, |c| c as f64),
+            self.warm_failures as f64,
+            self.warm_skips as f64,
+        ]);
+        for &(key, s, l) in &self.kept_iterate {
+            memory.extend([(key >> 32) as f64, (key as u32) as f64, s, l]);
+        }
+        memory
+    }
+
+    /// Takes what [`memory`](Self::memory) gave; anything else leaves the solver as new.
+    fn set_memory(&mut self, memory: &[f64]) {
+        let count = |x: f64| (x >= 0.0 && x.fract() == 0.0).then_some(x as usize);
+        self.last_changes = None;
+        (self.polish_failures, self.polish_skips) = (0, 0);
+        (self.cold_iterations, self.warm_failures, self.warm_skips) = (None, 0, 0);
+        self.kept_iterate.clear();
+        let (Some(head), Some(rows)) = (
+            memory.get(..MEMORY_HEAD),
+            memory.get(MEMORY_HEAD..).filter(|r| r.len() % 4 == 0),
+        ) else {
+            return;
+        };
+        let (Some(pf), Some(ps), Some(wf), Some(ws)) = (
+            count(head[1]),
+            count(head[2]),
+            count(head[4]),
+            count(head[5]),
+        ) else {
+            return;
+        };
+        self.last_changes = (head[0] >= 0.0).then_some(head[0]);
+        (self.polish_failures, self.polish_skips) = ((pf as u32).min(6), ps);
+        self.cold_iterations = count(head[3]);
+        (self.warm_failures, self.warm_skips) = ((wf as u32).min(6), ws);
+        self.kept_iterate.extend(
+            rows.chunks_exact(4)
+                .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2], r[3])),
+        );
+        self.kept_iterate.sort_unstable_by_key(|e| e.0);
+    }
 }
+
+/// Numbers before the kept iterate's rows in [`InteriorPoint`]'s memory.
+const MEMORY_HEAD: usize = 6;
 
 #[cfg(test)]
 mod tests {
