@@ -64,52 +64,62 @@ impl ConstraintRows {
     }
 
     /// Number of rows (assembled constraints).
+    #[inline]
     pub fn len(&self) -> usize {
         self.values.len()
     }
 
     /// True when no constraint is assembled.
+    #[inline]
     pub fn is_empty(&self) -> bool {
         self.values.is_empty()
     }
 
     /// Dimension of the unknowns (number of columns).
+    #[inline]
     pub fn dim(&self) -> usize {
         self.dim
     }
 
     /// The constraint values `g_i`.
+    #[inline]
     pub fn values(&self) -> &[f64] {
         &self.values
     }
 
     /// The constraint identities.
+    #[inline]
     pub fn keys(&self) -> &[ConstraintKey] {
         &self.keys
     }
 
     /// Row `i` of the Jacobian: its columns and coefficients.
+    #[inline]
     pub fn row(&self, i: usize) -> (&[usize], &[f64]) {
         let (a, b) = (self.row_start[i], self.row_start[i + 1]);
         (&self.cols[a..b], &self.coefs[a..b])
     }
 
     /// Where each row starts in [`ConstraintRows::columns`] (one more entry than rows).
+    #[inline]
     pub fn row_starts(&self) -> &[usize] {
         &self.row_start
     }
 
     /// The columns of all gradient entries, row after row.
+    #[inline]
     pub fn columns(&self) -> &[usize] {
         &self.cols
     }
 
     /// The coefficients of all gradient entries, row after row.
+    #[inline]
     pub fn coefficients(&self) -> &[f64] {
         &self.coefs
     }
 
     /// Number of stored gradient entries.
+    #[inline]
     pub fn nnz(&self) -> usize {
         self.cols.len()
     }
@@ -138,6 +148,7 @@ impl ConstraintRows {
     }
 
     /// `|∇g_i|²` for row `i`.
+    #[inline]
     pub fn row_norm_sq(&self, i: usize) -> f64 {
         self.row(i).1.iter().map(|a| a * a).sum()
     }
