@@ -69,11 +69,13 @@ pub struct InteriorPointSettings {
     /// from it (rows matched by key; a new row at its slack at `w`), with `v = w + Jᵀλ` and
     /// each slack raised to the row's slack at that `v`. Gondzio and Grothey's re-optimization
     /// start: the iterations that take `sᵀλ` from the cold start's down to that level are
-    /// skipped while the problem moves little (cromosim's scene: 13–14 iterations a solve →
-    /// 8–10). Where it moves more than that iterate's centrality allows (a jam of a dense
-    /// hall) it costs iterations instead: a start from it that takes at least as many
-    /// iterations as the last cold start makes the next `2ᵏ − 1` solves start cold after `k`
-    /// such losses in a row (`k ≤ 6`), and one that does not converge is redone cold.
+    /// skipped while the problem moves little (cromosim's scene: 11.8 iterations a solve →
+    /// 9.1; 10⁷ and 10¹⁰ did as well there, but 10⁷ lost on the crush of 40,000 and gained
+    /// nothing in jams, benches/README.md, session 13). Where the problem moves more than that
+    /// iterate's centrality allows it costs iterations instead: a start from it that takes at
+    /// least as many iterations as the last cold start makes the next `2ᵏ − 1` solves start
+    /// cold after `k` such losses in a row (`k ≤ 6`), and one that has not converged within
+    /// twice those iterations is redone cold.
     pub warm_iterate: f64,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential).
@@ -91,7 +93,7 @@ impl Default for InteriorPointSettings {
             polish_penalty: 1e6,
             polish_changes: 0.005,
             polish_updates: 4,
-            warm_iterate: 1e7,
+            warm_iterate: 1e9,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }

@@ -1505,7 +1505,7 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
         rep.iterations
     };
     let (mut kept, mut cold) = (
-        InteriorPoint::new(settings(1e7)).unwrap(),
+        InteriorPoint::new(settings(1e9)).unwrap(),
         InteriorPoint::new(settings(0.0)).unwrap(),
     );
     let (mut kept_sol, mut cold_sol) =
@@ -1523,7 +1523,7 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
         "kept {kept_its:?} against Mehrotra's start {cold_its:?}"
     );
     // Restored from the memory, a new solver answers the next pushes as the first does.
-    let mut restored = InteriorPoint::new(settings(1e7)).unwrap();
+    let mut restored = InteriorPoint::new(settings(1e9)).unwrap();
     restored.set_memory(&kept.memory());
     let mut restored_sol = kept_sol.clone();
     for k in 4..8 {
@@ -1533,7 +1533,7 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
         assert_eq!(kept_sol, restored_sol, "push {k}");
     }
     // A memory that is not one leaves the solver as new (its first solve is cold).
-    let mut fresh = InteriorPoint::new(settings(1e7)).unwrap();
+    let mut fresh = InteriorPoint::new(settings(1e9)).unwrap();
     fresh.set_memory(&[1.0, 2.0, f64::NAN]);
     assert!(fresh.memory().len() == 6, "{:?}", fresh.memory());
     let mut fresh_sol = ProjectionSolution::default();
