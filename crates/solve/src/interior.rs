@@ -638,15 +638,22 @@ impl InteriorPoint {
     fn kept_start(&mut self, p: &ProjectionProblem<'_>, v: &mut [f64], lam: &mut [f64]) -> bool {
         let (m, j) = (p.rows(), p.jacobian);
         let kept = &self.kept_iterate;
-        let mu = kept.iter().map(|e| e.1 * e.2).sum::<f64>() / kept.len() as f64;
-        if !(mu > 0.0 && mu.is_finite()) {
+        // (A kept pair is strictly positive unless a memory was damaged: then as new.)
+        let inside = |x: f64| x > 0.0 && x.is_finite();
+        let (sum, count) = kept
+            .iter()
+            .filter(|e| inside(e.1) && inside(e.2))
+            .fold((0.0, 0usize), |(sum, n), e| (sum + e.1 * e.2, n + 1));
+        let mu = sum / count as f64;
+        if !inside(mu) {
             return false;
         }
         let keys = j.keys();
         let mut found = 0;
         for i in 0..m {
-            if let Ok(k) = kept.binary_search_by_key(&keys[i], |e| e.0) {
-                (self.s[i], lam[i]) = (kept[k].1, kept[k].2);
+            let at = kept.binary_search_by_key(&keys[i], |e| e.0).ok();
+            if let Some(&(_, s, l)) = at.map(|k| &kept[k]).filter(|e| inside(e.1) && inside(e.2)) {
+                (self.s[i], lam[i]) = (s, l);
                 found += 1;
             } else {
                 self.s[i] = (p.b[i] + row_dot(j, p.w, i)).max(mu.sqrt());

@@ -1532,6 +1532,18 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
         assert_eq!(a, b, "push {k}");
         assert_eq!(kept_sol, restored_sol, "push {k}");
     }
+    // A damaged row of the kept iterate (its multiplier not a number) starts as a new row:
+    // the start from the rest still pays, from zero multipliers as from the previous ones.
+    let mut memory = kept.memory();
+    memory[6 + 3] = f64::NAN;
+    let mut damaged = InteriorPoint::new(settings(1e9)).unwrap();
+    damaged.set_memory(&memory);
+    let its = run(&mut damaged, &mut ProjectionSolution::default(), 7);
+    assert!(
+        its < cold_its[0],
+        "{its} iterations from a damaged kept iterate, {} from Mehrotra's start",
+        cold_its[0]
+    );
     // A memory that is not one leaves the solver as new (its first solve is cold).
     let mut fresh = InteriorPoint::new(settings(1e9)).unwrap();
     fresh.set_memory(&[1.0, 2.0, f64::NAN]);
