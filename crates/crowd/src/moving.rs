@@ -158,7 +158,7 @@ pub struct MovingBodies {
 
 impl MovingBodies {
     /// The bodies of `scene` (validated): its `[[moving]]` ones, then a panel for every exit
-    /// that `closes` or `opens` (see [`exit_panel`]).
+    /// that `closes` or `opens` (see `exit_panel`).
     pub fn new(scene: &Scene) -> Self {
         let all: Vec<MovingBody> = scene
             .moving
