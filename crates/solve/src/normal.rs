@@ -111,6 +111,7 @@ struct NormalPattern {
     // scratch for building
     count: Vec<usize>,
     fill: Vec<Index>,
+    row_groups: Vec<usize>,
 }
 
 /// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
@@ -123,6 +124,32 @@ fn for_each_product(j: &ConstraintRows, mut f: impl FnMut(usize, usize)) {
                 if ca >= cb {
                     f(ca, cb);
                 }
+            }
+        }
+    }
+}
+
+/// Calls `f(a, b)` once per row for each pair `a ≠ b` of the distinct values `group(c)`
+/// takes on that row's columns (`seen` is scratch): the off-diagonal entries of the pattern of
+/// `Jᵀ J` compressed by `group`, a row between two disks one pair where
+/// [`for_each_product`] visits its ten products.
+fn for_each_pair_of(
+    j: &ConstraintRows,
+    group: impl Fn(usize) -> usize,
+    seen: &mut Vec<usize>,
+    mut f: impl FnMut(usize, usize),
+) {
+    for i in 0..j.len() {
+        seen.clear();
+        for &c in j.row(i).0 {
+            let g = group(c);
+            if !seen.contains(&g) {
+                seen.push(g);
+            }
+        }
+        for (k, &a) in seen.iter().enumerate() {
+            for &b in &seen[k + 1..] {
+                f(a, b);
             }
         }
     }
@@ -148,7 +175,7 @@ fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
 /// `visit` is called twice (a count, then a fill); `count` and `fill` are scratch.
 fn sorted_columns(
     n: usize,
-    visit: impl Fn(&mut dyn FnMut(usize, usize)),
+    mut visit: impl FnMut(&mut dyn FnMut(usize, usize)),
     (count, fill): (&mut Vec<usize>, &mut Vec<Index>),
     ptr: &mut Vec<Index>,
     rows: &mut Vec<Index>,
@@ -214,18 +241,30 @@ impl NormalPattern {
             let (lo, hi) = if pa <= pb { (pa, pb) } else { (pb, pa) };
             if upper { (lo, hi) } else { (hi, lo) } // (row, column)
         };
+        // Without slots only the pattern is wanted: each row's distinct pairs of positions
+        // (the diagonal is always in it), not every product.
+        let mut seen = std::mem::take(&mut self.row_groups);
         sorted_columns(
             n,
             |f| {
-                for_each_product(j, |ca, cb| {
-                    let (r, c) = place(ca, cb);
-                    f(r, c)
-                })
+                if slots {
+                    for_each_product(j, |ca, cb| {
+                        let (r, c) = place(ca, cb);
+                        f(r, c)
+                    })
+                } else {
+                    let group = |c: usize| at.map_or(c, |at| at[c]);
+                    for_each_pair_of(j, group, &mut seen, |a, b| {
+                        let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+                        if upper { f(lo, hi) } else { f(hi, lo) }
+                    })
+                }
             },
             (&mut self.count, &mut self.fill),
             &mut self.col_ptr,
             &mut self.row_idx,
         );
+        self.row_groups = seen;
         self.value_len = self.row_idx.len();
         self.diag.clear();
         self.slots.clear();
@@ -270,20 +309,15 @@ impl NormalPattern {
         self.row_idx.clear();
         // The off-diagonal blocks by column, behind each column's diagonal block.
         let mut blocks = BlockPattern::default();
+        let mut seen = std::mem::take(&mut self.row_groups);
         sorted_columns(
             nb,
-            |f| {
-                for_each_product(j, |ca, cb| {
-                    let (a, b) = (at[ca] / 2, at[cb] / 2);
-                    if a != b {
-                        f(a.max(b), a.min(b))
-                    }
-                })
-            },
+            |f| for_each_pair_of(j, |c| at[c] / 2, &mut seen, |a, b| f(a.max(b), a.min(b))),
             (&mut self.count, &mut self.fill),
             &mut blocks.ptr,
             &mut blocks.row,
         );
+        self.row_groups = seen;
         // The diagonal: (0, 0) or (1, 1) of the first block of its column.
         self.diag.clear();
         for &q in &at[..n] {
