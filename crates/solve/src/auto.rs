@@ -273,8 +273,9 @@ impl ProjectionSolver for AutoSolver {
         }
         let (last_change, rows, interiors) = match memory {
             [layout, last_change, given_up, rest @ ..] if *layout == MEMORY_LAYOUT => {
-                let g = *given_up as usize;
-                match (rest.get(..3 * g), rest.get(3 * g..)) {
+                // (`as` saturates; a damaged count finds no rows and restores nothing.)
+                let rows = (*given_up as usize).checked_mul(3).unwrap_or(usize::MAX);
+                match (rest.get(..rows), rest.get(rows..)) {
                     (Some(rows), Some(interiors)) => (*last_change, rows, interiors),
                     _ => (-1.0, &[][..], &[][..]),
                 }
@@ -589,6 +590,12 @@ mod tests {
         assert!(restored.given_up.is_empty());
         assert_eq!(restored.last_change, 0.5);
         restored.set_memory(&[-1.0]);
+        assert_eq!(restored.last_change, f64::INFINITY);
+        // A damaged count of rows given up restores nothing (and does not overflow).
+        let mut damaged = memory.clone();
+        damaged[2] = 1e300;
+        restored.set_memory(&damaged);
+        assert!(restored.given_up.is_empty());
         assert_eq!(restored.last_change, f64::INFINITY);
     }
 }
