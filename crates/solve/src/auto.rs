@@ -274,7 +274,7 @@ impl ProjectionSolver for AutoSolver {
         let (last_change, rows, interiors) = match memory {
             [layout, last_change, given_up, rest @ ..] if *layout == MEMORY_LAYOUT => {
                 // (`as` saturates; a damaged count finds no rows and restores nothing.)
-                let rows = (*given_up as usize).checked_mul(3).unwrap_or(usize::MAX);
+                let rows = (*given_up as usize).saturating_mul(3);
                 match (rest.get(..rows), rest.get(rows..)) {
                     (Some(rows), Some(interiors)) => (*last_change, rows, interiors),
                     _ => (-1.0, &[][..], &[][..]),
