@@ -257,16 +257,39 @@ pub struct InteriorPoint {
     warm: Vec<f64>,
     warm_floor: f64,
     last_changes: Option<f64>,
-    // Polishes that failed in a row, and the settled solves still to skip because of them.
-    polish_failures: u32,
-    polish_skips: usize,
+    // when the polish is tried
+    polish_backoff: BackOff,
     // The iterate kept for the next start (row key, s, λ; sorted by key), the iterations of
-    // the last cold start, and the kept-iterate starts that lost in a row and the solves still
-    // to start cold because of them.
+    // the last cold start, and when a start from the kept iterate is tried.
     kept_iterate: Vec<(ConstraintKey, f64, f64)>,
     cold_iterations: Option<usize>,
-    warm_failures: u32,
-    warm_skips: usize,
+    kept_backoff: BackOff,
+}
+
+/// An attempt that may lose (the polish, the kept iterate's start): after `k` losses in a
+/// row, the next `2ᵏ − 1` chances to try it are skipped (`k ≤ 6`): where it keeps losing it
+/// costs an attempt every ~2ᵏ solves, not every solve.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct BackOff {
+    losses: u32,
+    skips: usize,
+}
+
+impl BackOff {
+    /// Whether to try now; a chance not taken counts down the skips.
+    fn allows(&mut self) -> bool {
+        if self.skips > 0 {
+            self.skips -= 1;
+            return false;
+        }
+        true
+    }
+
+    /// The outcome of an attempt.
+    fn record(&mut self, won: bool) {
+        self.losses = if won { 0 } else { (self.losses + 1).min(6) };
+        self.skips = (1 << self.losses) - 1;
+    }
 }
 
 impl InteriorPoint {
@@ -293,12 +316,10 @@ impl InteriorPoint {
             warm: Vec::new(),
             warm_floor: 0.0,
             last_changes: None,
-            polish_failures: 0,
-            polish_skips: 0,
+            polish_backoff: BackOff::default(),
             kept_iterate: Vec::new(),
             cold_iterations: None,
-            warm_failures: 0,
-            warm_skips: 0,
+            kept_backoff: BackOff::default(),
         })
     }
 
@@ -747,19 +768,11 @@ impl ProjectionSolver for InteriorPoint {
             .last_changes
             .is_some_and(|c| c <= self.settings.polish_changes);
         let tried = self.settings.polish_penalty > 0.0 && warm_mean > 0.0 && settled;
-        if tried && self.polish_skips > 0 {
-            self.polish_skips -= 1;
-        } else if tried {
+        if tried && self.polish_backoff.allows() {
+            // Backed off where it keeps failing (a crush of 40,000 whose contacts still open
+            // and close by the handful).
             let polished = self.polish(p, target, v, lam);
-            // After k failures in a row the next 2ᵏ − 1 settled solves skip it (at most 63):
-            // where it keeps failing (a crush of 40,000 whose contacts still open and close
-            // by the handful) it costs a factorization every ~2ᵏ solves, not every solve.
-            self.polish_failures = if polished.is_some() {
-                0
-            } else {
-                (self.polish_failures + 1).min(6)
-            };
-            self.polish_skips = (1 << self.polish_failures) - 1;
+            self.polish_backoff.record(polished.is_some());
             if let Some(cert) = polished {
                 self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
                 let mut report = SolveReport {
@@ -788,12 +801,7 @@ impl ProjectionSolver for InteriorPoint {
         // The kept iterate's start, unless the last ones lost (see `warm_iterate`); redone
         // cold when it does not converge.
         let kept = self.settings.warm_iterate > 0.0 && !self.kept_iterate.is_empty();
-        let from_kept = if kept && self.warm_skips > 0 {
-            self.warm_skips -= 1;
-            false
-        } else {
-            kept && self.kept_start(p, v, lam)
-        };
+        let from_kept = kept && self.kept_backoff.allows() && self.kept_start(p, v, lam);
         // A start from the kept iterate that takes twice the last cold start's iterations
         // has lost already: it is stopped there and redone cold.
         let max = self.settings.max_iterations;
@@ -806,12 +814,7 @@ impl ProjectionSolver for InteriorPoint {
         if from_kept {
             let lost = !status.is_converged()
                 || self.cold_iterations.is_some_and(|cold| iterations >= cold);
-            self.warm_failures = if lost {
-                (self.warm_failures + 1).min(6)
-            } else {
-                0
-            };
-            self.warm_skips = (1 << self.warm_failures) - 1;
+            self.kept_backoff.record(!lost);
         }
         if !from_kept || !status.is_converged() {
             self.cold_start(p, v, lam, warm_mean);
@@ -837,19 +840,19 @@ impl ProjectionSolver for InteriorPoint {
         Ok(report)
     }
 
-    /// `[last_changes, polish_failures, polish_skips, cold_iterations, warm_failures,
-    /// warm_skips, (key_high, key_low, s, λ) of each row of the kept iterate…]`: what decides
+    /// `[last_changes, the polish's losses and skips, cold_iterations, the kept start's losses
+    /// and skips, (key_high, key_low, s, λ) of each row of the kept iterate…]`: what decides
     /// the next solve's polish and start (`-1` for none yet; each key in two 32-bit halves,
     /// exact in an f64).
     fn memory(&self) -> Vec<f64> {
         let mut memory = Vec::with_capacity(MEMORY_HEAD + 4 * self.kept_iterate.len());
         memory.extend([
             self.last_changes.unwrap_or(-1.0),
-            self.polish_failures as f64,
-            self.polish_skips as f64,
+            self.polish_backoff.losses as f64,
+            self.polish_backoff.skips as f64,
             self.cold_iterations.map_or(-1.0, |c| c as f64),
-            self.warm_failures as f64,
-            self.warm_skips as f64,
+            self.kept_backoff.losses as f64,
+            self.kept_backoff.skips as f64,
         ]);
         for &(key, s, l) in &self.kept_iterate {
             memory.extend([(key >> 32) as f64, (key as u32) as f64, s, l]);
@@ -861,8 +864,8 @@ impl ProjectionSolver for InteriorPoint {
     fn set_memory(&mut self, memory: &[f64]) {
         let count = |x: f64| (x >= 0.0 && x.fract() == 0.0).then_some(x as usize);
         self.last_changes = None;
-        (self.polish_failures, self.polish_skips) = (0, 0);
-        (self.cold_iterations, self.warm_failures, self.warm_skips) = (None, 0, 0);
+        self.polish_backoff = BackOff::default();
+        (self.cold_iterations, self.kept_backoff) = (None, BackOff::default());
         self.kept_iterate.clear();
         let (Some(head), Some(rows)) = (
             memory.get(..MEMORY_HEAD),
@@ -879,9 +882,15 @@ impl ProjectionSolver for InteriorPoint {
             return;
         };
         self.last_changes = (head[0] >= 0.0).then_some(head[0]);
-        (self.polish_failures, self.polish_skips) = ((pf as u32).min(6), ps);
+        self.polish_backoff = BackOff {
+            losses: (pf as u32).min(6),
+            skips: ps,
+        };
         self.cold_iterations = count(head[3]);
-        (self.warm_failures, self.warm_skips) = ((wf as u32).min(6), ws);
+        self.kept_backoff = BackOff {
+            losses: (wf as u32).min(6),
+            skips: ws,
+        };
         self.kept_iterate.extend(
             rows.chunks_exact(4)
                 .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2], r[3])),
