@@ -254,6 +254,99 @@ impl BroadPhase for TreeBroadPhase {
     }
 }
 
+/// A Verlet list over a backend: the backend's pairs at a wider margin (the skin), kept from
+/// call to call and filtered by the exact gap test while nobody has moved far enough to close
+/// the skin. A gap moves by at most the two people's displacements, so a pair within `margin`
+/// now was within `margin + 2 × the farthest anyone moved` when the list was built; while that
+/// stays inside the built margin the list holds every pair, and the exact test on it gives
+/// the very pairs (and order) of the backend alone.
+#[derive(Debug)]
+pub struct VerletList {
+    inner: Box<dyn BroadPhase>,
+    candidates: Vec<(u32, u32)>,
+    built_pos: Vec<f64>,
+    built_radius: Vec<f64>,
+    /// The margin the candidates hold; NaN before the first build.
+    built_margin: f64,
+    builds: usize,
+}
+
+impl VerletList {
+    /// A list kept over `inner`'s pairs.
+    pub fn new(inner: Box<dyn BroadPhase>) -> Self {
+        Self {
+            inner,
+            candidates: Vec::new(),
+            built_pos: Vec::new(),
+            built_radius: Vec::new(),
+            built_margin: f64::NAN,
+            builds: 0,
+        }
+    }
+
+    /// How many times the backend was asked for pairs.
+    pub fn builds(&self) -> usize {
+        self.builds
+    }
+
+    /// True when the candidates hold every pair within `margin` at `pos`: the same people
+    /// (radii, bit for bit) and `margin + 2 max |q − q_built|` (with room for rounding)
+    /// inside the built margin.
+    fn holds(&self, pos: &[f64], radius: &[f64], margin: f64) -> bool {
+        if pos.len() != self.built_pos.len()
+            || radius.len() != self.built_radius.len()
+            || radius
+                .iter()
+                .zip(&self.built_radius)
+                .any(|(a, b)| a.to_bits() != b.to_bits())
+        {
+            return false;
+        }
+        let (mut moved2, mut scale) = (0.0f64, 0.0f64);
+        for (a, b) in pos.chunks_exact(2).zip(self.built_pos.chunks_exact(2)) {
+            let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+            let d2 = dx * dx + dy * dy;
+            // NaN makes the answer false.
+            if !(d2 <= moved2) {
+                moved2 = d2;
+            }
+            scale = scale.max(a[0].abs()).max(a[1].abs());
+        }
+        let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
+        let rounding = 1e-12 * (1.0 + scale + rmax);
+        margin + 2.0 * moved2.sqrt() * (1.0 + 1e-9) + rounding <= self.built_margin
+    }
+}
+
+impl BroadPhase for VerletList {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+
+    fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>) {
+        if !self.holds(pos, radius, margin) {
+            // The skin: twice the margin (a few steps of the fastest walker, by the crowd's
+            // margin), and at least half the largest radius.
+            let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
+            let skin = (2.0 * margin).max(0.5 * rmax);
+            self.built_margin = margin.max(0.0) + skin;
+            self.inner
+                .pairs(pos, radius, self.built_margin, &mut self.candidates);
+            self.built_pos.clear();
+            self.built_pos.extend_from_slice(pos);
+            self.built_radius.clear();
+            self.built_radius.extend_from_slice(radius);
+            self.builds += 1;
+        }
+        out.clear();
+        out.extend(
+            self.candidates
+                .iter()
+                .filter(|&&(i, j)| close(pos, radius, i as usize, j as usize, margin)),
+        );
+    }
+}
+
 /// Which backend a scene gets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BroadPhaseKind {
@@ -274,11 +367,12 @@ pub fn choose_broad_phase(min_radius: f64, max_radius: f64) -> BroadPhaseKind {
 }
 
 impl BroadPhaseKind {
-    /// A fresh backend of this kind.
+    /// A fresh backend of this kind, under a [`VerletList`].
     pub fn build(self) -> Box<dyn BroadPhase> {
-        match self {
+        let inner: Box<dyn BroadPhase> = match self {
             BroadPhaseKind::Grid => Box::new(CellGrid::default()),
             BroadPhaseKind::Bvh => Box::new(TreeBroadPhase::default()),
-        }
+        };
+        Box::new(VerletList::new(inner))
     }
 }

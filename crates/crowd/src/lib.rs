@@ -27,7 +27,8 @@ mod walls;
 mod wkt;
 
 pub use broad::{
-    BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, choose_broad_phase,
+    BroadPhase, BroadPhaseKind, BruteForce, CellGrid, TreeBroadPhase, VerletList,
+    choose_broad_phase,
 };
 pub use contacts::{
     ContactKind, ContactQuery, ContactSource, ContactSources, CrowdContacts, PersonPairs,

@@ -1,6 +1,6 @@
-//! Both broad-phase backends return exactly the brute-force pair set on random scenes.
+//! Both broad-phase backends, and the Verlet list over them, return exactly the brute-force pair set.
 
-use moreau_crowd::{BroadPhase, BruteForce, CellGrid, TreeBroadPhase};
+use moreau_crowd::{BroadPhase, BruteForce, CellGrid, TreeBroadPhase, VerletList};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -59,4 +59,46 @@ fn one_huge_disk_among_tiny_ones_is_found_by_both() {
     assert!(a.iter().filter(|p| p.0 == 0).count() == 50);
     assert_eq!(a, b);
     assert_eq!(a, c);
+}
+
+#[test]
+fn a_verlet_list_returns_the_brute_force_pairs_as_people_move_and_leave() {
+    // A crowd walking in small random steps, sometimes a long one, sometimes one person
+    // fewer, with the crowd's kind of margins (and the negative one of the check after a
+    // step): the kept list must give exactly the brute-force pairs every time.
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for backend in 0..2 {
+        let inner: Box<dyn BroadPhase> = if backend == 0 {
+            Box::new(CellGrid::default())
+        } else {
+            Box::new(TreeBroadPhase::default())
+        };
+        let mut verlet = VerletList::new(inner);
+        let n0 = 300;
+        let mut pos: Vec<f64> = (0..2 * n0).map(|_| rng.random_range(0.0..10.0)).collect();
+        let mut radius: Vec<f64> = (0..n0).map(|_| rng.random_range(0.2..0.3)).collect();
+        let (mut want, mut got) = (Vec::new(), Vec::new());
+        let mut total = 0;
+        let calls = 200;
+        for call in 0..calls {
+            let step = if call % 37 == 36 { 0.3 } else { 0.012 };
+            for x in pos.iter_mut() {
+                *x += rng.random_range(-step..step);
+            }
+            if call % 50 == 49 {
+                let k = rng.random_range(0..radius.len());
+                radius.remove(k);
+                pos.drain(2 * k..2 * k + 2);
+            }
+            let margin = [0.04, 0.05, -1e-9, 0.02][call % 4];
+            BruteForce.pairs(&pos, &radius, margin, &mut want);
+            verlet.pairs(&pos, &radius, margin, &mut got);
+            assert_eq!(want, got, "backend {backend}, call {call}");
+            total += want.len();
+        }
+        assert!(total > 50 * calls, "{total}");
+        // The list was kept most of the time (each build is the backend's full search).
+        assert!(verlet.builds() < calls / 3, "{} builds", verlet.builds());
+        assert!(verlet.builds() > 4, "{} builds", verlet.builds());
+    }
 }
