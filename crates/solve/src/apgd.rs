@@ -159,8 +159,7 @@ impl Apgd {
         u: &mut [f64],
         s: &mut [f64],
     ) {
-        let coefs = p.jacobian.coefficients();
-        w.map(u, |c, _| jt.dot(coefs, lam, c));
+        w.map(u, |c, _| jt.dot(lam, c));
         let u: &[f64] = u;
         w.map(s, |i, _| p.b[i] + row_dot_sum(p.jacobian, p.w, u, i));
     }

@@ -366,13 +366,8 @@ impl InteriorPoint {
         let (s, d, rp, rc) = (&self.s, &self.d, &self.rp, &self.rc);
         w.map(&mut self.scratch_m, |i, _| rc[i] / s[i] + d[i] * rp[i]);
         // Δv's right-hand side −r_d + Jᵀ(r_c/s + D r_p) in natural order.
-        let (y, rd, jt, coefs) = (
-            &self.scratch_m,
-            &self.rd,
-            self.normal.transpose(),
-            j.coefficients(),
-        );
-        w.map(&mut self.dv, |c, _| jt.dot(coefs, y, c) - rd[c]);
+        let (y, rd, jt) = (&self.scratch_m, &self.rd, self.normal.transpose());
+        w.map(&mut self.dv, |c, _| jt.dot(y, c) - rd[c]);
         self.normal.solve_in_place(&mut self.dv);
         let w = self.normal.workers();
         let dv = &self.dv;
@@ -423,8 +418,8 @@ impl InteriorPoint {
                 let lam: &[f64] = lam;
                 wk.map(&mut self.scratch_m, |i, _| lam[i] - d[i] * p.b[i]);
             }
-            let (y, jt, coefs) = (&self.scratch_m, self.normal.transpose(), j.coefficients());
-            wk.map(&mut self.dv, |c, _| p.w[c] + jt.dot(coefs, y, c));
+            let (y, jt) = (&self.scratch_m, self.normal.transpose());
+            wk.map(&mut self.dv, |c, _| p.w[c] + jt.dot(y, c));
             self.normal.solve_in_place(&mut self.dv);
             let (wk, d, dv) = (self.normal.workers(), &self.d, &self.dv);
             wk.map(&mut self.rp, |i, _| {
@@ -527,14 +522,10 @@ impl InteriorPoint {
         let mut iterations = 0;
         let status = loop {
             // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
-            let (wk, jt, coefs) = (
-                self.normal.workers(),
-                self.normal.transpose(),
-                j.coefficients(),
-            );
+            let (wk, jt) = (self.normal.workers(), self.normal.transpose());
             {
                 let (v, lam): (&[f64], &[f64]) = (v, lam);
-                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(coefs, lam, c));
+                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(lam, c));
                 let s = &self.s;
                 wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
             }

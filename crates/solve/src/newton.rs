@@ -321,8 +321,8 @@ impl Newton {
         });
         let y = &self.y;
         w.map(&mut self.yhat, |i, _| y[i].max(0.0));
-        let (yhat, jt, coefs) = (&self.yhat, self.normal.transpose(), j.coefficients());
-        w.map(&mut self.g, |c, _| v[c] - p.w[c] - jt.dot(coefs, yhat, c));
+        let (yhat, jt) = (&self.yhat, self.normal.transpose());
+        w.map(&mut self.g, |c, _| v[c] - p.w[c] - jt.dot(yhat, c));
         let g = &self.g;
         let gap =
             0.5 * w.sum(g.len(), |c| g[c] * g[c]) + w.sum(s.len(), |i| yhat[i] * s[i].max(0.0));
@@ -336,13 +336,9 @@ impl Newton {
         p: &ProjectionProblem<'_>,
         sol: &mut ProjectionSolution,
     ) -> crate::certificate::Certificate {
-        let (w, jt, coefs) = (
-            self.normal.workers(),
-            self.normal.transpose(),
-            p.jacobian.coefficients(),
-        );
+        let (w, jt) = (self.normal.workers(), self.normal.transpose());
         let yhat = &self.yhat;
-        w.map(&mut sol.v, |c, _| p.w[c] + jt.dot(coefs, yhat, c));
+        w.map(&mut sol.v, |c, _| p.w[c] + jt.dot(yhat, c));
         sol.lambda.copy_from_slice(&self.yhat);
         certify(
             p,
@@ -410,13 +406,9 @@ impl Newton {
                 break;
             }
             {
-                let (w, jt, coefs) = (
-                    self.normal.workers(),
-                    self.normal.transpose(),
-                    j.coefficients(),
-                );
+                let (w, jt) = (self.normal.workers(), self.normal.transpose());
                 let pr = &self.dual_p;
-                w.map(&mut self.dual_u, |c, _| jt.dot(coefs, pr, c));
+                w.map(&mut self.dual_u, |c, _| jt.dot(pr, c));
             }
             self.normal.solve_in_place(&mut self.dual_u);
             *solves += 1;

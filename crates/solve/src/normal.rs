@@ -528,6 +528,7 @@ impl NormalEquations {
             && same(&self.j_row_start, j.row_starts())
             && same(&self.j_cols, j.columns())
         {
+            self.jt.refresh(j);
             return Ok(false);
         }
         let n = j.dim();

@@ -7,14 +7,16 @@ use moreau_core::ConstraintRows;
 /// 4·10⁹ entries (the interior point checks its patterns against it).
 pub(crate) type Index = u32;
 
-/// The structure of `Jᵀ`: for each unknown, the rows it appears in (ascending) and where
-/// its coefficient is stored in `J`. Products `Jᵀy` gather per unknown, so they split over
-/// threads without changing the order of any sum.
+/// `Jᵀ`: for each unknown, the rows it appears in (ascending), where its coefficient is
+/// stored in `J`, and a copy of that coefficient (so that a product reads it in order).
+/// Products `Jᵀy` gather per unknown, so they split over threads without changing the order
+/// of any sum.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Transpose {
     pub(crate) col_start: Vec<usize>,
     rows: Vec<Index>,
     entries: Vec<Index>,
+    values: Vec<f64>,
     next: Vec<usize>, // scratch for building
 }
 
@@ -45,12 +47,24 @@ impl Transpose {
                 self.next[c] += 1;
             }
         }
+        self.refresh(j);
     }
 
-    /// `(Jᵀ y)_c`.
-    pub(crate) fn dot(&self, coefs: &[f64], y: &[f64], c: usize) -> f64 {
-        (self.col_start[c]..self.col_start[c + 1])
-            .map(|k| coefs[self.entries[k] as usize] * y[self.rows[k] as usize])
+    /// Copies the coefficients of `j`, whose rows have the columns [`Self::build`] saw.
+    pub(crate) fn refresh(&mut self, j: &ConstraintRows) {
+        let coefs = j.coefficients();
+        self.values.clear();
+        self.values
+            .extend(self.entries.iter().map(|&e| coefs[e as usize]));
+    }
+
+    /// `(Jᵀ y)_c`, with the coefficients of the last [`Self::build`] or [`Self::refresh`].
+    pub(crate) fn dot(&self, y: &[f64], c: usize) -> f64 {
+        let (a, b) = (self.col_start[c], self.col_start[c + 1]);
+        self.values[a..b]
+            .iter()
+            .zip(&self.rows[a..b])
+            .map(|(&v, &r)| v * y[r as usize])
             .sum()
     }
 

@@ -342,6 +342,25 @@ fn perturb(rng: &mut ChaCha8Rng, inst: &Instance, dw: f64, db: f64, churn: bool)
     Instance { w, rows, b }
 }
 
+/// The same rows (keys and columns) with new coefficients, as a crowd's contacts turn from
+/// one step to the next, and offsets in `[0, |J_i|₁ / 2]` (feasible: `v = 0` holds them).
+fn new_coefficients(rng: &mut ChaCha8Rng, inst: &Instance) -> Instance {
+    let mut rows = ConstraintRows::new(inst.rows.dim());
+    let mut b = Vec::new();
+    for i in 0..inst.b.len() {
+        let (c, _) = inst.rows.row(i);
+        let a: Vec<f64> = c.iter().map(|_| rng.random_range(-2.0..2.0)).collect();
+        let l1: f64 = a.iter().map(|a| a.abs()).sum();
+        rows.push(inst.rows.keys()[i], 0.0, c.iter().copied().zip(a));
+        b.push(l1 * rng.random_range(0.0..0.5));
+    }
+    Instance {
+        w: inst.w.clone(),
+        rows,
+        b,
+    }
+}
+
 /// The multipliers of `old`'s rows matched to `new`'s by key (0 for new rows), as the
 /// integrator's warm start does.
 fn matched(old: &Instance, lambda: &[f64], new: &Instance) -> Vec<f64> {
@@ -590,6 +609,43 @@ fn newton_on_rows_scaled_1_to_100_meets_kkt() {
 fn newton_warm_across_a_pattern_change_meets_kkt() {
     for kind in 0..5 {
         run_newton(kind, 40, 300 + kind as u64, kind % 2 == 1, true);
+    }
+}
+
+/// Regression for the copy of `Jᵀ`'s coefficients the normal equations keep: their analysis
+/// is reused while the rows keep their columns, and the products with `Jᵀ` must then read
+/// the new coefficients (without the copy's refresh both solvers converge to wrong answers
+/// or not at all here).
+#[test]
+fn new_coefficients_on_the_same_columns_are_solved_with_the_new_coefficients() {
+    let target = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(808);
+    let mut solvers: [Box<dyn ProjectionSolver>; 2] = [
+        Box::new(InteriorPoint::new(InteriorPointSettings::default()).unwrap()),
+        Box::new(Newton::new(NewtonSettings::default()).unwrap()),
+    ];
+    for case in 0..40 {
+        let inst = random_instance(&mut rng, case % 5);
+        let next = new_coefficients(&mut rng, &inst);
+        for solver in solvers.iter_mut() {
+            let mut sol = ProjectionSolution::default();
+            for (step, inst) in [&inst, &next].into_iter().enumerate() {
+                let name = format!("{} case {case} step {step}", solver.name());
+                let p = ProjectionProblem {
+                    w: &inst.w,
+                    jacobian: &inst.rows,
+                    b: &inst.b,
+                };
+                let rep = solver.solve(&p, target, &mut sol).unwrap();
+                assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+                check_kkt(inst, &name, &sol, rep.gap, rep.violation);
+                check_report(&p, target, &name, &sol, &rep);
+                assert_clarabel_objective(&p, &name, &sol, rep.gap, &clarabel_answer(&p, target));
+            }
+        }
     }
 }
 
