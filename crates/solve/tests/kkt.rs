@@ -470,9 +470,9 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
         violation: 1e-9,
     };
     // The default, Gondzio's correctors on every solve (by default they wait for factors
-    // denser than these small crowds make), and the warm polish tried on every warm solve its
+    // denser than these small crowds make), the warm polish tried on every warm solve its
     // back-off allows (by default only after a solve that changed ≤ 0.5 % of its rows'
-    // sides).
+    // sides), and one step length for the primal and the dual variables.
     let mut interiors = [
         InteriorPointSettings::default(),
         InteriorPointSettings::builder()
@@ -481,6 +481,10 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
             .unwrap(),
         InteriorPointSettings::builder()
             .polish_changes(1.0)
+            .build()
+            .unwrap(),
+        InteriorPointSettings::builder()
+            .separate_steps(false)
             .build()
             .unwrap(),
     ]
