@@ -17,6 +17,12 @@ use crate::problem::{
 /// ones in groups of about this many rows.
 const GROUP_ROWS: usize = 256;
 
+/// A row's reach for setting it aside (see [`AutoSettings::set_aside_factor`]): this many
+/// times the change of its slack the caller's multipliers predict...
+const PREDICTED_MARGIN: f64 = 1.5;
+/// ... and at least this share of the previous answer's largest change of any slack.
+const LARGEST_CHANGE_SHARE: f64 = 0.25;
+
 /// Settings of [`AutoSolver`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AutoSettings {
@@ -33,15 +39,20 @@ pub struct AutoSettings {
     /// a sample of its rows were in it); then Gauss–Seidel tries it again (a jam may have
     /// cleared). 0: Gauss–Seidel tries every component every time.
     pub retry_after: usize,
-    /// Rows whose slack at `w` (before any correction) exceeds this factor times the
-    /// larger of the previous solve's largest change of a row's slack and the largest
-    /// violation at `w` are set aside: they split no component and are only checked, by
-    /// the certificate of the whole answer. When one of them turns out to be needed, the
-    /// projection is solved again with every row. `f64::INFINITY`: never. At 1 (was 1.5)
-    /// the jams' components are smaller and the solves again few: the jammed 10,000
-    /// 23.7 → 18.1 ms a step, a whole evacuation of 10,000 26.1 → 21.7 ms (mean), of 2,000
-    /// 8.1 → 7.6; 0.7 solves again too often, 1.2 lies between (benches/README.md,
-    /// session 14).
+    /// Rows whose slack at `w` (before any correction) exceeds this factor times their
+    /// reach are set aside: they split no component and are only checked, by the
+    /// certificate of the whole answer. When one of them turns out to be needed, the
+    /// projection is solved again with every row. `f64::INFINITY`: never. A row's reach is
+    /// the largest of the worst violation at `w`, 1.5 times the change of its slack that the
+    /// caller's multipliers predict (`Σ_c |J_ic| |(Jᵀλ)_c|`, the correction they make at its
+    /// unknowns) and a quarter of the previous answer's largest change of any slack.
+    /// Measured (benches/README.md, session 14): with one reach for every row (the largest
+    /// change) at 1.5 × the jammed 10,000 took 23.7 ms a step, at 1 × 18.1 (0.7 × solved
+    /// again too often, 1.2 × lay between); each row's own reach then took the jammed 2,000
+    /// from 8.75 to 7.45 ms, the jammed 10,000 from 18.3 to 16.5, whole evacuations of
+    /// 2,000 and 10,000 from 7.7 and 22.0 ms a step (mean) to 7.0 and 18.6, and cromosim's
+    /// scene from 2.32 to 2.34–2.37 (its jam at the door is one component either way; twice
+    /// the prediction cost it 5 %, the prediction alone solved again too often).
     pub set_aside_factor: f64,
     /// Threads: the interior point's part runs as two solves at once (the largest
     /// component, the others), each on one thread; Gauss–Seidel runs on one.
@@ -71,12 +82,12 @@ impl Default for AutoSettings {
 /// the work counted (passes and certificates), never on timings, so answers do not depend
 /// on the machine or the thread count.
 ///
-/// Before splitting, rows whose slack at `w` is well beyond what a correction has been
-/// moving any row's slack ([`AutoSettings::set_aside_factor`]) are set aside: in a jam they
-/// are a quarter of the rows, and without them one jam of 14,000 rows falls apart into
-/// hundreds of components. They are checked by the certificate of the whole answer (with
-/// zero multipliers they add nothing to its gap); when one is violated, the projection is
-/// solved again with every row.
+/// Before splitting, rows whose slack at `w` is beyond what the correction is expected to
+/// move it ([`AutoSettings::set_aside_factor`]: predicted from the caller's multipliers, row
+/// by row) are set aside: in a jam they are a quarter of the rows or more, and with them set
+/// aside one jam of 14,000 rows falls apart into hundreds of components. They are checked by
+/// the certificate of the whole answer (with zero multipliers they add nothing to its gap);
+/// when one is violated, the projection is solved again with every row.
 ///
 /// With threads ([`AutoSettings::parallelism`] above one), the largest component and the
 /// others are solved at once, each by its own interior point on one thread; the split is the
@@ -112,6 +123,10 @@ pub struct AutoSolver {
     // per row: J w (the slack at w is b + J w); set aside
     jw: Vec<f64>,
     set_aside: Vec<bool>,
+    // per row: how far its slack may move before it is needed (above); per unknown: the
+    // correction `Jᵀλ` the caller's multipliers make
+    reach: Vec<f64>,
+    correction: Vec<f64>,
     // the previous answer's largest |J_i (v − w)| (infinite before the first)
     last_change: f64,
     scratch_m: Vec<f64>,
@@ -169,6 +184,8 @@ impl AutoSolver {
             warm: Vec::new(),
             jw: Vec::new(),
             set_aside: Vec::new(),
+            reach: Vec::new(),
+            correction: Vec::new(),
             last_change: f64::INFINITY,
             scratch_m: Vec::new(),
             scratch_n: Vec::new(),
@@ -220,14 +237,15 @@ impl ProjectionSolver for AutoSolver {
         self.jw.resize(m, 0.0);
         p.jacobian.mul(p.w, &mut self.jw);
         let worst_at_w = (self.jw.iter().zip(p.b)).fold(0.0f64, |a, (jw, b)| a.max(-(jw + b)));
-        let reach = self.settings.set_aside_factor * self.last_change.max(worst_at_w);
         let screened = self.settings.set_aside_factor.is_finite() && self.last_change.is_finite();
-        let mut report =
-            self.solve_split(p, target, sol, if screened { reach } else { f64::INFINITY })?;
+        if screened {
+            self.reach_of_rows(p, worst_at_w);
+        }
+        let mut report = self.solve_split(p, target, sol, screened)?;
         if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
             // A row set aside was needed after all: every row this time.
             let first = report;
-            report = self.solve_split(p, target, sol, f64::INFINITY)?;
+            report = self.solve_split(p, target, sol, false)?;
             report.add_work(&first);
         }
         self.next_given_up.sort_unstable_by_key(|&(key, _)| key);
@@ -429,20 +447,54 @@ impl AutoSolver {
         (0..p.rows()).any(|i| self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation)
     }
 
-    /// One solve with the rows whose slack at `w` exceeds `reach` set aside: the components
-    /// of the rest, each answered by Gauss–Seidel or the interior point, certified as a
-    /// whole (rows set aside included, with zero multipliers). Leaves `J v` in `scratch_m`.
+    /// Each row's reach, times the factor, into `reach` (see
+    /// [`AutoSettings::set_aside_factor`]).
+    fn reach_of_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) {
+        let j = p.jacobian;
+        self.correction.clear();
+        self.correction.resize(p.dim(), 0.0);
+        for (i, &l) in self.warm.iter().enumerate() {
+            if l > 0.0 && l.is_finite() {
+                let (c, a) = j.row(i);
+                for (&c, &a) in c.iter().zip(a) {
+                    self.correction[c] += a * l;
+                }
+            }
+        }
+        let floor = worst_at_w.max(LARGEST_CHANGE_SHARE * self.last_change);
+        let (factor, correction) = (self.settings.set_aside_factor, &self.correction);
+        self.reach.clear();
+        self.reach.extend((0..p.rows()).map(|i| {
+            let (c, a) = j.row(i);
+            let predicted: f64 = c
+                .iter()
+                .zip(a)
+                .map(|(&c, &a)| (a * correction[c]).abs())
+                .sum();
+            factor * floor.max(PREDICTED_MARGIN * predicted)
+        }));
+    }
+
+    /// One solve, with the rows whose slack at `w` exceeds their `reach` set aside when
+    /// `screened`: the components of the rest, each answered by Gauss–Seidel or the interior
+    /// point, certified as a whole (rows set aside included, with zero multipliers). Leaves
+    /// `J v` in `scratch_m`.
     fn solve_split(
         &mut self,
         p: &ProjectionProblem<'_>,
         target: Target,
         sol: &mut ProjectionSolution,
-        reach: f64,
+        screened: bool,
     ) -> Result<SolveReport, SolveError> {
         let m = p.rows();
         self.set_aside.clear();
-        self.set_aside
-            .extend(self.jw.iter().zip(p.b).map(|(jw, b)| jw + b > reach));
+        if screened {
+            let (jw, reach) = (&self.jw, &self.reach);
+            self.set_aside
+                .extend((0..m).map(|i| jw[i] + p.b[i] > reach[i]));
+        } else {
+            self.set_aside.resize(m, false);
+        }
         let any_aside = self.set_aside.iter().any(|&a| a);
         let count = self.components.split(p, &self.set_aside);
         self.finished.clear();
