@@ -260,6 +260,13 @@ impl BroadPhase for TreeBroadPhase {
 /// now was within `margin + 2 × the farthest anyone moved` when the list was built; while that
 /// stays inside the built margin the list holds every pair, and the exact test on it gives
 /// the very pairs (and order) of the backend alone.
+///
+/// The skin is sized for a list to serve [`VerletList::CALLS`] calls at the speed the last
+/// list saw (the farthest anyone moved, over the calls it served). Where that skin would be
+/// wider than the largest radius, a list holds so many pairs and is rebuilt so often that
+/// the backend alone is cheaper: the next [`VerletList::PAUSE`] calls go straight to it,
+/// then a list is tried again (halls at 0.05 s steps, where the farthest walker goes 0.1 m a
+/// step, take the backend; cromosim's scene at 0.01 s keeps its lists 4–6 calls).
 #[derive(Debug)]
 pub struct VerletList {
     inner: Box<dyn BroadPhase>,
@@ -268,10 +275,19 @@ pub struct VerletList {
     built_radius: Vec<f64>,
     /// The margin the candidates hold; NaN before the first build.
     built_margin: f64,
+    /// Calls the current list has answered.
+    served: usize,
+    /// Calls left to go straight to the backend.
+    paused: usize,
     builds: usize,
 }
 
 impl VerletList {
+    /// Calls a list is sized to serve.
+    pub const CALLS: usize = 4;
+    /// Calls that go straight to the backend when a list would not pay.
+    pub const PAUSE: usize = 16;
+
     /// A list kept over `inner`'s pairs.
     pub fn new(inner: Box<dyn BroadPhase>) -> Self {
         Self {
@@ -280,6 +296,8 @@ impl VerletList {
             built_pos: Vec::new(),
             built_radius: Vec::new(),
             built_margin: f64::NAN,
+            served: 0,
+            paused: 0,
             builds: 0,
         }
     }
@@ -289,10 +307,9 @@ impl VerletList {
         self.builds
     }
 
-    /// True when the candidates hold every pair within `margin` at `pos`: the same people
-    /// (radii, bit for bit) and `margin + 2 max |q − q_built|` (with room for rounding)
-    /// inside the built margin.
-    fn holds(&self, pos: &[f64], radius: &[f64], margin: f64) -> bool {
+    /// The farthest anyone moved since the list was built, if the people are the same
+    /// (radii, bit for bit), and the largest coordinate.
+    fn moved(&self, pos: &[f64], radius: &[f64]) -> Option<(f64, f64)> {
         if pos.len() != self.built_pos.len()
             || radius.len() != self.built_radius.len()
             || radius
@@ -300,21 +317,19 @@ impl VerletList {
                 .zip(&self.built_radius)
                 .any(|(a, b)| a.to_bits() != b.to_bits())
         {
-            return false;
+            return None;
         }
         let (mut moved2, mut scale) = (0.0f64, 0.0f64);
         for (a, b) in pos.chunks_exact(2).zip(self.built_pos.chunks_exact(2)) {
             let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
             let d2 = dx * dx + dy * dy;
-            // NaN makes the answer false.
+            // NaN propagates (and makes the list fail to hold).
             if !(d2 <= moved2) {
                 moved2 = d2;
             }
             scale = scale.max(a[0].abs()).max(a[1].abs());
         }
-        let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
-        let rounding = 1e-12 * (1.0 + scale + rmax);
-        margin + 2.0 * moved2.sqrt() * (1.0 + 1e-9) + rounding <= self.built_margin
+        Some((moved2.sqrt(), scale))
     }
 }
 
@@ -324,11 +339,34 @@ impl BroadPhase for VerletList {
     }
 
     fn pairs(&mut self, pos: &[f64], radius: &[f64], margin: f64, out: &mut Vec<(u32, u32)>) {
-        if !self.holds(pos, radius, margin) {
-            // The skin: twice the margin (a few steps of the fastest walker, by the crowd's
-            // margin), and at least half the largest radius.
-            let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
-            let skin = (2.0 * margin).max(0.5 * rmax);
+        if self.paused > 0 {
+            self.paused -= 1;
+            self.builds += 1;
+            return self.inner.pairs(pos, radius, margin, out);
+        }
+        let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
+        let moved = self.moved(pos, radius);
+        // The list holds every pair within `margin` when `margin + 2 × moved` (with room for
+        // rounding) stays inside the built margin.
+        let holds = moved.is_some_and(|(moved, scale)| {
+            let rounding = 1e-12 * (1.0 + scale + rmax);
+            margin + 2.0 * moved * (1.0 + 1e-9) + rounding <= self.built_margin
+        });
+        if !holds {
+            let skin = match moved {
+                // The speed the last list saw, for CALLS calls, both people of a pair moving.
+                Some((moved, _)) if self.served > 0 => {
+                    2.0 * Self::CALLS as f64 * moved / self.served as f64
+                }
+                _ => 0.5 * rmax,
+            };
+            if !(skin <= rmax) {
+                self.paused = Self::PAUSE;
+                self.built_pos.clear();
+                self.built_margin = f64::NAN;
+                self.builds += 1;
+                return self.inner.pairs(pos, radius, margin, out);
+            }
             self.built_margin = margin.max(0.0) + skin;
             self.inner
                 .pairs(pos, radius, self.built_margin, &mut self.candidates);
@@ -336,8 +374,10 @@ impl BroadPhase for VerletList {
             self.built_pos.extend_from_slice(pos);
             self.built_radius.clear();
             self.built_radius.extend_from_slice(radius);
+            self.served = 0;
             self.builds += 1;
         }
+        self.served += 1;
         out.clear();
         out.extend(
             self.candidates
