@@ -261,12 +261,13 @@ impl BroadPhase for TreeBroadPhase {
 /// stays inside the built margin the list holds every pair, and the exact test on it gives
 /// the very pairs (and order) of the backend alone.
 ///
-/// The skin is sized for a list to serve [`VerletList::CALLS`] calls at the speed the last
-/// list saw (the farthest anyone moved, over the calls it served). Where that skin would be
-/// wider than the largest radius, a list holds so many pairs and is rebuilt so often that
-/// the backend alone is cheaper: the next [`VerletList::PAUSE`] calls go straight to it,
-/// then a list is tried again (halls at 0.05 s steps, where the farthest walker goes 0.1 m a
-/// step, take the backend; cromosim's scene at 0.01 s keeps its lists 4–6 calls).
+/// The skin is sized for a list to serve [`VerletList::CALLS`] calls at the speed the lists
+/// saw (the farthest anyone moved over the calls a list served). Where that skin would be
+/// wider than the largest radius, or the last list served a single call (people leave at
+/// every step: indices shift, and a list is for the same people), a list does not pay: the
+/// next [`VerletList::PAUSE`] calls go straight to the backend, then a list is tried again.
+/// Halls at 0.05 s steps take the backend (people leave every step, the farthest walker goes
+/// 0.1 m a step); cromosim's scene at 0.01 s keeps its lists 4–6 calls.
 #[derive(Debug)]
 pub struct VerletList {
     inner: Box<dyn BroadPhase>,
@@ -279,6 +280,9 @@ pub struct VerletList {
     served: usize,
     /// Calls left to go straight to the backend.
     paused: usize,
+    /// The farthest anyone moved in a call, over the calls of the last list that ended with
+    /// the same people (NaN before).
+    speed: f64,
     builds: usize,
 }
 
@@ -298,6 +302,7 @@ impl VerletList {
             built_margin: f64::NAN,
             served: 0,
             paused: 0,
+            speed: f64::NAN,
             builds: 0,
         }
     }
@@ -353,14 +358,18 @@ impl BroadPhase for VerletList {
             margin + 2.0 * moved * (1.0 + 1e-9) + rounding <= self.built_margin
         });
         if !holds {
-            let skin = match moved {
-                // The speed the last list saw, for CALLS calls, both people of a pair moving.
-                Some((moved, _)) if self.served > 0 => {
-                    2.0 * Self::CALLS as f64 * moved / self.served as f64
-                }
-                _ => 0.5 * rmax,
+            if let Some((moved, _)) = moved.filter(|_| self.served > 0) {
+                self.speed = moved / self.served as f64;
+            }
+            // After a list: CALLS calls at the speed seen, both people of a pair moving; the
+            // first list (and the first after a pause) is a guess, to measure the speed.
+            let built = !self.built_margin.is_nan();
+            let skin = if built {
+                2.0 * Self::CALLS as f64 * self.speed
+            } else {
+                0.5 * rmax
             };
-            if !(skin <= rmax) {
+            if built && (!(skin <= rmax) || self.served < 2) {
                 self.paused = Self::PAUSE;
                 self.built_pos.clear();
                 self.built_margin = f64::NAN;
