@@ -261,27 +261,27 @@ impl BroadPhase for TreeBroadPhase {
 /// stays inside the built margin the list holds every pair, and the exact test on it gives
 /// the very pairs (and order) of the backend alone.
 ///
-/// The skin is sized for a list to serve [`VerletList::CALLS`] calls at the speed the lists
-/// saw (the farthest anyone moved over the calls a list served). Where that skin would be
-/// wider than the largest radius, or the last list served a single call (people leave at
-/// every step: indices shift, and a list is for the same people), a list does not pay: the
-/// next [`VerletList::PAUSE`] calls go straight to the backend, then a list is tried again.
-/// Halls at 0.05 s steps take the backend (people leave every step, the farthest walker goes
-/// 0.1 m a step); cromosim's scene at 0.01 s keeps its lists 4–6 calls.
+/// The skin is sized for a list to serve [`VerletList::CALLS`] calls at the speed measured
+/// (the farthest anyone moved over the calls since the positions were kept: the first call
+/// only keeps them). Where that skin would be wider than the largest radius, or the people
+/// changed within a call or two (a hall's people leave at every step, shifting indices, and
+/// a list is for the same people), a list does not pay: the next [`VerletList::PAUSE`] calls
+/// go straight to the backend, keeping nothing, then the speed is measured again. Halls at
+/// 0.05 s steps take the backend (people leave every step, the farthest walker goes 0.1 m a
+/// step); cromosim's scene at 0.01 s keeps its lists 4–6 calls.
 #[derive(Debug)]
 pub struct VerletList {
     inner: Box<dyn BroadPhase>,
     candidates: Vec<(u32, u32)>,
     built_pos: Vec<f64>,
     built_radius: Vec<f64>,
-    /// The margin the candidates hold; NaN before the first build.
+    /// The margin the candidates hold; NaN without a list.
     built_margin: f64,
-    /// Calls the current list has answered.
+    /// Calls since the positions were kept.
     served: usize,
     /// Calls left to go straight to the backend.
     paused: usize,
-    /// The farthest anyone moved in a call, over the calls of the last list that ended with
-    /// the same people (NaN before).
+    /// The farthest anyone moved in a call, as last measured (NaN before).
     speed: f64,
     builds: usize,
 }
@@ -312,7 +312,7 @@ impl VerletList {
         self.builds
     }
 
-    /// The farthest anyone moved since the list was built, if the people are the same
+    /// The farthest anyone moved since the positions were kept, if the people are the same
     /// (radii, bit for bit), and the largest coordinate.
     fn moved(&self, pos: &[f64], radius: &[f64]) -> Option<(f64, f64)> {
         if pos.len() != self.built_pos.len()
@@ -336,6 +336,24 @@ impl VerletList {
         }
         Some((moved2.sqrt(), scale))
     }
+
+    /// Keeps the positions and radii (of a new list, or to measure the speed).
+    fn keep(&mut self, pos: &[f64], radius: &[f64]) {
+        self.built_pos.clear();
+        self.built_pos.extend_from_slice(pos);
+        self.built_radius.clear();
+        self.built_radius.extend_from_slice(radius);
+    }
+
+    /// Goes straight to the backend for the next [`Self::PAUSE`] calls, keeping nothing.
+    fn pause(&mut self) {
+        self.paused = Self::PAUSE;
+        self.candidates = Vec::new();
+        self.built_pos = Vec::new();
+        self.built_radius = Vec::new();
+        self.built_margin = f64::NAN;
+        self.served = 0;
+    }
 }
 
 impl BroadPhase for VerletList {
@@ -351,38 +369,37 @@ impl BroadPhase for VerletList {
         }
         let rmax = radius.iter().fold(0.0f64, |m, &r| m.max(r));
         let moved = self.moved(pos, radius);
+        if let Some((moved, _)) = moved.filter(|_| self.served > 0) {
+            self.speed = moved / self.served as f64;
+        }
+        let listed = !self.built_margin.is_nan();
         // The list holds every pair within `margin` when `margin + 2 × moved` (with room for
         // rounding) stays inside the built margin.
-        let holds = moved.is_some_and(|(moved, scale)| {
-            let rounding = 1e-12 * (1.0 + scale + rmax);
-            margin + 2.0 * moved * (1.0 + 1e-9) + rounding <= self.built_margin
-        });
+        let holds = listed
+            && moved.is_some_and(|(moved, scale)| {
+                let rounding = 1e-12 * (1.0 + scale + rmax);
+                margin + 2.0 * moved * (1.0 + 1e-9) + rounding <= self.built_margin
+            });
         if !holds {
-            if let Some((moved, _)) = moved.filter(|_| self.served > 0) {
-                self.speed = moved / self.served as f64;
+            if !listed && self.served == 0 {
+                // Nothing kept yet (or since a pause): this call keeps the positions, the
+                // next one measures how far people go in a call.
+                self.keep(pos, radius);
+                self.served = 1;
+                self.builds += 1;
+                return self.inner.pairs(pos, radius, margin, out);
             }
-            // After a list: CALLS calls at the speed seen, both people of a pair moving; the
-            // first list (and the first after a pause) is a guess, to measure the speed.
-            let built = !self.built_margin.is_nan();
-            let skin = if built {
-                2.0 * Self::CALLS as f64 * self.speed
-            } else {
-                0.5 * rmax
-            };
-            if built && (!(skin <= rmax) || self.served < 2) {
-                self.paused = Self::PAUSE;
-                self.built_pos.clear();
-                self.built_margin = f64::NAN;
+            // CALLS calls at the speed measured, both people of a pair moving.
+            let skin = 2.0 * Self::CALLS as f64 * self.speed;
+            if (moved.is_none() && self.served < 2) || !(skin <= rmax) {
+                self.pause();
                 self.builds += 1;
                 return self.inner.pairs(pos, radius, margin, out);
             }
             self.built_margin = margin.max(0.0) + skin;
             self.inner
                 .pairs(pos, radius, self.built_margin, &mut self.candidates);
-            self.built_pos.clear();
-            self.built_pos.extend_from_slice(pos);
-            self.built_radius.clear();
-            self.built_radius.extend_from_slice(radius);
+            self.keep(pos, radius);
             self.served = 0;
             self.builds += 1;
         }
