@@ -123,10 +123,6 @@ pub struct AutoSolver {
     // per row: J w (the slack at w is b + J w); set aside
     jw: Vec<f64>,
     set_aside: Vec<bool>,
-    // per row: how far its slack may move before it is needed (above); per unknown: the
-    // correction `Jᵀλ` the caller's multipliers make
-    reach: Vec<f64>,
-    correction: Vec<f64>,
     // the previous answer's largest |J_i (v − w)| (infinite before the first)
     last_change: f64,
     scratch_m: Vec<f64>,
@@ -184,8 +180,6 @@ impl AutoSolver {
             warm: Vec::new(),
             jw: Vec::new(),
             set_aside: Vec::new(),
-            reach: Vec::new(),
-            correction: Vec::new(),
             last_change: f64::INFINITY,
             scratch_m: Vec::new(),
             scratch_n: Vec::new(),
@@ -239,7 +233,7 @@ impl ProjectionSolver for AutoSolver {
         let worst_at_w = (self.jw.iter().zip(p.b)).fold(0.0f64, |a, (jw, b)| a.max(-(jw + b)));
         let screened = self.settings.set_aside_factor.is_finite() && self.last_change.is_finite();
         if screened {
-            self.reach_of_rows(p, worst_at_w);
+            self.set_aside_rows(p, worst_at_w);
         }
         let mut report = self.solve_split(p, target, sol, screened)?;
         if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
@@ -447,38 +441,40 @@ impl AutoSolver {
         (0..p.rows()).any(|i| self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation)
     }
 
-    /// Each row's reach, times the factor, into `reach` (see
-    /// [`AutoSettings::set_aside_factor`]).
-    fn reach_of_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) {
+    /// Marks in `set_aside` the rows whose slack at `w` exceeds the factor times their reach
+    /// (see [`AutoSettings::set_aside_factor`]); the correction `Jᵀλ` of the caller's
+    /// multipliers goes through `scratch_n`.
+    fn set_aside_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) {
         let j = p.jacobian;
-        self.correction.clear();
-        self.correction.resize(p.dim(), 0.0);
+        let correction = &mut self.scratch_n;
+        correction.clear();
+        correction.resize(p.dim(), 0.0);
         for (i, &l) in self.warm.iter().enumerate() {
             if l > 0.0 && l.is_finite() {
                 let (c, a) = j.row(i);
                 for (&c, &a) in c.iter().zip(a) {
-                    self.correction[c] += a * l;
+                    correction[c] += a * l;
                 }
             }
         }
         let floor = worst_at_w.max(LARGEST_CHANGE_SHARE * self.last_change);
-        let (factor, correction) = (self.settings.set_aside_factor, &self.correction);
-        self.reach.clear();
-        self.reach.extend((0..p.rows()).map(|i| {
+        let (factor, correction, jw) = (self.settings.set_aside_factor, &self.scratch_n, &self.jw);
+        self.set_aside.clear();
+        self.set_aside.extend((0..p.rows()).map(|i| {
             let (c, a) = j.row(i);
             let predicted: f64 = c
                 .iter()
                 .zip(a)
                 .map(|(&c, &a)| (a * correction[c]).abs())
                 .sum();
-            factor * floor.max(PREDICTED_MARGIN * predicted)
+            jw[i] + p.b[i] > factor * floor.max(PREDICTED_MARGIN * predicted)
         }));
     }
 
-    /// One solve, with the rows whose slack at `w` exceeds their `reach` set aside when
-    /// `screened`: the components of the rest, each answered by Gauss–Seidel or the interior
-    /// point, certified as a whole (rows set aside included, with zero multipliers). Leaves
-    /// `J v` in `scratch_m`.
+    /// One solve, with the rows marked in `set_aside` set aside when `screened` (else none):
+    /// the components of the rest, each answered by Gauss–Seidel or the interior point,
+    /// certified as a whole (rows set aside included, with zero multipliers). Leaves `J v` in
+    /// `scratch_m`.
     fn solve_split(
         &mut self,
         p: &ProjectionProblem<'_>,
@@ -487,12 +483,8 @@ impl AutoSolver {
         screened: bool,
     ) -> Result<SolveReport, SolveError> {
         let m = p.rows();
-        self.set_aside.clear();
-        if screened {
-            let (jw, reach) = (&self.jw, &self.reach);
-            self.set_aside
-                .extend((0..m).map(|i| jw[i] + p.b[i] > reach[i]));
-        } else {
+        if !screened {
+            self.set_aside.clear();
             self.set_aside.resize(m, false);
         }
         let any_aside = self.set_aside.iter().any(|&a| a);
