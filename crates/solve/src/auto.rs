@@ -19,7 +19,7 @@ const GROUP_ROWS: usize = 256;
 
 /// A row's reach for setting it aside (see [`AutoSettings::set_aside_factor`]): this many
 /// times the change of its slack the caller's multipliers predict...
-const PREDICTED_MARGIN: f64 = 1.5;
+const PREDICTED_MARGIN: f64 = 1.0;
 /// ... and at least this share of the previous answer's largest change of any slack.
 const LARGEST_CHANGE_SHARE: f64 = 0.25;
 
@@ -41,18 +41,20 @@ pub struct AutoSettings {
     pub retry_after: usize,
     /// Rows whose slack at `w` (before any correction) exceeds this factor times their
     /// reach are set aside: they split no component and are only checked, by the
-    /// certificate of the whole answer. When one of them turns out to be needed, the
-    /// projection is solved again with every row. `f64::INFINITY`: never. A row's reach is
-    /// the largest of the worst violation at `w`, 1.5 times the change of its slack that the
-    /// caller's multipliers predict (`Σ_c |J_ic| |(Jᵀλ)_c|`, the correction they make at its
-    /// unknowns) and a quarter of the previous answer's largest change of any slack.
-    /// Measured (benches/README.md, session 14): with one reach for every row (the largest
-    /// change) at 1.5 × the jammed 10,000 took 23.7 ms a step, at 1 × 18.1 (0.7 × solved
-    /// again too often, 1.2 × lay between); each row's own reach then took the jammed 2,000
-    /// from 8.75 to 7.45 ms, the jammed 10,000 from 18.3 to 16.5, whole evacuations of
-    /// 2,000 and 10,000 from 7.7 and 22.0 ms a step (mean) to 7.0 and 18.6, and cromosim's
-    /// scene from 2.32 to 2.34–2.37 (its jam at the door is one component either way; twice
-    /// the prediction cost it 5 %, the prediction alone solved again too often).
+    /// certificate of the whole answer. When some of them turn out to be needed, they join
+    /// the others and the projection is solved again from that answer; if a row set aside is
+    /// needed still, with every row. `f64::INFINITY`: never. A row's reach is the largest of
+    /// the worst violation at `w`, the change of its slack that the caller's multipliers
+    /// predict (`Σ_c |J_ic| |(Jᵀλ)_c|`, the correction they make at its unknowns) and a
+    /// quarter of the previous answer's largest change of any slack. Measured
+    /// (benches/README.md, session 14): with one reach for every row (the largest change) at
+    /// 1.5 × the jammed 10,000 took 23.7 ms a step, at 1 × 18.1 (0.7 × solved again too
+    /// often, 1.2 × lay between); each row's own reach (1.5 × the prediction) then took the
+    /// jammed 2,000 from 8.75 to 7.45 ms, the jammed 10,000 from 18.3 to 16.5, whole
+    /// evacuations of 2,000 and 10,000 from 7.7 and 22.0 ms a step (mean) to 7.0 and 18.6;
+    /// solving again with only the rows needed (instead of every row) made 1 × the
+    /// prediction pay: cromosim's scene 2.37 → 2.24 ms, the jammed 2,000 7.5 → 6.6, whole
+    /// evacuations (mean) 6.9 → 6.4 and 18.3 → 16.9.
     pub set_aside_factor: f64,
     /// Threads: the interior point's part runs as two solves at once (the largest
     /// component, the others), each on one thread; Gauss–Seidel runs on one.
@@ -237,10 +239,25 @@ impl ProjectionSolver for AutoSolver {
         }
         let mut report = self.solve_split(p, target, sol, screened)?;
         if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
-            // A row set aside was needed after all: every row this time.
+            // Rows set aside were needed after all: those the answer violates join the
+            // others, and the projection is solved again from that answer (the components
+            // they do not touch certify at once); if one set aside is needed still, with
+            // every row.
             let first = report;
-            report = self.solve_split(p, target, sol, false)?;
+            for i in 0..m {
+                if self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation {
+                    self.set_aside[i] = false;
+                }
+            }
+            self.warm.clear();
+            self.warm.extend_from_slice(&sol.lambda);
+            report = self.solve_split(p, target, sol, true)?;
             report.add_work(&first);
+            if !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
+                let second = report;
+                report = self.solve_split(p, target, sol, false)?;
+                report.add_work(&second);
+            }
         }
         self.next_given_up.sort_unstable_by_key(|&(key, _)| key);
         std::mem::swap(&mut self.given_up, &mut self.next_given_up);

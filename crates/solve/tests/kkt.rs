@@ -906,7 +906,7 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
             .is_converged()
     );
     // Person 0 pushes person 1 at 1 m/s: s(w) = (−1, 40); the second row is set aside
-    // (40 > 1.5 · 1), but v1 = 0.5 alone would make it −10.
+    // (40 is beyond its reach), but v1 = 0.5 alone would make it −10.
     let push = Instance {
         w: vec![1.0, 0.0, 0.0],
         rows: rows.clone(),
@@ -927,6 +927,50 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
     assert!(
         sol.lambda[1] > 0.0,
         "the second row binds: {:?}",
+        sol.lambda
+    );
+
+    // A chain of three rows pushed at 3 m/s: the second row is needed (the first solve
+    // violates it), and with it the third (the solve again with the second violates it),
+    // so the last solve has every row.
+    let mut rows = ConstraintRows::new(4);
+    rows.push(0, 0.0, [(0, -1.0), (1, 1.0)]);
+    rows.push(1, 0.0, [(1, -100.0), (2, 100.0)]);
+    rows.push(2, 0.0, [(2, -100.0), (3, 100.0)]);
+    let b = [0.0, 40.0, 40.0];
+    let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
+    let rest = ProjectionProblem {
+        w: &[0.0; 4],
+        jacobian: &rows,
+        b: &b,
+    };
+    let mut sol = ProjectionSolution::default();
+    assert!(
+        auto.solve(&rest, t, &mut sol)
+            .unwrap()
+            .status
+            .is_converged()
+    );
+    let push = Instance {
+        w: vec![3.0, 0.0, 0.0, 0.0],
+        rows: rows.clone(),
+        b: b.to_vec(),
+    };
+    let p = ProjectionProblem {
+        w: &push.w,
+        jacobian: &push.rows,
+        b: &push.b,
+    };
+    let rep = auto.solve(&p, t, &mut sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+    check_kkt(&push, "auto, a chain", &sol, rep.gap, rep.violation);
+    let (v, _) = exact_projection(&push);
+    for (a, b) in sol.v.iter().zip(&v) {
+        assert!((a - b).abs() <= 1e-5, "{:?} vs {v:?}", sol.v);
+    }
+    assert!(
+        sol.lambda.iter().all(|&l| l > 0.0),
+        "every row binds: {:?}",
         sol.lambda
     );
 }
