@@ -877,26 +877,19 @@ fn auto_gives_the_same_bits_on_one_and_two_threads() {
     assert_eq!((r1.iterations, r1.gap), (r2.iterations, r2.gap));
 }
 
-/// A row far from binding at `w` is set aside, but the correction of another row moves it
-/// past zero (a row with a large gradient): `auto` sees the violation in its certificate
-/// and solves again with every row, reaching the exact projection.
-#[test]
-fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
-    // v1 − v0 ≥ 0 and 100 (v2 − v1) + 40 ≥ 0.
-    let mut rows = ConstraintRows::new(3);
-    rows.push(0, 0.0, [(0, -1.0), (1, 1.0)]);
-    rows.push(1, 0.0, [(1, -100.0), (2, 100.0)]);
-    let b = [0.0, 40.0];
+/// `auto` at rest on `rows` (so that the next solve expects small changes), then pushed at
+/// `w`: converged, meeting the KKT conditions, at the exact projection; its multipliers.
+fn auto_pushed_after_rest(rows: &ConstraintRows, b: &[f64], w: &[f64], name: &str) -> Vec<f64> {
     let t = Target {
         gap: 1e-12,
         violation: 1e-9,
     };
     let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
-    // At rest: nothing moves, so the next solve expects small changes.
+    let zero = vec![0.0; w.len()];
     let rest = ProjectionProblem {
-        w: &[0.0, 0.0, 0.0],
-        jacobian: &rows,
-        b: &b,
+        w: &zero,
+        jacobian: rows,
+        b,
     };
     let mut sol = ProjectionSolution::default();
     assert!(
@@ -905,10 +898,8 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
             .status
             .is_converged()
     );
-    // Person 0 pushes person 1 at 1 m/s: s(w) = (−1, 40); the second row is set aside
-    // (40 is beyond its reach), but v1 = 0.5 alone would make it −10.
     let push = Instance {
-        w: vec![1.0, 0.0, 0.0],
+        w: w.to_vec(),
         rows: rows.clone(),
         b: b.to_vec(),
     };
@@ -918,17 +909,29 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
         b: &push.b,
     };
     let rep = auto.solve(&p, t, &mut sol).unwrap();
-    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
-    check_kkt(&push, "auto", &sol, rep.gap, rep.violation);
+    assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+    check_kkt(&push, name, &sol, rep.gap, rep.violation);
     let (v, _) = exact_projection(&push);
     for (a, b) in sol.v.iter().zip(&v) {
-        assert!((a - b).abs() <= 1e-5, "{:?} vs {v:?}", sol.v);
+        assert!((a - b).abs() <= 1e-5, "{name}: {:?} vs {v:?}", sol.v);
     }
-    assert!(
-        sol.lambda[1] > 0.0,
-        "the second row binds: {:?}",
-        sol.lambda
-    );
+    sol.lambda
+}
+
+/// A row far from binding at `w` is set aside, but the correction of another row moves it
+/// past zero (a row with a large gradient): `auto` sees the violation in its certificate
+/// and solves again with the rows needed (and, if a row set aside is needed still, with
+/// every row), reaching the exact projection.
+#[test]
+fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
+    // v1 − v0 ≥ 0 and 100 (v2 − v1) + 40 ≥ 0. Person 0 pushes person 1 at 1 m/s:
+    // s(w) = (−1, 40); the second row is set aside (40 is beyond its reach), but v1 = 0.5
+    // alone would make it −10.
+    let mut rows = ConstraintRows::new(3);
+    rows.push(0, 0.0, [(0, -1.0), (1, 1.0)]);
+    rows.push(1, 0.0, [(1, -100.0), (2, 100.0)]);
+    let lambda = auto_pushed_after_rest(&rows, &[0.0, 40.0], &[1.0, 0.0, 0.0], "a pair");
+    assert!(lambda[1] > 0.0, "the second row binds: {lambda:?}");
 
     // A chain of three rows pushed at 3 m/s: the second row is needed (the first solve
     // violates it), and with it the third (the solve again with the second violates it),
@@ -937,41 +940,11 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
     rows.push(0, 0.0, [(0, -1.0), (1, 1.0)]);
     rows.push(1, 0.0, [(1, -100.0), (2, 100.0)]);
     rows.push(2, 0.0, [(2, -100.0), (3, 100.0)]);
-    let b = [0.0, 40.0, 40.0];
-    let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
-    let rest = ProjectionProblem {
-        w: &[0.0; 4],
-        jacobian: &rows,
-        b: &b,
-    };
-    let mut sol = ProjectionSolution::default();
+    let w = [3.0, 0.0, 0.0, 0.0];
+    let lambda = auto_pushed_after_rest(&rows, &[0.0, 40.0, 40.0], &w, "a chain");
     assert!(
-        auto.solve(&rest, t, &mut sol)
-            .unwrap()
-            .status
-            .is_converged()
-    );
-    let push = Instance {
-        w: vec![3.0, 0.0, 0.0, 0.0],
-        rows: rows.clone(),
-        b: b.to_vec(),
-    };
-    let p = ProjectionProblem {
-        w: &push.w,
-        jacobian: &push.rows,
-        b: &push.b,
-    };
-    let rep = auto.solve(&p, t, &mut sol).unwrap();
-    assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
-    check_kkt(&push, "auto, a chain", &sol, rep.gap, rep.violation);
-    let (v, _) = exact_projection(&push);
-    for (a, b) in sol.v.iter().zip(&v) {
-        assert!((a - b).abs() <= 1e-5, "{:?} vs {v:?}", sol.v);
-    }
-    assert!(
-        sol.lambda.iter().all(|&l| l > 0.0),
-        "every row binds: {:?}",
-        sol.lambda
+        lambda.iter().all(|&l| l > 0.0),
+        "every row binds: {lambda:?}"
     );
 }
 
