@@ -89,7 +89,8 @@ impl Default for AutoSettings {
 /// by row) are set aside: in a jam they are a quarter of the rows or more, and with them set
 /// aside one jam of 14,000 rows falls apart into hundreds of components. They are checked by
 /// the certificate of the whole answer (with zero multipliers they add nothing to its gap);
-/// when one is violated, the projection is solved again with every row.
+/// those the answer violates join the others and the projection is solved again from that
+/// answer, with every row if one set aside is needed still.
 ///
 /// With threads ([`AutoSettings::parallelism`] above one), the largest component and the
 /// others are solved at once, each by its own interior point on one thread; the split is the
