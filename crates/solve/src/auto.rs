@@ -460,21 +460,20 @@ impl AutoSolver {
     }
 
     /// Marks in `set_aside` the rows whose slack at `w` exceeds the factor times their reach
-    /// (see [`AutoSettings::set_aside_factor`]); the correction `Jᵀλ` of the caller's
-    /// multipliers goes through `scratch_n`.
+    /// (see [`AutoSettings::set_aside_factor`]); the caller's multipliers (those that are
+    /// positive and finite) go through `scratch_m`, their correction `Jᵀλ` through
+    /// `scratch_n`.
     fn set_aside_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) {
         let j = p.jacobian;
-        let correction = &mut self.scratch_n;
-        correction.clear();
-        correction.resize(p.dim(), 0.0);
-        for (i, &l) in self.warm.iter().enumerate() {
-            if l > 0.0 && l.is_finite() {
-                let (c, a) = j.row(i);
-                for (&c, &a) in c.iter().zip(a) {
-                    correction[c] += a * l;
-                }
-            }
-        }
+        self.scratch_m.clear();
+        self.scratch_m.extend(
+            self.warm
+                .iter()
+                .map(|&l| if l > 0.0 && l.is_finite() { l } else { 0.0 }),
+        );
+        self.scratch_n.clear();
+        self.scratch_n.resize(p.dim(), 0.0);
+        j.mul_transpose_add(&self.scratch_m, &mut self.scratch_n);
         let floor = worst_at_w.max(LARGEST_CHANGE_SHARE * self.last_change);
         let (factor, correction, jw) = (self.settings.set_aside_factor, &self.scratch_n, &self.jw);
         self.set_aside.clear();
