@@ -1,6 +1,8 @@
 //! A sparse Cholesky factorization in 2×2 blocks, for normal equations whose unknowns come in
 //! pairs that share every row (a disk's x and y): symbolic analysis once per pattern, then
 //! left-looking numeric factorizations and triangular solves that read one index per block.
+//! The matrix's columns are added by the caller as the factorization reaches them
+//! ([`BlockColumns`]): the normal equations add `J`'s rows there, with no assembled copy.
 //!
 //! Why not faer's simplicial factorization, which it replaces on such matrices: that one is
 //! scalar and up-looking, reads an index per multiply–add and recomputes each row's pattern
@@ -16,7 +18,7 @@
 use crate::products::Index;
 
 /// A 2×2 block in column order `[a₀₀, a₁₀, a₀₁, a₁₁]`.
-type Block = [f64; 4];
+pub(crate) type Block = [f64; 4];
 
 /// `w −= l bᵀ` for 2×2 blocks, with `b` spread as `bx = [b₀₀, b₀₀, b₁₀, b₁₀]` and
 /// `by = [b₀₁, b₀₁, b₁₁, b₁₁]`: `w −= [l(:, 0), l(:, 0)] ∘ bx + [l(:, 1), l(:, 1)] ∘ by`, lane
@@ -28,6 +30,35 @@ fn sub_mul_transpose(w: &mut Block, l: &Block, bx: &Block, by: &Block) {
     let lb = [l[2], l[3], l[2], l[3]];
     for q in 0..4 {
         w[q] -= la[q] * bx[q] + lb[q] * by[q];
+    }
+}
+
+/// The block columns of the matrix a factorization reads (see
+/// [`BlockCholesky::factorize_columns`]).
+pub(crate) trait BlockColumns {
+    /// Adds block column `k` (its blocks in rows `≥ k`; of the diagonal block `a₀₀, a₁₀,
+    /// a₁₁`) into `work`, indexed by block row; only blocks of the analysed pattern.
+    fn add_column(&self, k: usize, work: &mut [Block]);
+}
+
+/// The block columns of `A` from its blocks `values`, laid out as `pattern`.
+#[cfg(test)]
+struct StoredColumns<'a> {
+    pattern: &'a BlockPattern,
+    values: &'a [f64],
+}
+
+#[cfg(test)]
+impl BlockColumns for StoredColumns<'_> {
+    #[inline(always)]
+    fn add_column(&self, k: usize, work: &mut [Block]) {
+        let a = self.pattern;
+        for p in a.col(k) {
+            let w = &mut work[a.row[p] as usize];
+            for (q, x) in w.iter_mut().enumerate() {
+                *x += self.values[4 * p + q];
+            }
+        }
     }
 }
 
@@ -165,39 +196,51 @@ impl BlockCholesky {
 
     /// Factorizes the matrix whose blocks `a_values` are laid out as the analysed pattern of
     /// `A`; false when it is not numerically positive definite.
+    #[cfg(test)]
     pub(crate) fn factorize(&mut self, a_values: &[f64]) -> bool {
         debug_assert_eq!(a_values.len(), 4 * self.a.row.len());
+        let a = std::mem::take(&mut self.a);
+        let ok = self.factorize_columns(&StoredColumns {
+            pattern: &a,
+            values: a_values,
+        });
+        self.a = a;
+        ok
+    }
+
+    /// Factorizes the matrix of the analysed pattern whose block columns `columns` adds as the
+    /// factorization reaches them (no assembled copy); false when it is not numerically
+    /// positive definite.
+    #[inline]
+    pub(crate) fn factorize_columns(&mut self, columns: &impl BlockColumns) -> bool {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the processor has AVX (just checked), all `factorize_avx` asks for.
             #[allow(unsafe_code)]
-            return unsafe { self.factorize_avx(a_values) };
+            return unsafe { self.factorize_avx(columns) };
         }
-        self.factorize_with(a_values)
+        self.factorize_with(columns)
     }
 
-    /// [`factorize`](Self::factorize) compiled for AVX: each block update in one 4-lane
-    /// operation instead of two pairs of lanes. The same operations in the same order (no
-    /// fused multiply–add), so the same bits on any x86-64.
+    /// [`factorize_columns`](Self::factorize_columns) compiled for AVX: each block update in
+    /// one 4-lane operation instead of two pairs of lanes. The same operations in the same
+    /// order (no fused multiply–add), so the same bits on any x86-64.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn factorize_avx(&mut self, a_values: &[f64]) -> bool {
-        self.factorize_with(a_values)
+    fn factorize_avx(&mut self, columns: &impl BlockColumns) -> bool {
+        self.factorize_with(columns)
     }
 
     #[inline(always)]
-    fn factorize_with(&mut self, a_values: &[f64]) -> bool {
+    fn factorize_with(&mut self, columns: &impl BlockColumns) -> bool {
         let n = self.l.columns();
-        let (l, a, work, values) = (&self.l, &self.a, &mut self.work, &mut self.values);
+        let (l, work, values) = (&self.l, &mut self.work, &mut self.values);
         for k in 0..n {
             let lk = l.col(k);
             for &r in &l.row[lk.clone()] {
                 work[r as usize] = [0.0; 4];
             }
-            for p in a.col(k) {
-                let b = &a_values[4 * p..4 * p + 4];
-                work[a.row[p] as usize] = [b[0], b[1], b[2], b[3]];
-            }
+            columns.add_column(k, work);
             // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
             let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
             for (&p, &end) in self.row_pos[row.clone()].iter().zip(&self.row_end[row]) {
@@ -357,7 +400,10 @@ mod tests {
             assert!(chol.factorize(&values));
             // The factor is the same, bit for bit, whichever instructions computed it.
             let mut portable = chol.clone();
-            assert!(portable.factorize_with(&values));
+            assert!(portable.factorize_with(&StoredColumns {
+                pattern: &pattern,
+                values: &values,
+            }));
             assert_eq!(portable.values, chol.values, "n {n}");
             let mut x = b.clone();
             chol.solve_in_place(&mut x);

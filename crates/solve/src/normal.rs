@@ -8,7 +8,9 @@
 //! rows, a person's x and y; on large patterns whose minimum-degree factor is dense, a
 //! crush's, also nested dissection ([`crate::dissection`]), keeping whichever factor costs
 //! fewer multiply–adds), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
-//! row's products land, and faer's *symbolic* Cholesky — all three redone only when the
+//! row's products land (in 2×2 blocks: each row's blocks and where its coefficients are, so
+//! that the factorization adds `J`'s rows into each column as it reaches it, with no
+//! assembled copy of the matrix), and the *symbolic* Cholesky — all three redone only when the
 //! columns of `J`'s rows change — and the *numeric* factorization, as often as the caller
 //! asks. The matrix is `shift·I + Jᵀ D J` for any `D ≥ 0` and `shift > 0`: symmetric positive
 //! definite however redundant the rows are. Scratch memory is sized at each symbolic analysis.
@@ -27,7 +29,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use moreau_core::{ConstraintRows, Parallelism};
 
-use crate::blocked::{BlockCholesky, BlockPattern};
+use crate::blocked::{Block, BlockCholesky, BlockColumns, BlockPattern};
 use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
 use crate::problem::SolveReport;
@@ -60,7 +62,7 @@ pub struct FactorizationCounts {
 pub(crate) struct StageTimes {
     /// Orderings, patterns and symbolic analyses (and the check whether they are current).
     pub(crate) analyse: f64,
-    /// Numeric factorizations and triangular solves.
+    /// Assembling `I + Jᵀ D J`, numeric factorizations and triangular solves.
     pub(crate) factorize: f64,
     /// Numeric factorizations (a count: [`FactorizationCounts::factorizations`] when read).
     pub(crate) factorizations: usize,
@@ -105,9 +107,17 @@ struct NormalPattern {
     slots: Vec<Index>,
     // Where each row's products start in `slots` (one more entry than rows).
     slot_start: Vec<usize>,
-    // Length of the values `slots` index (the pattern's entries, or the blocks' values after
-    // [`NormalPattern::build_blocks`]).
+    // Length of the values `slots` index (the pattern's entries).
     value_len: usize,
+    // In 2×2 blocks (after [`NormalPattern::build_blocks`], instead of `slots`): for each row
+    // of J, the blocks it touches, each `[block, position of the row's coefficient at the
+    // block's first unknown, at its second]` (positions in `J`'s coefficients), from
+    // `row_entry_start[i]`; for each block column, the `[row, entry]` of the rows touching it,
+    // from `col_entry_start[k]`, rows increasing.
+    row_entry_start: Vec<Index>,
+    row_entries: Vec<[Index; 3]>,
+    col_entry_start: Vec<Index>,
+    col_entries: Vec<[Index; 2]>,
     // scratch for building
     count: Vec<usize>,
     fill: Vec<Index>,
@@ -299,14 +309,72 @@ impl NormalPattern {
 
     /// The lower triangle of `j`'s normal matrix in 2×2 blocks, with unknown `c` at position
     /// `at[c]` of `n` (even) and positions `2k, 2k + 1` paired into block `k`: the blocks'
-    /// pattern, and `slots` and the diagonal as positions among the blocks' values (four per
-    /// block, column order). A pair's entry outside the products stays zero.
-    fn build_blocks(&mut self, j: &ConstraintRows, at: &[usize], n: usize) -> BlockPattern {
+    /// pattern, and each row's blocks with where its coefficients are (`row_entries`,
+    /// `col_entries`). `None` when a row does not have exactly one coefficient at each
+    /// unknown of the blocks it touches (a column repeated in a row).
+    fn build_blocks(&mut self, j: &ConstraintRows, at: &[usize], n: usize) -> Option<BlockPattern> {
         debug_assert!(n.is_multiple_of(2));
         let nb = n / 2;
         self.n = n;
         self.col_ptr.clear();
         self.row_idx.clear();
+        self.diag.clear();
+        self.slots.clear();
+        self.slot_start.clear();
+        self.value_len = 0;
+        // Each row's blocks, with the positions of its two coefficients there.
+        const NONE: Index = Index::MAX;
+        self.row_entry_start.clear();
+        self.row_entries.clear();
+        let (starts, cols) = (j.row_starts(), j.columns());
+        for i in 0..j.len() {
+            let first = self.row_entries.len();
+            self.row_entry_start.push(first as Index);
+            for t in starts[i]..starts[i + 1] {
+                let pos = at[cols[t]];
+                let (q, lane) = ((pos / 2) as Index, 1 + pos % 2);
+                let e = match self.row_entries[first..].iter().position(|e| e[0] == q) {
+                    Some(e) => first + e,
+                    None => {
+                        self.row_entries.push([q, NONE, NONE]);
+                        self.row_entries.len() - 1
+                    }
+                };
+                if self.row_entries[e][lane] != NONE {
+                    return None;
+                }
+                self.row_entries[e][lane] = t as Index;
+            }
+            if self.row_entries[first..]
+                .iter()
+                .any(|e| e[1] == NONE || e[2] == NONE)
+            {
+                return None;
+            }
+        }
+        self.row_entry_start.push(self.row_entries.len() as Index);
+        // By block column: a counting sort of the entries by block, rows increasing.
+        self.col_entry_start.clear();
+        self.col_entry_start.resize(nb + 1, 0);
+        for e in &self.row_entries {
+            self.col_entry_start[e[0] as usize + 1] += 1;
+        }
+        for k in 0..nb {
+            self.col_entry_start[k + 1] += self.col_entry_start[k];
+        }
+        self.col_entries.clear();
+        self.col_entries.resize(self.row_entries.len(), [0, 0]);
+        self.count.clear();
+        self.count
+            .extend(self.col_entry_start[..nb].iter().map(|&c| c as usize));
+        for i in 0..j.len() {
+            let range = self.row_entry_start[i] as usize..self.row_entry_start[i + 1] as usize;
+            for e in range {
+                let k = self.row_entries[e][0] as usize;
+                self.col_entries[self.count[k]] = [i as Index, e as Index];
+                self.count[k] += 1;
+            }
+        }
         // The off-diagonal blocks by column, behind each column's diagonal block.
         let mut blocks = BlockPattern::default();
         let mut seen = std::mem::take(&mut self.row_groups);
@@ -318,35 +386,7 @@ impl NormalPattern {
             &mut blocks.row,
         );
         self.row_groups = seen;
-        // The diagonal: (0, 0) or (1, 1) of the first block of its column.
-        self.diag.clear();
-        for &q in &at[..n] {
-            self.diag.push(4 * blocks.ptr[q / 2] as usize + 3 * (q % 2));
-        }
-        let find = |pr: usize, pc: usize| -> Index {
-            let (a, b) = (blocks.ptr[pc / 2] as usize, blocks.ptr[pc / 2 + 1] as usize);
-            let k = a + blocks.row[a..b]
-                .binary_search(&((pr / 2) as Index))
-                .expect("every product has a block in the pattern");
-            (4 * k + pr % 2 + 2 * (pc % 2)) as Index
-        };
-        self.slots.clear();
-        self.slot_start.clear();
-        for i in 0..j.len() {
-            self.slot_start.push(self.slots.len());
-            let cols = j.row(i).0;
-            for &ca in cols {
-                for &cb in cols {
-                    if ca >= cb {
-                        let (pa, pb) = (at[ca], at[cb]);
-                        self.slots.push(find(pa.max(pb), pa.min(pb)));
-                    }
-                }
-            }
-        }
-        self.slot_start.push(self.slots.len());
-        self.value_len = 4 * blocks.row.len();
-        blocks
+        Some(blocks)
     }
 
     fn symbolic(&self) -> SymbolicSparseColMatRef<'_, Index> {
@@ -373,6 +413,48 @@ impl NormalPattern {
                         k += 1;
                     }
                 }
+            }
+        }
+    }
+}
+
+/// The block columns of `shift·I + Jᵀ diag(d) J` from `J`'s rows, by the entries of
+/// [`NormalPattern::build_blocks`]; rows with `d_i = 0` are skipped.
+struct NormalColumns<'a> {
+    pattern: &'a NormalPattern,
+    coefs: &'a [f64],
+    shift: f64,
+    d: &'a [f64],
+}
+
+impl BlockColumns for NormalColumns<'_> {
+    #[inline(always)]
+    fn add_column(&self, k: usize, work: &mut [Block]) {
+        let (shift, d, coefs) = (self.shift, self.d, self.coefs);
+        let pattern = self.pattern;
+        let diag = &mut work[k];
+        diag[0] += shift;
+        diag[3] += shift;
+        let (rows, entries) = (&pattern.row_entry_start, &pattern.row_entries);
+        let range = pattern.col_entry_start[k] as usize..pattern.col_entry_start[k + 1] as usize;
+        for &[i, e] in &pattern.col_entries[range] {
+            let di = d[i as usize];
+            if di == 0.0 {
+                continue;
+            }
+            let [_, o0, o1] = entries[e as usize];
+            let (u0, u1) = (di * coefs[o0 as usize], di * coefs[o1 as usize]);
+            let row = rows[i as usize] as usize..rows[i as usize + 1] as usize;
+            for &[q, p0, p1] in &entries[row] {
+                if (q as usize) < k {
+                    continue;
+                }
+                let (v0, v1) = (coefs[p0 as usize], coefs[p1 as usize]);
+                let w = &mut work[q as usize];
+                w[0] += v0 * u0;
+                w[1] += v1 * u0;
+                w[2] += v0 * u1;
+                w[3] += v1 * u1;
             }
         }
     }
@@ -633,8 +715,13 @@ impl NormalEquations {
         if known_dense {
             self.block = BlockCholesky::default();
         }
-        if !known_dense && self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0) {
-            let blocks = self.pattern.build_blocks(j, &self.perm_inv, n);
+        let even = self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0);
+        let blocks = if !known_dense && even {
+            self.pattern.build_blocks(j, &self.perm_inv, n)
+        } else {
+            None
+        };
+        if let Some(blocks) = blocks {
             let a_blocks = blocks.row.len();
             self.block.analyse(blocks);
             let products = self.block.factor_block_products();
@@ -726,15 +813,23 @@ impl NormalEquations {
     /// Factorizes `shift·I + Jᵀ diag(d) J` (after [`Self::analyse`] of the same `j`); false
     /// when it is not numerically positive definite.
     pub(crate) fn factorize(&mut self, j: &ConstraintRows, shift: f64, d: &[f64]) -> bool {
-        self.pattern.assemble(j, shift, d, &mut self.h);
-        let clock = Instant::now();
         if self.blocked {
+            // The blocks of `A` are added column by column as the factorization reaches them:
+            // no assembled copy of `A`.
+            let clock = Instant::now();
             self.counts.factorizations += 1;
             self.counts.block_factorizations += 1;
-            let ok = self.block.factorize(&self.h);
+            let ok = self.block.factorize_columns(&NormalColumns {
+                pattern: &self.pattern,
+                coefs: j.coefficients(),
+                shift,
+                d,
+            });
             self.times.factorize += clock.elapsed().as_secs_f64();
             return ok;
         }
+        let clock = Instant::now();
+        self.pattern.assemble(j, shift, d, &mut self.h);
         let par = self.par();
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
@@ -889,6 +984,45 @@ mod tests {
                     "case {case} row {r}: {ax} against {}",
                     b[r]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn rows_with_their_columns_in_any_order_or_repeated_are_solved() {
+        // The 2×2 blocks find each coefficient by its unknown, whatever the order of a row's
+        // columns; a column repeated in a row (its coefficients add up) goes to faer.
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for repeated in [false, true] {
+            let people = 12;
+            let mut j = ConstraintRows::new(2 * people);
+            for i in 0..30u64 {
+                let a = rng.random_range(0..people - 1);
+                let b = rng.random_range(a + 1..people);
+                let mut row = vec![
+                    (2 * a, rng.random_range(-1.0..1.0)),
+                    (2 * a + 1, rng.random_range(-1.0..1.0)),
+                    (2 * b, rng.random_range(-1.0..1.0)),
+                    (2 * b + 1, rng.random_range(-1.0..1.0)),
+                ];
+                row.swap(rng.random_range(0..4), rng.random_range(0..4));
+                row.swap(0, 3);
+                if repeated && i == 7 {
+                    row.push((2 * a, 0.5));
+                }
+                j.push(i, 0.0, row);
+            }
+            let d: Vec<f64> = (0..j.len()).map(|_| rng.random_range(0.0..10.0)).collect();
+            let b: Vec<f64> = (0..j.dim()).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
+            ne.analyse(&j).unwrap();
+            assert!(ne.factorize(&j, 1.0, &d));
+            assert_eq!(ne.counts().block_factorizations, usize::from(!repeated));
+            let mut x = b.clone();
+            ne.solve_in_place(&mut x);
+            for (r, row) in dense(&j, 1.0, &d).iter().enumerate() {
+                let ax: f64 = row.iter().zip(&x).map(|(a, x)| a * x).sum();
+                assert!((ax - b[r]).abs() <= 1e-10, "row {r}: {ax} against {}", b[r]);
             }
         }
     }
