@@ -185,6 +185,34 @@ impl DistanceField {
             .map_or(f64::INFINITY, |(ix, iy)| self.dist[iy * self.nx + ix])
     }
 
+    /// Asks the processor to bring the cells [`Self::direction`]`(p)` reads into its cache;
+    /// changes no result.
+    #[inline]
+    pub fn prefetch(&self, p: [f64; 2]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
+            let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
+            let (x0, y0) = (floor(fx), floor(fy));
+            if !(x0 >= 0.0 && y0 >= 0.0 && x0 < self.nx as f64 && y0 < self.ny as f64) {
+                return;
+            }
+            let (ix, iy) = (x0 as usize, y0 as usize);
+            for row in [iy, (iy + 1).min(self.ny - 1)] {
+                let cell = &self.dir[row * self.nx + ix];
+                // SAFETY: a prefetch only hints the cache: it reads nothing the program sees
+                // and cannot fault (the address is a cell of the grid besides).
+                #[allow(unsafe_code)]
+                unsafe {
+                    _mm_prefetch::<_MM_HINT_T0>((cell as *const [f64; 2]).cast::<i8>());
+                }
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = p;
+    }
+
     /// The descent direction at `p`: bilinear blend of the four nearest cell directions
     /// (walkable cells only), normalized; zero where no walkable cell is near.
     pub fn direction(&self, p: [f64; 2]) -> [f64; 2] {
@@ -215,6 +243,11 @@ impl DistanceField {
         }
     }
 }
+
+/// People whose cells of the distance field [`DesiredVelocity::eval`] asks the processor to
+/// fetch ahead of their turn: the field's cells (2 MB on cromosim's scene) are read at random
+/// and had left the cache since the last step, each read a wait of ~100 ns.
+const PREFETCH_AHEAD: usize = 8;
 
 /// `x.floor()` inlined (x86-64 has no floor instruction before SSE4.1, and the call into libm
 /// was 3 % of a step at a million people); exact for |x| < 2⁶³.
@@ -320,7 +353,14 @@ impl Field for DesiredVelocity<'_> {
     /// group is released after `t`.
     fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
         let mut near = self.near.borrow_mut();
-        for i in 0..self.people.id.len() {
+        let n = self.people.id.len();
+        for i in 0..n {
+            let ahead = i + PREFETCH_AHEAD;
+            if ahead < n
+                && let Some(g) = self.goal(ahead)
+            {
+                self.fields[g].prefetch([q[2 * ahead], q[2 * ahead + 1]]);
+            }
             let v = if t < self.stand_until[self.people.group[i] as usize] {
                 [0.0, 0.0]
             } else {
