@@ -579,7 +579,7 @@ impl InteriorPoint {
             self.direction(j, lam);
             let wk = self.normal.workers();
             let (s, ds, dl) = (&self.s, &self.ds, &self.dl);
-            let alpha_aff = Self::max_step(wk, s, ds, lam, dl);
+            let alpha_aff = Self::max_step(Self::max_steps(wk, s, ds, lam, dl));
             let lam_ref: &[f64] = lam;
             let mu_aff = wk.sum(m, |i| {
                 (s[i] + alpha_aff * ds[i]) * (lam_ref[i] + alpha_aff * dl[i])
@@ -602,7 +602,8 @@ impl InteriorPoint {
             }
             self.direction(j, lam);
             let wk = self.normal.workers();
-            let mut alpha_max = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
+            let mut steps = Self::max_steps(wk, &self.s, &self.ds, lam, &self.dl);
+            let mut alpha_max = Self::max_step(steps);
             for _ in 0..correctors {
                 if alpha_max >= 1.0 {
                     break;
@@ -625,9 +626,10 @@ impl InteriorPoint {
                 self.swap_kept();
                 self.direction(j, lam);
                 let wk = self.normal.workers();
-                let next = Self::max_step(wk, &self.s, &self.ds, lam, &self.dl);
+                let next_steps = Self::max_steps(wk, &self.s, &self.ds, lam, &self.dl);
+                let next = Self::max_step(next_steps);
                 if next >= 1.01 * alpha_max && self.dv.iter().all(|x| x.is_finite()) {
-                    alpha_max = next;
+                    (steps, alpha_max) = (next_steps, next);
                 } else {
                     self.swap_kept();
                     break;
@@ -640,11 +642,7 @@ impl InteriorPoint {
             }
             let (dv, ds, dl) = (&self.dv, &self.ds, &self.dl);
             let (alpha_primal, alpha_dual) = if self.settings.separate_steps {
-                let (s, lam): (&[f64], &[f64]) = (&self.s, lam);
-                (
-                    tau * wk.min(m, |i| step_ratio(s[i], ds[i])).min(1.0),
-                    tau * wk.min(m, |i| step_ratio(lam[i], dl[i])).min(1.0),
-                )
+                (tau * steps.0, tau * steps.1)
             } else {
                 (alpha, alpha)
             };
@@ -706,18 +704,27 @@ impl InteriorPoint {
         true
     }
 
-    /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0` and `λ + αΔλ ≥ 0`.
-    fn max_step(w: &Workers, s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> f64 {
-        w.min(s.len(), |i| {
-            step_ratio(s[i], ds[i]).min(step_ratio(lam[i], dl[i]))
-        })
-        .min(1.0)
+    /// The largest `α ≤ 1` keeping `s + αΔs ≥ 0`, and that keeping `λ + αΔλ ≥ 0`, in one
+    /// pass.
+    fn max_steps(w: &Workers, s: &[f64], ds: &[f64], lam: &[f64], dl: &[f64]) -> (f64, f64) {
+        let (p, d) = w.min_pair(s.len(), |i| {
+            (step_ratio(s[i], ds[i]), step_ratio(lam[i], dl[i]))
+        });
+        (p.min(1.0), d.min(1.0))
+    }
+
+    /// The largest `α ≤ 1` keeping both (of [`Self::max_steps`]).
+    fn max_step((primal, dual): (f64, f64)) -> f64 {
+        primal.min(dual)
     }
 }
 
-/// How far along `dx` the positive `x` may go: `−x / dx` where `dx < 0`, else `∞`.
+/// How far along `dx` the positive `x` may go, where that is less than all the way (`dx` and
+/// beyond: `∞`, as every use takes at most 1): `x / −dx` where `x < −dx` (then `dx < 0`; a
+/// quotient that rounds up to 1 is 1 either way), else `∞`. Most rows do not block a step:
+/// their division is skipped.
 fn step_ratio(x: f64, dx: f64) -> f64 {
-    if dx < 0.0 { -x / dx } else { f64::INFINITY }
+    if x < -dx { x / -dx } else { f64::INFINITY }
 }
 
 impl ProjectionSolver for InteriorPoint {

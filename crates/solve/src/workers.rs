@@ -76,6 +76,22 @@ impl Workers {
         }
     }
 
+    /// `min_{i < n} f(i)` of each of the two components of `f`, in one pass.
+    pub(crate) fn min_pair(&self, n: usize, f: impl Fn(usize) -> (f64, f64) + Sync) -> (f64, f64) {
+        let both = |a: (f64, f64), b: (f64, f64)| (a.0.min(b.0), a.1.min(b.1));
+        let none = (f64::INFINITY, f64::INFINITY);
+        match &self.pool {
+            None => (0..n).map(f).fold(none, both),
+            Some(pool) => pool.install(|| {
+                (0..n)
+                    .into_par_iter()
+                    .with_min_len(CHUNK)
+                    .map(&f)
+                    .reduce(|| none, both)
+            }),
+        }
+    }
+
     /// `min_{i < n} f(i)` (order does not matter for a minimum).
     pub(crate) fn min(&self, n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
         match &self.pool {
@@ -103,6 +119,9 @@ mod tests {
         let two = Workers::new(Parallelism::threads(2)).unwrap();
         assert_eq!(one.sum(n, f).to_bits(), two.sum(n, f).to_bits());
         assert_eq!(one.min(n, f), two.min(n, f));
+        let g = |i: usize| (f(i), f(n - 1 - i) - 1.0);
+        assert_eq!(one.min_pair(n, g), two.min_pair(n, g));
+        assert_eq!(one.min_pair(n, g), (one.min(n, f), one.min(n, f) - 1.0));
         let (mut a, mut b) = (vec![1.0; n], vec![1.0; n]);
         one.map(&mut a, |i, x| x + f(i));
         two.map(&mut b, |i, x| x + f(i));
