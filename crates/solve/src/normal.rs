@@ -522,6 +522,8 @@ pub(crate) struct NormalEquations {
     h: Vec<f64>,
     l: Vec<f64>,
     mem: Scratch,
+    // AMD's workspace and its size in bytes, grown as needed
+    amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
 }
@@ -556,6 +558,7 @@ impl NormalEquations {
             h: Vec::new(),
             l: Vec::new(),
             mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
+            amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
         })
     }
@@ -641,20 +644,26 @@ impl NormalEquations {
         // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
         self.jt.build(j);
         let groups = column_groups(&self.jt, &mut self.group_of);
+        // The upper triangle, its rows sorted and without repeats: what faer's AMD makes of
+        // any input first (`order_maybe_unsorted`), so `order` takes it as it is.
         self.natural
-            .build(j, Some((&self.group_of, groups)), false, false);
+            .build(j, Some((&self.group_of, groups)), true, false);
         let nnz = self.natural.row_idx.len();
         self.group_perm.clear();
         self.group_perm.resize(groups, 0);
         self.group_perm_inv.clear();
         self.group_perm_inv.resize(groups, 0);
-        let mut mem = MemBuffer::new(amd::order_maybe_unsorted_scratch::<Index>(groups, nnz));
-        amd::order_maybe_unsorted(
+        // (Bytes enough at any alignment; kept from analysis to analysis.)
+        let bytes = amd::order_scratch::<Index>(groups, nnz).unaligned_bytes_required();
+        if self.amd_mem.1 < bytes {
+            self.amd_mem = (Scratch(MemBuffer::new(StackReq::new::<u8>(bytes))), bytes);
+        }
+        amd::order(
             &mut self.group_perm,
             &mut self.group_perm_inv,
             self.natural.symbolic(),
             amd::Control::default(),
-            MemStack::new(&mut mem),
+            MemStack::new(&mut self.amd_mem.0.0),
         )
         .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
         // A large pattern whose minimum-degree factor is dense (a crush: wide fronts) is also
@@ -662,6 +671,8 @@ impl NormalEquations {
         // is kept. Its count is exact for the 2×2 blocks when every group is a pair.
         let mut fill = None;
         if groups >= DISSECTION_MIN_GROUPS {
+            self.natural
+                .build(j, Some((&self.group_of, groups)), false, false);
             let natural = self.natural.symbolic();
             let (mut products, mut entries) = self.fill.count(natural, &self.group_perm_inv);
             if products >= DISSECTION_MIN_PRODUCTS_PER_ENTRY * entries {
