@@ -742,6 +742,7 @@ impl NormalEquations {
                 self.blocked = true;
                 self.mem = Scratch(MemBuffer::new(StackReq::EMPTY));
                 self.l = Vec::new();
+                self.h = Vec::new();
                 // Scalar equivalents: a block column of c blocks is two columns of 2c
                 // and 2c − 1 entries, 4c² multiply–adds.
                 self.counts.factor_nnz = (4 * blocks - (n / 2) as u64) as usize;
