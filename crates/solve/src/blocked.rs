@@ -235,11 +235,10 @@ impl BlockCholesky {
     fn factorize_with(&mut self, columns: &impl BlockColumns) -> bool {
         let n = self.l.columns();
         let (l, work, values) = (&self.l, &mut self.work, &mut self.values);
+        // `work` is zero between columns: each block is reset where column k's factor reads
+        // it (no pass that clears the column first), and all of it after a failure.
         for k in 0..n {
             let lk = l.col(k);
-            for &r in &l.row[lk.clone()] {
-                work[r as usize] = [0.0; 4];
-            }
             columns.add_column(k, work);
             // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
             let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
@@ -255,14 +254,12 @@ impl BlockCholesky {
             // L(k, k) by the 2×2 Cholesky of the diagonal block, kept as
             // `[1/l₀₀, l₁₀, 0, 1/l₁₁]`: the divisions of the column below and of every
             // triangular solve become multiplications.
-            let d = work[k];
-            if !(d[0] > 0.0) {
-                return false;
-            }
+            let d = std::mem::replace(&mut work[k], [0.0; 4]);
             let l00 = d[0].sqrt();
             let l10 = d[1] / l00;
             let schur = d[3] - l10 * l10;
-            if !(schur > 0.0) {
+            if !(d[0] > 0.0 && schur > 0.0) {
+                work.fill([0.0; 4]);
                 return false;
             }
             let (i00, i11) = (1.0 / l00, 1.0 / schur.sqrt());
@@ -272,7 +269,7 @@ impl BlockCholesky {
                 .iter()
                 .zip(&mut values[lk.start + 1..lk.end])
             {
-                let w = work[r as usize];
+                let w = std::mem::replace(&mut work[r as usize], [0.0; 4]);
                 let (x0, x1) = (w[0] * i00, w[1] * i00); // rows 0 and 1
                 *out = [x0, x1, (w[2] - x0 * l10) * i11, (w[3] - x1 * l10) * i11];
             }
@@ -421,15 +418,33 @@ mod tests {
     }
 
     #[test]
-    fn an_indefinite_matrix_is_refused() {
+    fn an_indefinite_matrix_is_refused_and_the_next_factorization_starts_clean() {
+        // Blocks (0, 0), (1, 0), (1, 1), (2, 1), (2, 2): the first three are I, 2I, I
+        // (eigenvalues −1 and 3: column 1 fails), after block (2, 1) was added into the
+        // workspace.
         let pattern = BlockPattern {
-            ptr: vec![0, 2, 3],
-            row: vec![0, 1, 1],
+            ptr: vec![0, 2, 4, 5],
+            row: vec![0, 1, 1, 2, 2],
         };
-        // Diagonal blocks I, off-diagonal block 2I: eigenvalues −1 and 3.
-        let values = [1.0, 0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0, 1.0];
+        let eye = [1.0, 0.0, 0.0, 1.0];
+        let values: Vec<f64> = [eye, [2.0, 0.0, 0.0, 2.0], eye, eye, eye].concat();
         let mut chol = BlockCholesky::default();
-        chol.analyse(pattern);
+        chol.analyse(pattern.clone());
         assert!(!chol.factorize(&values));
+        // The next factorization starts clean (the workspace a failed one left is cleared):
+        // the same factor, bit for bit, as a new factorization's.
+        let definite: Vec<f64> = [
+            [4.0, 1.0, 0.0, 3.0],
+            [0.5, 0.2, -0.3, 0.1],
+            [5.0, -1.0, 0.0, 2.0],
+            [0.7, -0.4, 0.2, 0.3],
+            [6.0, 0.5, 0.0, 4.0],
+        ]
+        .concat();
+        assert!(chol.factorize(&definite));
+        let mut fresh = BlockCholesky::default();
+        fresh.analyse(pattern);
+        assert!(fresh.factorize(&definite));
+        assert_eq!(chol.values, fresh.values);
     }
 }
