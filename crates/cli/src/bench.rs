@@ -6,6 +6,7 @@
 //! at one size, the step's own (warm) projection against cold solves of the same projection
 //! by each solver asked for (Clarabel among them).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -443,6 +444,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 String::from_utf8_lossy(&out.stderr).trim()
             );
         }
+        // What the measurement said on its standard error (nothing, normally) is passed on.
+        std::io::stderr().write_all(&out.stderr)?;
         let row: Row = serde_json::from_slice(&out.stdout)?;
         println!(
             "{:>9} {:>8.0} {:>9.0} {:>9.0} {:>10.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>7.1} {:>6.1} {:>9.2e} {:>9.2e} {:>8.0} {:>7.1}",
