@@ -256,7 +256,7 @@ def test_12_bottleneck(tmp_path_factory):
     across its entrance is an equilibrium of the model (a clogged state stays clogged even
     with Clarabel at ε = 4e-14), and whether one forms is chance — with seeds 1–24, 5 or 6
     runs clog with each of `auto`, `interior` and `gauss-seidel` (benches/README.md, session
-    10). One seed passed or failed by luck, so the scene runs with six seeds: every run in
+    10; 3 of 24 with `auto` in session 15, seeds 2, 15 and 19). One seed passed or failed by luck, so the scene runs with six seeds: every run in
     which everyone went through the corridor must meet the criteria, and at most four of the
     six may clog (with one run in four clogging, five or six clog once in 200 changes). A clog
     can also give way late (seed 15 with the code of 2026-11-26: stuck 13 s, then 21 people in
