@@ -246,7 +246,7 @@ impl ProjectionSolver for AutoSolver {
             // every row.
             let first = report;
             for i in 0..m {
-                if self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation {
+                if self.needed_set_aside(p, target, i) {
                     self.set_aside[i] = false;
                 }
             }
@@ -453,10 +453,15 @@ impl AutoSolver {
         into.extend(rows.iter().map(|&i| (keys[i as usize], left)));
     }
 
-    /// Whether the answer of the last [`solve_split`](Self::solve_split) violates a row that
-    /// was set aside (its `J v` is in `scratch_m`).
+    /// Whether the answer of the last [`solve_split`](Self::solve_split) violates row `i`, set
+    /// aside (its `J v` is in `scratch_m`).
+    fn needed_set_aside(&self, p: &ProjectionProblem<'_>, target: Target, i: usize) -> bool {
+        self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation
+    }
+
+    /// Whether it violates any row set aside.
     fn needed_a_row_set_aside(&self, p: &ProjectionProblem<'_>, target: Target) -> bool {
-        (0..p.rows()).any(|i| self.set_aside[i] && p.b[i] + self.scratch_m[i] < -target.violation)
+        (0..p.rows()).any(|i| self.needed_set_aside(p, target, i))
     }
 
     /// Marks in `set_aside` the rows whose slack at `w` exceeds the factor times their reach
