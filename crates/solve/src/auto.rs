@@ -93,8 +93,11 @@ impl Default for AutoSettings {
 /// answer, with every row if one set aside is needed still.
 ///
 /// With threads ([`AutoSettings::parallelism`] above one), the largest component and the
-/// others are solved at once, each by its own interior point on one thread; the split is the
-/// same on any thread count, and so are the answers, bit for bit.
+/// others are solved at once, each by its own interior point, and the largest component's
+/// factorizations and triangular solves in 2×2 blocks are split over two threads where its
+/// elimination tree has two parts that pay
+/// ([`InteriorPointSettings::split_factorization`]); the split is the same on any thread
+/// count, and so are the answers, bit for bit.
 ///
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
@@ -157,20 +160,23 @@ impl AutoSolver {
                 .abandon_when_slow(true)
                 .build()?,
         )?;
-        // Each interior point runs on one thread: with threads, the largest component and
-        // the others run at once (two interior points each spreading its loops over the same
-        // cores would only contend).
-        let interior = || {
+        // Each interior point's loops run on one thread: with threads, the largest component
+        // and the others run at once (two interior points each spreading its loops over the
+        // same cores would only contend), and the largest one's factorizations split in two
+        // (measured: benches/README.md, session 16).
+        let interior = |split: bool| {
             InteriorPoint::new(
                 InteriorPointSettings::builder()
                     .parallelism(Parallelism::SEQUENTIAL)
+                    .split_factorization(split)
                     .build()?,
             )
         };
+        let threads = !settings.parallelism.is_sequential();
         Ok(Self {
             settings,
             gauss_seidel,
-            interiors: [interior()?, interior()?],
+            interiors: [interior(threads)?, interior(false)?],
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
             finished: Vec::new(),

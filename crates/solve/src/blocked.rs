@@ -15,7 +15,19 @@
 //! the factor keeps its diagonal blocks as `[1/l₀₀, l₁₀, 0, 1/l₁₁]`, so that no division is
 //! left in the numeric factorization's columns or in the triangular solves.
 
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::helper::Helper;
 use crate::products::Index;
+
+/// Block products (2×2) of a factorization below which it is not split over two threads:
+/// a handoff costs about a microsecond, ~5,000 products about eight.
+const SPLIT_MIN_PRODUCTS: u64 = 5_000;
+
+/// A split is kept when its two threads' time (the larger part, then the rest) is at most this
+/// fraction of one thread's, counted in block products.
+const SPLIT_MAX_SHARE: f64 = 0.85;
 
 /// A 2×2 block in column order `[a₀₀, a₁₀, a₀₁, a₁₁]`.
 pub(crate) type Block = [f64; 4];
@@ -90,18 +102,39 @@ pub(crate) struct BlockCholesky {
     row_ptr: Vec<Index>,
     row_pos: Vec<Index>,
     row_end: Vec<Index>,
+    row_col: Vec<Index>,
     values: Vec<Block>,
     work: Vec<Block>,
     // scratch of the analysis
     mark: Vec<Index>,
+    // The columns in two parts for two threads, if the analysis was asked for one and found
+    // it worth it, with the second thread's workspace.
+    split: Option<Split>,
+    work2: Vec<Block>,
 }
+
+/// The block columns in three parts: two unions of disjoint subtrees of the elimination tree
+/// (factorized at once, each on its own thread: a column reads only its descendants) and the
+/// rest, their ancestors (factorized after both). Each part lists its columns in increasing
+/// order.
+#[derive(Debug, Clone, Default)]
+struct Split {
+    part: Vec<u8>,
+    cols: [Vec<Index>; 3],
+}
+
+/// The rest's part number in [`Split::part`].
+const REST: u8 = 2;
 
 impl BlockCholesky {
     /// Analyses the pattern of `A` (block columns of its lower triangle, each with its
     /// diagonal block first and its rows increasing): the pattern of `L` by merging each
     /// column's children in the elimination tree, and the row lists the numeric
     /// factorization walks.
-    pub(crate) fn analyse(&mut self, a: BlockPattern) {
+    ///
+    /// With `split`, the columns are also divided for two threads where that pays
+    /// ([`Self::is_split`]).
+    pub(crate) fn analyse(&mut self, a: BlockPattern, split: bool) {
         let n = a.columns();
         self.a = a;
         let l = &mut self.l;
@@ -163,19 +196,142 @@ impl BlockCholesky {
         self.row_pos.resize(self.row_ptr[n] as usize, 0);
         self.row_end.clear();
         self.row_end.resize(self.row_ptr[n] as usize, 0);
+        // (The columns of the row lists' blocks only for a split's forward solve.)
+        self.row_col.clear();
+        if split {
+            self.row_col.resize(self.row_ptr[n] as usize, 0);
+        }
         let mut fill: Vec<Index> = self.row_ptr[..n].to_vec();
         for k in 0..n {
             for p in l.ptr[k] as usize + 1..l.ptr[k + 1] as usize {
                 let r = l.row[p] as usize;
                 self.row_pos[fill[r] as usize] = p as Index;
                 self.row_end[fill[r] as usize] = l.ptr[k + 1];
+                if split {
+                    self.row_col[fill[r] as usize] = k as Index;
+                }
                 fill[r] += 1;
             }
         }
         self.values.clear();
-        self.values.resize(l.row.len(), [0.0; 4]);
+        self.values.resize(self.l.row.len(), [0.0; 4]);
         self.work.clear();
         self.work.resize(n, [0.0; 4]);
+        self.split = if split { self.split_columns() } else { None };
+        if self.split.is_some() {
+            self.work2.clear();
+            self.work2.resize(n, [0.0; 4]);
+        } else {
+            self.work2 = Vec::new();
+        }
+    }
+
+    /// Whether the last analysis divided the columns for two threads.
+    pub(crate) fn is_split(&self) -> bool {
+        self.split.is_some()
+    }
+
+    /// The parts of [`Split`]: starting from the elimination tree's roots, the heaviest
+    /// subtree is replaced by its children (its root joining the rest) while that helps, each
+    /// time the subtrees dealt to two threads heaviest first, each to the lighter one; the
+    /// best of at most 64 such steps, if worth it ([`SPLIT_MIN_PRODUCTS`],
+    /// [`SPLIT_MAX_SHARE`]). Weights are block products.
+    fn split_columns(&self) -> Option<Split> {
+        const NONE: usize = usize::MAX;
+        let l = &self.l;
+        let n = l.columns();
+        let parent = |k: usize| {
+            let c = l.col(k);
+            if c.len() > 1 {
+                l.row[c.start + 1] as usize
+            } else {
+                NONE
+            }
+        };
+        let cost = |k: usize| {
+            let c = l.col(k).len() as u64;
+            c * (c + 1) / 2
+        };
+        let mut weight: Vec<u64> = (0..n).map(cost).collect();
+        let total: u64 = weight.iter().sum();
+        if total < SPLIT_MIN_PRODUCTS {
+            return None;
+        }
+        let (mut head, mut next) = (vec![NONE; n], vec![NONE; n]);
+        let mut frontier = Vec::new();
+        for k in 0..n {
+            match parent(k) {
+                NONE => frontier.push(k),
+                p => {
+                    weight[p] += weight[k];
+                    next[k] = head[p];
+                    head[p] = k;
+                }
+            }
+        }
+        // The two threads' loads, the heaviest subtrees first, each to the lighter thread.
+        let deal = |frontier: &mut Vec<usize>, bins: Option<&mut Vec<u8>>| {
+            frontier.sort_unstable_by_key(|&k| (std::cmp::Reverse(weight[k]), k));
+            let mut load = [0u64; 2];
+            let mut bins = bins;
+            for &k in frontier.iter() {
+                let b = usize::from(load[1] < load[0]);
+                load[b] += weight[k];
+                if let Some(bins) = bins.as_deref_mut() {
+                    bins[k] = b as u8;
+                }
+            }
+            load[0].max(load[1])
+        };
+        let (mut rest, mut best, mut best_steps) = (0u64, total, None);
+        let mut part = vec![REST; n];
+        for steps in 0..=64 {
+            let time = deal(&mut frontier, None) + rest;
+            if time < best {
+                (best, best_steps) = (time, Some(steps));
+            }
+            // The heaviest subtree (first after the deal) gives way to its children.
+            let k = frontier[0];
+            if head[k] == NONE {
+                break;
+            }
+            frontier.swap_remove(0);
+            rest += cost(k);
+            let mut c = head[k];
+            while c != NONE {
+                frontier.push(c);
+                c = next[c];
+            }
+        }
+        let steps = best_steps?;
+        if (best as f64) > SPLIT_MAX_SHARE * total as f64 {
+            return None;
+        }
+        // Again up to the best step, then the subtrees dealt for good.
+        frontier.clear();
+        frontier.extend((0..n).filter(|&k| parent(k) == NONE));
+        for _ in 0..steps {
+            deal(&mut frontier, None);
+            let k = frontier.swap_remove(0);
+            let mut c = head[k];
+            while c != NONE {
+                frontier.push(c);
+                c = next[c];
+            }
+        }
+        deal(&mut frontier, Some(&mut part));
+        // Descendants follow their subtree's root (parents come after children).
+        for k in (0..n).rev() {
+            let p = parent(k);
+            if p != NONE && part[p] != REST {
+                part[k] = part[p];
+            }
+        }
+        let mut cols: [Vec<Index>; 3] = Default::default();
+        for (k, &b) in part.iter().enumerate() {
+            cols[b as usize].push(k as Index);
+        }
+        Some(Split { part, cols })
     }
 
     /// Blocks of `L` (the fill the ordering left), for the reports.
@@ -234,47 +390,74 @@ impl BlockCholesky {
     #[inline(always)]
     fn factorize_with(&mut self, columns: &impl BlockColumns) -> bool {
         let n = self.l.columns();
-        let (l, work, values) = (&self.l, &mut self.work, &mut self.values);
-        // `work` is zero between columns: each block is reset where column k's factor reads
-        // it (no pass that clears the column first), and all of it after a failure.
-        for k in 0..n {
-            let lk = l.col(k);
-            columns.add_column(k, work);
-            // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
-            let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
-            for (&p, &end) in self.row_pos[row.clone()].iter().zip(&self.row_end[row]) {
-                let (p, end) = (p as usize, end as usize);
-                let b = values[p];
-                let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
-                // The rest of column j from row k on (its rows increase).
-                for (&r, v) in l.row[p..end].iter().zip(&values[p..end]) {
-                    sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
-                }
-            }
-            // L(k, k) by the 2×2 Cholesky of the diagonal block, kept as
-            // `[1/l₀₀, l₁₀, 0, 1/l₁₁]`: the divisions of the column below and of every
-            // triangular solve become multiplications.
-            let d = std::mem::replace(&mut work[k], [0.0; 4]);
-            let l00 = d[0].sqrt();
-            let l10 = d[1] / l00;
-            let schur = d[3] - l10 * l10;
-            if !(d[0] > 0.0 && schur > 0.0) {
-                work.fill([0.0; 4]);
-                return false;
-            }
-            let (i00, i11) = (1.0 / l00, 1.0 / schur.sqrt());
-            values[lk.start] = [i00, l10, 0.0, i11];
-            // L(i, k) = W(i) L(k, k)⁻ᵀ: each row of the block solved against L(k, k)ᵀ.
-            for (&r, out) in l.row[lk.start + 1..lk.end]
-                .iter()
-                .zip(&mut values[lk.start + 1..lk.end])
-            {
-                let w = std::mem::replace(&mut work[r as usize], [0.0; 4]);
-                let (x0, x1) = (w[0] * i00, w[1] * i00); // rows 0 and 1
-                *out = [x0, x1, (w[2] - x0 * l10) * i11, (w[3] - x1 * l10) * i11];
-            }
+        let rows = RowLists {
+            l: &self.l,
+            row_ptr: &self.row_ptr,
+            row_pos: &self.row_pos,
+            row_end: &self.row_end,
+        };
+        let ok = factor_columns(&rows, 0..n, columns, &mut self.work, &mut self.values[..]);
+        if !ok {
+            self.work.fill([0.0; 4]);
         }
-        true
+        ok
+    }
+
+    /// [`factorize_columns`](Self::factorize_columns) on two threads where the analysis split
+    /// the columns (the two parts at once, the second on `helper`, then the rest): the same
+    /// operations on every column, so the same bits as on one thread.
+    pub(crate) fn factorize_columns_split(
+        &mut self,
+        columns: &(impl BlockColumns + Sync),
+        helper: &Helper,
+    ) -> bool {
+        let Some(split) = self.split.take() else {
+            return self.factorize_columns(columns);
+        };
+        let ok = self.factorize_split(&split, columns, helper);
+        self.split = Some(split);
+        ok
+    }
+
+    fn factorize_split(
+        &mut self,
+        split: &Split,
+        columns: &(impl BlockColumns + Sync),
+        helper: &Helper,
+    ) -> bool {
+        let rows = RowLists {
+            l: &self.l,
+            row_ptr: &self.row_ptr,
+            row_pos: &self.row_pos,
+            row_end: &self.row_end,
+        };
+        let (work, work2) = (&mut self.work, Mutex::new(&mut self.work2));
+        let values = SharedValues::new(&mut self.values);
+        let second_ok = AtomicBool::new(true);
+        let second = || {
+            let mut work2 = work2.lock().unwrap_or_else(|e| e.into_inner());
+            let cols = split.cols[1].iter().map(|&k| k as usize);
+            let ok = factor_columns_dispatch(&rows, cols, columns, &mut work2[..], values);
+            second_ok.store(ok, Ordering::Relaxed);
+        };
+        let first_ok = helper.join(
+            || {
+                let cols = split.cols[0].iter().map(|&k| k as usize);
+                factor_columns_dispatch(&rows, cols, columns, &mut work[..], values)
+            },
+            &second,
+        );
+        let work2 = work2.into_inner().unwrap_or_else(|e| e.into_inner());
+        let mut ok = first_ok && second_ok.load(Ordering::Relaxed);
+        if ok {
+            let cols = split.cols[2].iter().map(|&k| k as usize);
+            ok = factor_columns_dispatch(&rows, cols, columns, &mut work[..], values);
+        }
+        if !ok {
+            work.fill([0.0; 4]);
+            work2.fill([0.0; 4]);
+        }
+        ok
     }
 
     /// Overwrites `x` (two entries per block column, in the factor's order) by `A⁻¹ x`.
@@ -319,6 +502,311 @@ impl BlockCholesky {
             x[2 * k + 1] = x1;
         }
     }
+}
+
+impl BlockCholesky {
+    /// [`solve_in_place`](Self::solve_in_place) on two threads where the analysis split the
+    /// columns: forward, the two parts at once (each column's updates to rows of its own part),
+    /// then the rows of the rest, each gathering its updates from its row of `L` in increasing
+    /// column order (the order the column sweep applies them: the same bits); backward, the
+    /// rest, then the two parts at once.
+    pub(crate) fn solve_in_place_split(&self, x: &mut [f64], helper: &Helper) {
+        let Some(split) = &self.split else {
+            return self.solve_in_place(x);
+        };
+        let (l, values) = (&self.l, &self.values);
+        debug_assert_eq!(x.len(), 2 * l.columns());
+        let forward = |shared: SharedX<'_>, part: usize| {
+            for &k in &split.cols[part] {
+                let k = k as usize;
+                let lk = l.col(k);
+                let [i00, l10, _, i11] = values[lk.start];
+                let y0 = shared.get(2 * k) * i00;
+                let y1 = (shared.get(2 * k + 1) - l10 * y0) * i11;
+                shared.set(2 * k, y0);
+                shared.set(2 * k + 1, y1);
+                let below = lk.start + 1..lk.end;
+                for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+                    let i = i as usize;
+                    if split.part[i] == REST {
+                        continue;
+                    }
+                    let t = [b[0] * y0 + b[2] * y1, b[1] * y0 + b[3] * y1];
+                    shared.set(2 * i, shared.get(2 * i) - t[0]);
+                    shared.set(2 * i + 1, shared.get(2 * i + 1) - t[1]);
+                }
+            }
+        };
+        {
+            let shared = SharedX::new(x);
+            helper.join(|| forward(shared, 0), &|| forward(shared, 1));
+        }
+        for &k in &split.cols[2] {
+            let k = k as usize;
+            let (mut x0, mut x1) = (x[2 * k], x[2 * k + 1]);
+            let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
+            for (&p, &j) in self.row_pos[row.clone()].iter().zip(&self.row_col[row]) {
+                let (b, j) = (values[p as usize], j as usize);
+                let (y0, y1) = (x[2 * j], x[2 * j + 1]);
+                let t = [b[0] * y0 + b[2] * y1, b[1] * y0 + b[3] * y1];
+                x0 -= t[0];
+                x1 -= t[1];
+            }
+            let [i00, l10, _, i11] = values[l.col(k).start];
+            let y0 = x0 * i00;
+            x[2 * k] = y0;
+            x[2 * k + 1] = (x1 - l10 * y0) * i11;
+        }
+        let backward = |shared: SharedX<'_>, part: usize| {
+            for &k in split.cols[part].iter().rev() {
+                let k = k as usize;
+                let lk = l.col(k);
+                let mut r = [shared.get(2 * k), shared.get(2 * k + 1)];
+                let below = lk.start + 1..lk.end;
+                for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+                    let i = 2 * i as usize;
+                    let (x0, x1) = (shared.get(i), shared.get(i + 1));
+                    r = [
+                        r[0] - (b[0] * x0 + b[1] * x1),
+                        r[1] - (b[2] * x0 + b[3] * x1),
+                    ];
+                }
+                let [i00, l10, _, i11] = values[lk.start];
+                let x1 = r[1] * i11;
+                let x0 = (r[0] - l10 * x1) * i00;
+                shared.set(2 * k, x0);
+                shared.set(2 * k + 1, x1);
+            }
+        };
+        let shared = SharedX::new(x);
+        backward(shared, REST as usize);
+        helper.join(|| backward(shared, 0), &|| backward(shared, 1));
+    }
+}
+
+/// The right-hand side of a split solve, shared by its two threads: each writes only the
+/// entries of its own part's columns and reads only those and (finished) entries of the rest.
+#[derive(Clone, Copy)]
+struct SharedX<'a> {
+    ptr: *mut f64,
+    len: usize,
+    _x: std::marker::PhantomData<&'a mut [f64]>,
+}
+
+// SAFETY: see `SharedX::get`.
+#[allow(unsafe_code)]
+unsafe impl Send for SharedX<'_> {}
+#[allow(unsafe_code)]
+unsafe impl Sync for SharedX<'_> {}
+
+impl<'a> SharedX<'a> {
+    fn new(x: &'a mut [f64]) -> Self {
+        Self {
+            ptr: x.as_mut_ptr(),
+            len: x.len(),
+            _x: std::marker::PhantomData,
+        }
+    }
+
+    #[inline(always)]
+    fn get(&self, i: usize) -> f64 {
+        assert!(i < self.len);
+        // SAFETY: in bounds (checked); entry `i` belongs to the reading thread's part or to the
+        // rest, which no thread writes while the parts run (`solve_in_place_split`): no write
+        // to it races with this read.
+        #[allow(unsafe_code)]
+        unsafe {
+            self.ptr.add(i).read()
+        }
+    }
+
+    #[inline(always)]
+    fn set(&self, i: usize, v: f64) {
+        assert!(i < self.len);
+        // SAFETY: in bounds (checked); entry `i` belongs to the writing thread's part (or the
+        // rest, written by one thread while the parts do not run): no other thread reaches it.
+        #[allow(unsafe_code)]
+        unsafe {
+            self.ptr.add(i).write(v)
+        }
+    }
+}
+
+/// What a column of the numeric factorization reads of the analysis.
+struct RowLists<'a> {
+    l: &'a BlockPattern,
+    row_ptr: &'a [Index],
+    row_pos: &'a [Index],
+    row_end: &'a [Index],
+}
+
+/// The factor's values shared by the threads of a split factorization or solve, each of which
+/// reaches only the columns of its own part, and the rest's only after both parts are done.
+#[derive(Clone, Copy)]
+struct SharedValues<'a> {
+    ptr: *mut Block,
+    len: usize,
+    _values: std::marker::PhantomData<&'a mut [Block]>,
+}
+
+// SAFETY: a `SharedValues` is only handed to the threads of one split factorization, whose
+// column sets are disjoint (see `SharedValues::read`).
+#[allow(unsafe_code)]
+unsafe impl Send for SharedValues<'_> {}
+#[allow(unsafe_code)]
+unsafe impl Sync for SharedValues<'_> {}
+
+impl<'a> SharedValues<'a> {
+    fn new(values: &'a mut [Block]) -> Self {
+        Self {
+            ptr: values.as_mut_ptr(),
+            len: values.len(),
+            _values: std::marker::PhantomData,
+        }
+    }
+}
+
+impl SharedValues<'_> {
+    #[inline(always)]
+    fn read(&self, range: std::ops::Range<usize>) -> &[Block] {
+        assert!(range.start <= range.end && range.end <= self.len);
+        // SAFETY: in bounds (checked); the range is a column of the reading thread's own part
+        // (or, after both parts are done, any column): no thread writes it meanwhile, as a
+        // column is written only by the thread that factorizes it, once, before any column
+        // that reads it (its ancestors: the same part, or the rest) is started.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::slice::from_raw_parts(self.ptr.add(range.start), range.len())
+        }
+    }
+
+    #[inline(always)]
+    #[allow(clippy::mut_from_ref)]
+    fn write(&self, range: std::ops::Range<usize>) -> &mut [Block] {
+        assert!(range.start <= range.end && range.end <= self.len);
+        // SAFETY: in bounds (checked); the range is the column being factorized, which only
+        // its thread reaches until it is done (see `read`), and the slice is dropped before
+        // the next column starts.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::slice::from_raw_parts_mut(self.ptr.add(range.start), range.len())
+        }
+    }
+}
+
+/// The columns `cols` (each after its descendants) of the factorization, in `work` (zero
+/// before, zero after unless a column fails: then false at once).
+#[inline(always)]
+fn factor_columns(
+    rows: &RowLists<'_>,
+    cols: impl Iterator<Item = usize>,
+    columns: &impl BlockColumns,
+    work: &mut [Block],
+    values: &mut [Block],
+) -> bool {
+    let l = rows.l;
+    for k in cols {
+        let lk = l.col(k);
+        columns.add_column(k, work);
+        // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
+        let row = rows.row_ptr[k] as usize..rows.row_ptr[k + 1] as usize;
+        for (&p, &end) in rows.row_pos[row.clone()].iter().zip(&rows.row_end[row]) {
+            let (p, end) = (p as usize, end as usize);
+            let b = values[p];
+            let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
+            // The rest of column j from row k on (its rows increase).
+            for (&r, v) in l.row[p..end].iter().zip(&values[p..end]) {
+                sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
+            }
+        }
+        if !finish_column(l, k, work, &mut values[lk]) {
+            return false;
+        }
+    }
+    true
+}
+
+/// [`factor_columns`] on values shared between threads.
+#[inline(always)]
+fn factor_shared_columns(
+    rows: &RowLists<'_>,
+    cols: impl Iterator<Item = usize>,
+    columns: &impl BlockColumns,
+    work: &mut [Block],
+    values: SharedValues<'_>,
+) -> bool {
+    let l = rows.l;
+    for k in cols {
+        let lk = l.col(k);
+        columns.add_column(k, work);
+        let row = rows.row_ptr[k] as usize..rows.row_ptr[k + 1] as usize;
+        for (&p, &end) in rows.row_pos[row.clone()].iter().zip(&rows.row_end[row]) {
+            let (p, end) = (p as usize, end as usize);
+            let column = values.read(p..end);
+            let b = column[0];
+            let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
+            for (&r, v) in l.row[p..end].iter().zip(column) {
+                sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
+            }
+        }
+        if !finish_column(l, k, work, values.write(lk)) {
+            return false;
+        }
+    }
+    true
+}
+
+/// [`factor_shared_columns`] compiled for AVX where the processor has it (as
+/// [`BlockCholesky::factorize_columns`]).
+fn factor_columns_dispatch(
+    rows: &RowLists<'_>,
+    cols: impl Iterator<Item = usize>,
+    columns: &impl BlockColumns,
+    work: &mut [Block],
+    values: SharedValues<'_>,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        #[target_feature(enable = "avx")]
+        fn avx(
+            rows: &RowLists<'_>,
+            cols: impl Iterator<Item = usize>,
+            columns: &impl BlockColumns,
+            work: &mut [Block],
+            values: SharedValues<'_>,
+        ) -> bool {
+            factor_shared_columns(rows, cols, columns, work, values)
+        }
+        // SAFETY: the processor has AVX (just checked), all `avx` asks for.
+        #[allow(unsafe_code)]
+        return unsafe { avx(rows, cols, columns, work, values) };
+    }
+    factor_shared_columns(rows, cols, columns, work, values)
+}
+
+/// Column `k` of `L` from its updated column in `work` (read and reset there) into `out`: its
+/// diagonal block by the 2×2 Cholesky, kept as `[1/l₀₀, l₁₀, 0, 1/l₁₁]` (the divisions of the
+/// column below and of every triangular solve become multiplications), and the blocks below
+/// solved against it. False, with `work` left as it is, when the pivot is not positive.
+#[inline(always)]
+fn finish_column(l: &BlockPattern, k: usize, work: &mut [Block], out: &mut [Block]) -> bool {
+    let lk = l.col(k);
+    let d = std::mem::replace(&mut work[k], [0.0; 4]);
+    let l00 = d[0].sqrt();
+    let l10 = d[1] / l00;
+    let schur = d[3] - l10 * l10;
+    if !(d[0] > 0.0 && schur > 0.0) {
+        return false;
+    }
+    let (i00, i11) = (1.0 / l00, 1.0 / schur.sqrt());
+    out[0] = [i00, l10, 0.0, i11];
+    // L(i, k) = W(i) L(k, k)⁻ᵀ: each row of the block solved against L(k, k)ᵀ.
+    for (&r, out) in l.row[lk.start + 1..lk.end].iter().zip(&mut out[1..]) {
+        let w = std::mem::replace(&mut work[r as usize], [0.0; 4]);
+        let (x0, x1) = (w[0] * i00, w[1] * i00); // rows 0 and 1
+        *out = [x0, x1, (w[2] - x0 * l10) * i11, (w[3] - x1 * l10) * i11];
+    }
+    true
 }
 
 #[cfg(test)]
@@ -393,7 +881,7 @@ mod tests {
             let b: Vec<f64> = (0..2 * n).map(|_| lcg(&mut seed) - 0.5).collect();
 
             let mut chol = BlockCholesky::default();
-            chol.analyse(pattern.clone());
+            chol.analyse(pattern.clone(), false);
             assert!(chol.factorize(&values));
             // The factor is the same, bit for bit, whichever instructions computed it.
             let mut portable = chol.clone();
@@ -429,7 +917,7 @@ mod tests {
         let eye = [1.0, 0.0, 0.0, 1.0];
         let values: Vec<f64> = [eye, [2.0, 0.0, 0.0, 2.0], eye, eye, eye].concat();
         let mut chol = BlockCholesky::default();
-        chol.analyse(pattern.clone());
+        chol.analyse(pattern.clone(), false);
         assert!(!chol.factorize(&values));
         // The next factorization starts clean (the workspace a failed one left is cleared):
         // the same factor, bit for bit, as a new factorization's.
@@ -443,8 +931,107 @@ mod tests {
         .concat();
         assert!(chol.factorize(&definite));
         let mut fresh = BlockCholesky::default();
-        fresh.analyse(pattern);
+        fresh.analyse(pattern, false);
         assert!(fresh.factorize(&definite));
         assert_eq!(chol.values, fresh.values);
+    }
+
+    /// Two 12×12 grids of blocks (each block coupled to its right and upper neighbours) and
+    /// a separator of 12 blocks coupled to both: the elimination tree has two heavy subtrees.
+    fn two_grids_and_a_separator() -> (BlockPattern, Vec<f64>) {
+        let side = 12;
+        let g = side * side;
+        let n = 2 * g + side;
+        let mut lower: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for half in 0..2 {
+            for y in 0..side {
+                for x in 0..side {
+                    let k = half * g + y * side + x;
+                    if x + 1 < side {
+                        lower[k].push(k + 1);
+                    }
+                    if y + 1 < side {
+                        lower[k].push(k + side);
+                    }
+                    if y + 1 == side {
+                        lower[k].push(2 * g + x);
+                    }
+                }
+            }
+        }
+        for x in 0..side - 1 {
+            lower[2 * g + x].push(2 * g + x + 1);
+        }
+        let mut pattern = BlockPattern::default();
+        pattern.ptr.push(0);
+        for (k, rows) in lower.iter_mut().enumerate() {
+            rows.sort_unstable();
+            pattern.row.push(k as Index);
+            pattern.row.extend(rows.iter().map(|&r| r as Index));
+            pattern.ptr.push(pattern.row.len() as Index);
+        }
+        let mut seed = 11u64;
+        let mut values = vec![0.0; 4 * pattern.row.len()];
+        for k in 0..n {
+            let p = pattern.ptr[k] as usize;
+            let off = 0.2 * (lcg(&mut seed) - 0.5);
+            values[4 * p] = 6.0 + lcg(&mut seed);
+            values[4 * p + 1] = off;
+            values[4 * p + 3] = 6.0 + lcg(&mut seed);
+            for q in p + 1..pattern.ptr[k + 1] as usize {
+                for sub in 0..4 {
+                    values[4 * q + sub] = lcg(&mut seed) - 0.5;
+                }
+            }
+        }
+        (pattern, values)
+    }
+
+    #[test]
+    fn a_factorization_split_over_two_threads_gives_the_same_bits() {
+        let (pattern, values) = two_grids_and_a_separator();
+        let mut one = BlockCholesky::default();
+        one.analyse(pattern.clone(), false);
+        assert!(!one.is_split());
+        let mut two = BlockCholesky::default();
+        two.analyse(pattern.clone(), true);
+        let split = two.split.as_ref().expect("split");
+        // The two grids' columns go to the two threads (each with at least a quarter of them).
+        let side = 12 * 12;
+        assert!(split.cols[0].len() >= side / 4 && split.cols[1].len() >= side / 4);
+        let helper = Helper::start().expect("a thread");
+        let columns = StoredColumns {
+            pattern: &pattern,
+            values: &values,
+        };
+        let mut seed = 5u64;
+        for round in 0..3 {
+            assert!(one.factorize(&values));
+            assert!(two.factorize_columns_split(&columns, &helper));
+            assert_eq!(one.values, two.values, "round {round}");
+            let b: Vec<f64> = (0..2 * pattern.columns())
+                .map(|_| lcg(&mut seed) - 0.5)
+                .collect();
+            let (mut x1, mut x2) = (b.clone(), b);
+            one.solve_in_place(&mut x1);
+            two.solve_in_place_split(&mut x2, &helper);
+            assert!(
+                x1.iter().zip(&x2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "round {round}"
+            );
+        }
+        // A matrix that is not positive definite is refused, and the next one starts clean.
+        let mut bad = values.clone();
+        let last = pattern.ptr[pattern.columns() - 1] as usize;
+        bad[4 * last] = -1.0;
+        assert!(!two.factorize_columns_split(
+            &StoredColumns {
+                pattern: &pattern,
+                values: &bad,
+            },
+            &helper
+        ));
+        assert!(two.factorize_columns_split(&columns, &helper));
+        assert_eq!(one.values, two.values);
     }
 }

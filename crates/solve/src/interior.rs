@@ -85,6 +85,11 @@ pub struct InteriorPointSettings {
     /// 6.92 on cromosim's scene, 14.1 → 13.1 on the jammed 2,000, 11.7 → 10.9 and 14.5 → 13.6
     /// over whole evacuations of 2,000 and 10,000.
     pub separate_steps: bool,
+    /// Factorizations and triangular solves in 2×2 blocks on two threads where the
+    /// elimination tree splits into two parts that pay (the loops over rows and unknowns stay
+    /// on `parallelism`): a helper thread, spinning between jobs, takes one part. The same
+    /// bits as on one thread.
+    pub split_factorization: bool,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential).
     pub parallelism: Parallelism,
@@ -103,6 +108,7 @@ impl Default for InteriorPointSettings {
             polish_updates: 4,
             warm_iterate: 1e9,
             separate_steps: true,
+            split_factorization: false,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -232,6 +238,11 @@ impl InteriorPointSettingsBuilder {
         self.0.separate_steps = on;
         self
     }
+    /// Factorizations in 2×2 blocks split over two threads.
+    pub fn split_factorization(mut self, on: bool) -> Self {
+        self.0.split_factorization = on;
+        self
+    }
     /// Threads for the factorization.
     pub fn parallelism(mut self, p: Parallelism) -> Self {
         self.0.parallelism = p;
@@ -310,9 +321,13 @@ impl InteriorPoint {
     /// A solver with validated settings.
     pub fn new(settings: InteriorPointSettings) -> Result<Self, SolveError> {
         settings.validate()?;
+        let mut normal = NormalEquations::new(settings.parallelism)?;
+        if settings.split_factorization {
+            normal.split_over_two_threads();
+        }
         Ok(Self {
             settings: settings.clone(),
-            normal: NormalEquations::new(settings.parallelism)?,
+            normal,
             s: Vec::new(),
             d: Vec::new(),
             rp: Vec::new(),

@@ -19,6 +19,7 @@ mod components;
 mod dissection;
 mod error;
 mod gauss_seidel;
+mod helper;
 mod interior;
 mod newton;
 mod normal;

@@ -32,6 +32,7 @@ use moreau_core::{ConstraintRows, Parallelism};
 use crate::blocked::{Block, BlockCholesky, BlockColumns, BlockPattern};
 use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
+use crate::helper::Helper;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
 use crate::workers::Workers;
@@ -55,6 +56,9 @@ pub struct FactorizationCounts {
     pub factor_flops: u64,
     /// Analyses that ordered by nested dissection (the rest by minimum degree alone).
     pub dissections: usize,
+    /// Numeric factorizations in 2×2 blocks split over two threads
+    /// ([`InteriorPointSettings::split_factorization`](crate::InteriorPointSettings)).
+    pub split_factorizations: usize,
 }
 
 /// Seconds spent per stage of the factorization machinery, accumulated.
@@ -526,6 +530,8 @@ pub(crate) struct NormalEquations {
     amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
+    // The second thread of factorizations and solves in 2×2 blocks split in two.
+    helper: Option<Helper>,
 }
 
 impl NormalEquations {
@@ -560,7 +566,18 @@ impl NormalEquations {
             mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
             amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
+            helper: None,
         })
+    }
+
+    /// From the next analysis on, factorizations and triangular solves in 2×2 blocks run on
+    /// two threads where the elimination tree splits in two parts that pay (a helper thread
+    /// for the second part; the same bits as on one thread). Without a thread to be had,
+    /// nothing changes.
+    pub(crate) fn split_over_two_threads(&mut self) {
+        if self.helper.is_none() {
+            self.helper = Helper::start();
+        }
     }
 
     /// The workers the factorizations run on.
@@ -734,7 +751,7 @@ impl NormalEquations {
         };
         if let Some(blocks) = blocks {
             let a_blocks = blocks.row.len();
-            self.block.analyse(blocks);
+            self.block.analyse(blocks, self.helper.is_some());
             let products = self.block.factor_block_products();
             let blocks = self.block.factor_blocks() as u64;
             // faer's measure, multiply–adds per factor entry, in scalar equivalents.
@@ -831,12 +848,19 @@ impl NormalEquations {
             let clock = Instant::now();
             self.counts.factorizations += 1;
             self.counts.block_factorizations += 1;
-            let ok = self.block.factorize_columns(&NormalColumns {
+            let columns = NormalColumns {
                 pattern: &self.pattern,
                 coefs: j.coefficients(),
                 shift,
                 d,
-            });
+            };
+            let ok = match &self.helper {
+                Some(helper) if self.block.is_split() => {
+                    self.counts.split_factorizations += 1;
+                    self.block.factorize_columns_split(&columns, helper)
+                }
+                Some(_) | None => self.block.factorize_columns(&columns),
+            };
             self.times.factorize += clock.elapsed().as_secs_f64();
             return ok;
         }
@@ -877,7 +901,12 @@ impl NormalEquations {
         }
         let clock = Instant::now();
         if self.blocked {
-            self.block.solve_in_place(&mut self.x);
+            match &self.helper {
+                Some(helper) if self.block.is_split() => {
+                    self.block.solve_in_place_split(&mut self.x, helper)
+                }
+                Some(_) | None => self.block.solve_in_place(&mut self.x),
+            }
         } else {
             let par = self.par();
             let symbolic = self.symbolic.as_ref().expect("analysed");

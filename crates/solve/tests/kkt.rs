@@ -1217,6 +1217,27 @@ fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
         (&two_threads.v, &two_threads.lambda),
         "one thread and two"
     );
+    // And with the factorizations and solves split over two threads (the elimination tree's
+    // two heaviest parts at once): the same bits again.
+    let (split, split_answer, split_reports) = settled(
+        InteriorPointSettings::builder()
+            .split_factorization(true)
+            .build()
+            .unwrap(),
+    );
+    assert!(
+        split.counts().split_factorizations > 0,
+        "{:?}",
+        split.counts()
+    );
+    assert_eq!(
+        (&sol.v, &sol.lambda),
+        (&split_answer.v, &split_answer.lambda),
+        "one thread and the split factorization"
+    );
+    for (a, b) in reports.iter().zip(&split_reports) {
+        assert_eq!((a.iterations, a.gap), (b.iterations, b.gap));
+    }
     // Cold, then warm by the interior point (its warm start not yet known to be settled),
     // then polished.
     assert!(reports[0].factorizations > 5, "{:?}", reports[0]);
