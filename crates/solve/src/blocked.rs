@@ -396,7 +396,8 @@ impl BlockCholesky {
             row_pos: &self.row_pos,
             row_end: &self.row_end,
         };
-        let ok = factor_columns(&rows, 0..n, columns, &mut self.work, &mut self.values[..]);
+        let values = SharedValues::new(&mut self.values);
+        let ok = factor_shared_columns(&rows, 0..n, columns, &mut self.work, values);
         if !ok {
             self.work.fill([0.0; 4]);
         }
@@ -640,8 +641,9 @@ struct RowLists<'a> {
     row_end: &'a [Index],
 }
 
-/// The factor's values shared by the threads of a split factorization or solve, each of which
-/// reaches only the columns of its own part, and the rest's only after both parts are done.
+/// The factor's values as a factorization's columns reach them; in a split one, shared by its
+/// two threads, each of which reaches only the columns of its own part (the rest's only after
+/// both parts are done).
 #[derive(Clone, Copy)]
 struct SharedValues<'a> {
     ptr: *mut Block,
@@ -695,38 +697,8 @@ impl SharedValues<'_> {
 }
 
 /// The columns `cols` (each after its descendants) of the factorization, in `work` (zero
-/// before, zero after unless a column fails: then false at once).
-#[inline(always)]
-fn factor_columns(
-    rows: &RowLists<'_>,
-    cols: impl Iterator<Item = usize>,
-    columns: &impl BlockColumns,
-    work: &mut [Block],
-    values: &mut [Block],
-) -> bool {
-    let l = rows.l;
-    for k in cols {
-        let lk = l.col(k);
-        columns.add_column(k, work);
-        // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
-        let row = rows.row_ptr[k] as usize..rows.row_ptr[k + 1] as usize;
-        for (&p, &end) in rows.row_pos[row.clone()].iter().zip(&rows.row_end[row]) {
-            let (p, end) = (p as usize, end as usize);
-            let b = values[p];
-            let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
-            // The rest of column j from row k on (its rows increase).
-            for (&r, v) in l.row[p..end].iter().zip(&values[p..end]) {
-                sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
-            }
-        }
-        if !finish_column(l, k, work, &mut values[lk]) {
-            return false;
-        }
-    }
-    true
-}
-
-/// [`factor_columns`] on values shared between threads.
+/// before, zero after unless a column fails: then false at once), the values shared with
+/// another thread's part when the factorization is split (one thread: all of them).
 #[inline(always)]
 fn factor_shared_columns(
     rows: &RowLists<'_>,
@@ -739,9 +711,11 @@ fn factor_shared_columns(
     for k in cols {
         let lk = l.col(k);
         columns.add_column(k, work);
+        // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
         let row = rows.row_ptr[k] as usize..rows.row_ptr[k + 1] as usize;
         for (&p, &end) in rows.row_pos[row.clone()].iter().zip(&rows.row_end[row]) {
             let (p, end) = (p as usize, end as usize);
+            // The rest of column j from row k on (its rows increase).
             let column = values.read(p..end);
             let b = column[0];
             let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
