@@ -483,25 +483,8 @@ impl BlockCholesky {
                 xi[1] -= t[1];
             }
         }
-        // Lᵀ x = y, column by column backwards: [r₀, r₁] −= bᵀ x_i as one pair of lanes.
-        for k in (0..n).rev() {
-            let lk = l.col(k);
-            let mut r = [x[2 * k], x[2 * k + 1]];
-            let below = lk.start + 1..lk.end;
-            for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
-                let i = 2 * i as usize;
-                let (x0, x1) = (x[i], x[i + 1]);
-                r = [
-                    r[0] - (b[0] * x0 + b[1] * x1),
-                    r[1] - (b[2] * x0 + b[3] * x1),
-                ];
-            }
-            let [i00, l10, _, i11] = values[lk.start];
-            let x1 = r[1] * i11;
-            let x0 = (r[0] - l10 * x1) * i00;
-            x[2 * k] = x0;
-            x[2 * k + 1] = x1;
-        }
+        // Lᵀ x = y, column by column backwards.
+        backward_columns(l, values, (0..n).rev(), SharedX::new(x));
     }
 }
 
@@ -559,25 +542,8 @@ impl BlockCholesky {
             x[2 * k + 1] = (x1 - l10 * y0) * i11;
         }
         let backward = |shared: SharedX<'_>, part: usize| {
-            for &k in split.cols[part].iter().rev() {
-                let k = k as usize;
-                let lk = l.col(k);
-                let mut r = [shared.get(2 * k), shared.get(2 * k + 1)];
-                let below = lk.start + 1..lk.end;
-                for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
-                    let i = 2 * i as usize;
-                    let (x0, x1) = (shared.get(i), shared.get(i + 1));
-                    r = [
-                        r[0] - (b[0] * x0 + b[1] * x1),
-                        r[1] - (b[2] * x0 + b[3] * x1),
-                    ];
-                }
-                let [i00, l10, _, i11] = values[lk.start];
-                let x1 = r[1] * i11;
-                let x0 = (r[0] - l10 * x1) * i00;
-                shared.set(2 * k, x0);
-                shared.set(2 * k + 1, x1);
-            }
+            let cols = split.cols[part].iter().rev().map(|&k| k as usize);
+            backward_columns(l, values, cols, shared);
         };
         let shared = SharedX::new(x);
         backward(shared, REST as usize);
@@ -585,51 +551,32 @@ impl BlockCholesky {
     }
 }
 
-/// The right-hand side of a split solve, shared by its two threads: each writes only the
-/// entries of its own part's columns and reads only those and (finished) entries of the rest.
-#[derive(Clone, Copy)]
-struct SharedX<'a> {
-    ptr: *mut f64,
-    len: usize,
-    _x: std::marker::PhantomData<&'a mut [f64]>,
-}
-
-// SAFETY: see `SharedX::get`.
-#[allow(unsafe_code)]
-unsafe impl Send for SharedX<'_> {}
-#[allow(unsafe_code)]
-unsafe impl Sync for SharedX<'_> {}
-
-impl<'a> SharedX<'a> {
-    fn new(x: &'a mut [f64]) -> Self {
-        Self {
-            ptr: x.as_mut_ptr(),
-            len: x.len(),
-            _x: std::marker::PhantomData,
+/// `Lᵀ x = y` on the columns `cols` (each after the columns below it: decreasing, or the rest
+/// before the parts), each `x_k` from its own column: `[r₀, r₁] −= bᵀ x_i` as one pair of lanes.
+#[inline(always)]
+fn backward_columns(
+    l: &BlockPattern,
+    values: &[Block],
+    cols: impl Iterator<Item = usize>,
+    x: SharedX<'_>,
+) {
+    for k in cols {
+        let lk = l.col(k);
+        let mut r = [x.get(2 * k), x.get(2 * k + 1)];
+        let below = lk.start + 1..lk.end;
+        for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+            let i = 2 * i as usize;
+            let (x0, x1) = (x.get(i), x.get(i + 1));
+            r = [
+                r[0] - (b[0] * x0 + b[1] * x1),
+                r[1] - (b[2] * x0 + b[3] * x1),
+            ];
         }
-    }
-
-    #[inline(always)]
-    fn get(&self, i: usize) -> f64 {
-        assert!(i < self.len);
-        // SAFETY: in bounds (checked); entry `i` belongs to the reading thread's part or to the
-        // rest, which no thread writes while the parts run (`solve_in_place_split`): no write
-        // to it races with this read.
-        #[allow(unsafe_code)]
-        unsafe {
-            self.ptr.add(i).read()
-        }
-    }
-
-    #[inline(always)]
-    fn set(&self, i: usize, v: f64) {
-        assert!(i < self.len);
-        // SAFETY: in bounds (checked); entry `i` belongs to the writing thread's part (or the
-        // rest, written by one thread while the parts do not run): no other thread reaches it.
-        #[allow(unsafe_code)]
-        unsafe {
-            self.ptr.add(i).write(v)
-        }
+        let [i00, l10, _, i11] = values[lk.start];
+        let x1 = r[1] * i11;
+        let x0 = (r[0] - l10 * x1) * i00;
+        x.set(2 * k, x0);
+        x.set(2 * k + 1, x1);
     }
 }
 
@@ -641,58 +588,82 @@ struct RowLists<'a> {
     row_end: &'a [Index],
 }
 
-/// The factor's values as a factorization's columns reach them; in a split one, shared by its
-/// two threads, each of which reaches only the columns of its own part (the rest's only after
-/// both parts are done).
-#[derive(Clone, Copy)]
-struct SharedValues<'a> {
-    ptr: *mut Block,
+/// An array shared by the threads of a split factorization or solve (the factor's values, the
+/// right-hand side): each thread writes only the entries of its own part's columns and reads
+/// only those and the rest's, which no thread writes while the parts run (on one thread: all
+/// of them, one after the other).
+struct Shared<'a, T> {
+    ptr: *mut T,
     len: usize,
-    _values: std::marker::PhantomData<&'a mut [Block]>,
+    _array: std::marker::PhantomData<&'a mut [T]>,
 }
 
-// SAFETY: a `SharedValues` is only handed to the threads of one split factorization, whose
-// column sets are disjoint (see `SharedValues::read`).
-#[allow(unsafe_code)]
-unsafe impl Send for SharedValues<'_> {}
-#[allow(unsafe_code)]
-unsafe impl Sync for SharedValues<'_> {}
-
-impl<'a> SharedValues<'a> {
-    fn new(values: &'a mut [Block]) -> Self {
-        Self {
-            ptr: values.as_mut_ptr(),
-            len: values.len(),
-            _values: std::marker::PhantomData,
-        }
+impl<T> Clone for Shared<'_, T> {
+    fn clone(&self) -> Self {
+        *self
     }
 }
+impl<T> Copy for Shared<'_, T> {}
 
-impl SharedValues<'_> {
+// SAFETY: the threads sharing one reach disjoint entries, or read entries no one writes
+// meanwhile (see `Shared::read`); `T` is plain data (blocks, numbers).
+#[allow(unsafe_code)]
+unsafe impl<T: Send> Send for Shared<'_, T> {}
+#[allow(unsafe_code)]
+unsafe impl<T: Send> Sync for Shared<'_, T> {}
+
+/// The factor's values as a factorization's columns reach them.
+type SharedValues<'a> = Shared<'a, Block>;
+
+/// The right-hand side of a split solve.
+type SharedX<'a> = Shared<'a, f64>;
+
+impl<'a, T: Copy> Shared<'a, T> {
+    fn new(array: &'a mut [T]) -> Self {
+        Self {
+            ptr: array.as_mut_ptr(),
+            len: array.len(),
+            _array: std::marker::PhantomData,
+        }
+    }
+
+    /// Entries no thread writes while the slice lives: a column of the calling thread's own
+    /// part, or of the rest once both parts are done.
     #[inline(always)]
-    fn read(&self, range: std::ops::Range<usize>) -> &[Block] {
+    fn read(&self, range: std::ops::Range<usize>) -> &[T] {
         assert!(range.start <= range.end && range.end <= self.len);
-        // SAFETY: in bounds (checked); the range is a column of the reading thread's own part
-        // (or, after both parts are done, any column): no thread writes it meanwhile, as a
-        // column is written only by the thread that factorizes it, once, before any column
-        // that reads it (its ancestors: the same part, or the rest) is started.
+        // SAFETY: in bounds (checked); a column is written only by the thread that
+        // factorizes it, once, before any column that reads it (its ancestors: the same part,
+        // or the rest) is started; the rest is written only while the parts do not run.
         #[allow(unsafe_code)]
         unsafe {
             std::slice::from_raw_parts(self.ptr.add(range.start), range.len())
         }
     }
 
+    /// Entries only the calling thread reaches while the slice lives: the column it is
+    /// factorizing (or an entry of its own part).
     #[inline(always)]
     #[allow(clippy::mut_from_ref)]
-    fn write(&self, range: std::ops::Range<usize>) -> &mut [Block] {
+    fn write(&self, range: std::ops::Range<usize>) -> &mut [T] {
         assert!(range.start <= range.end && range.end <= self.len);
-        // SAFETY: in bounds (checked); the range is the column being factorized, which only
-        // its thread reaches until it is done (see `read`), and the slice is dropped before
-        // the next column starts.
+        // SAFETY: in bounds (checked); the entries belong to the calling thread's part (or to
+        // the rest, while the parts do not run), so no other thread reaches them, and the
+        // slice is dropped before another column starts.
         #[allow(unsafe_code)]
         unsafe {
             std::slice::from_raw_parts_mut(self.ptr.add(range.start), range.len())
         }
+    }
+
+    #[inline(always)]
+    fn get(&self, i: usize) -> T {
+        self.read(i..i + 1)[0]
+    }
+
+    #[inline(always)]
+    fn set(&self, i: usize, v: T) {
+        self.write(i..i + 1)[0] = v;
     }
 }
 
