@@ -530,8 +530,85 @@ pub(crate) struct NormalEquations {
     amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
-    // The second thread of factorizations and solves in 2×2 blocks split in two.
+    // The second thread of factorizations and solves in 2×2 blocks split in two, whether
+    // the split pays here, and whether the last factorization was split.
     helper: Option<Helper>,
+    split_choice: SplitChoice,
+    last_split: bool,
+}
+
+/// Whether a factorization whose analysis found a split runs it, by measurement: what two
+/// threads gain depends on how far apart the machine puts their cores (the factor's columns
+/// cross between them): on this 2-core VM the split factorization and solves of the jammed
+/// 2,000 took 0.72× one thread's time in one hour and 1.2× in another (benches/README.md,
+/// session 16). Every [`Self::PROBE_EVERY`]-th analysis with a split is probed: its
+/// factorizations go one thread, one thread, split, split; the first of each pair is not timed
+/// (after an analysis, or after the other way, each thread finds the columns it writes in the
+/// other's cache), the second ones are, and the ratio of their times (the same pattern, so the
+/// same work), averaged over the probes, decides every other factorization (the split until
+/// a probe has finished). A probe a new analysis interrupts is dropped. The answers are the
+/// same bits either way.
+#[derive(Debug, Default)]
+struct SplitChoice {
+    // Split over one thread, averaged over the probes (0: none yet).
+    ratio: f64,
+    analyses: u64,
+    probe: Probe,
+}
+
+/// Where a probe of [`SplitChoice`] stands: which factorization comes next.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+enum Probe {
+    #[default]
+    Off,
+    // One thread, not timed.
+    Start,
+    // One thread, timed.
+    One,
+    // Split, not timed (after one thread's seconds).
+    ToSplit(f64),
+    // Split, timed.
+    Split(f64),
+}
+
+impl SplitChoice {
+    const PROBE_EVERY: u64 = 8;
+
+    /// A new analysis with a split.
+    fn analysed(&mut self) {
+        self.probe = if self.analyses.is_multiple_of(Self::PROBE_EVERY) {
+            Probe::Start
+        } else {
+            Probe::Off
+        };
+        self.analyses += 1;
+    }
+
+    fn split_now(&self) -> bool {
+        match self.probe {
+            Probe::Start | Probe::One => false,
+            Probe::ToSplit(_) | Probe::Split(_) => true,
+            Probe::Off => self.ratio < 1.0,
+        }
+    }
+
+    fn record(&mut self, seconds: f64) {
+        self.probe = match self.probe {
+            Probe::Off => Probe::Off,
+            Probe::Start => Probe::One,
+            Probe::One => Probe::ToSplit(seconds),
+            Probe::ToSplit(one) => Probe::Split(one),
+            Probe::Split(one) => {
+                let r = seconds / one;
+                self.ratio = if self.ratio == 0.0 {
+                    r
+                } else {
+                    0.75 * self.ratio + 0.25 * r
+                };
+                Probe::Off
+            }
+        };
+    }
 }
 
 impl NormalEquations {
@@ -567,6 +644,8 @@ impl NormalEquations {
             amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
             helper: None,
+            split_choice: SplitChoice::default(),
+            last_split: false,
         })
     }
 
@@ -752,6 +831,9 @@ impl NormalEquations {
         if let Some(blocks) = blocks {
             let a_blocks = blocks.row.len();
             self.block.analyse(blocks, self.helper.is_some());
+            if self.block.is_split() {
+                self.split_choice.analysed();
+            }
             let products = self.block.factor_block_products();
             let blocks = self.block.factor_blocks() as u64;
             // faer's measure, multiply–adds per factor entry, in scalar equivalents.
@@ -854,14 +936,21 @@ impl NormalEquations {
                 shift,
                 d,
             };
+            let split =
+                self.helper.is_some() && self.block.is_split() && self.split_choice.split_now();
             let ok = match &self.helper {
-                Some(helper) if self.block.is_split() => {
+                Some(helper) if split => {
                     self.counts.split_factorizations += 1;
                     self.block.factorize_columns_split(&columns, helper)
                 }
                 Some(_) | None => self.block.factorize_columns(&columns),
             };
-            self.times.factorize += clock.elapsed().as_secs_f64();
+            let seconds = clock.elapsed().as_secs_f64();
+            self.times.factorize += seconds;
+            if self.helper.is_some() && self.block.is_split() && ok {
+                self.split_choice.record(seconds);
+            }
+            self.last_split = split;
             return ok;
         }
         let clock = Instant::now();
@@ -901,8 +990,10 @@ impl NormalEquations {
         }
         let clock = Instant::now();
         if self.blocked {
+            // (The solves go the way the factorization went: each thread then reads the
+            // columns it wrote.)
             match &self.helper {
-                Some(helper) if self.block.is_split() => {
+                Some(helper) if self.last_split => {
                     self.block.solve_in_place_split(&mut self.x, helper)
                 }
                 Some(_) | None => self.block.solve_in_place(&mut self.x),
@@ -931,6 +1022,60 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    /// The split runs where its probes measured it faster, one thread where they measured it
+    /// slower; a probe is four factorizations of one analysis (one thread twice, split twice,
+    /// the second of each timed), dropped when a new analysis interrupts it.
+    #[test]
+    fn the_split_goes_the_way_its_probes_measured_faster() {
+        // `seconds(split)` for every factorization over `analyses` analyses of `per` each;
+        // the ways taken.
+        let run = |choice: &mut SplitChoice,
+                   analyses: usize,
+                   per: usize,
+                   seconds: &dyn Fn(bool) -> f64| {
+            let mut ways = Vec::new();
+            for _ in 0..analyses {
+                choice.analysed();
+                for _ in 0..per {
+                    let split = choice.split_now();
+                    choice.record(seconds(split));
+                    ways.push(split);
+                }
+            }
+            ways
+        };
+        let mut fast = SplitChoice::default();
+        let ways = run(&mut fast, 8, 6, &|split| if split { 0.6 } else { 1.0 });
+        assert_eq!(&ways[..6], &[false, false, true, true, true, true]);
+        assert!((fast.ratio - 0.6).abs() < 1e-12, "{fast:?}");
+        assert!(ways[6..].iter().all(|&s| s));
+        // The next probe (the ninth analysis) measures one thread again.
+        let ways = run(&mut fast, 1, 4, &|split| if split { 0.6 } else { 1.0 });
+        assert_eq!(ways, [false, false, true, true]);
+
+        let mut slow = SplitChoice::default();
+        let ways = run(&mut slow, 8, 6, &|split| if split { 1.3 } else { 1.0 });
+        assert_eq!(&ways[..6], &[false, false, true, true, false, false]);
+        assert!(ways[6..].iter().all(|&s| !s));
+        // A machine that changes: the probes' average follows it.
+        let ways = run(&mut slow, 64, 6, &|split| if split { 0.5 } else { 1.0 });
+        assert!(slow.ratio < 1.0 && ways.last() == Some(&true), "{slow:?}");
+
+        // Analyses of three factorizations: every eighth starts a probe, which the next one
+        // drops; meanwhile (no ratio measured) the split is taken.
+        let mut short = SplitChoice::default();
+        let ways = run(&mut short, 16, 3, &|_| 1.0);
+        assert_eq!(short.ratio, 0.0);
+        for (a, c) in ways.chunks(3).enumerate() {
+            let expected = if a % 8 == 0 {
+                [false, false, true]
+            } else {
+                [true; 3]
+            };
+            assert_eq!(c, expected, "analysis {a}");
+        }
+    }
 
     /// `shift·I + Jᵀ diag(d) J` dense.
     fn dense(j: &ConstraintRows, shift: f64, d: &[f64]) -> Vec<Vec<f64>> {
