@@ -26,7 +26,7 @@ use crate::products::Index;
 const SPLIT_MIN_PRODUCTS: u64 = 5_000;
 
 /// A split is kept when its two threads' time (the larger part, then the rest) is at most this
-/// fraction of one thread's, counted in block products.
+/// fraction of one thread's, counted in block products (see `split_columns`).
 const SPLIT_MAX_SHARE: f64 = 0.85;
 
 /// A 2×2 block in column order `[a₀₀, a₁₀, a₀₁, a₁₁]`.
@@ -235,7 +235,11 @@ impl BlockCholesky {
     /// subtree is replaced by its children (its root joining the rest) while that helps, each
     /// time the subtrees dealt to two threads heaviest first, each to the lighter one; the
     /// best of at most 64 such steps, if worth it ([`SPLIT_MIN_PRODUCTS`],
-    /// [`SPLIT_MAX_SHARE`]). Weights are block products.
+    /// [`SPLIT_MAX_SHARE`]). A column weighs the block products it gathers in the left-looking
+    /// factorization (the updates from its descendants) and its own blocks: counted so, the
+    /// best split of cromosim's scene takes 0.69 of one thread's time and measured 0.74–0.76
+    /// (counted as the products each column sends, 0.60: the updates a part's columns send
+    /// to the rest are gathered by the rest).
     fn split_columns(&self) -> Option<Split> {
         const NONE: usize = usize::MAX;
         let l = &self.l;
@@ -248,9 +252,14 @@ impl BlockCholesky {
                 NONE
             }
         };
+        // A column's work in the left-looking factorization: the updates it gathers (each the
+        // rest of a descendant's column from its row on) and its own blocks.
         let cost = |k: usize| {
-            let c = l.col(k).len() as u64;
-            c * (c + 1) / 2
+            let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
+            let gathered: u64 = (self.row_pos[row.clone()].iter().zip(&self.row_end[row]))
+                .map(|(&p, &end)| u64::from(end - p))
+                .sum();
+            gathered + l.col(k).len() as u64
         };
         let mut weight: Vec<u64> = (0..n).map(cost).collect();
         let total: u64 = weight.iter().sum();
