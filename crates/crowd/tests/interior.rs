@@ -91,62 +91,74 @@ fn interior_point_matches_clarabel_with_radii_one_to_a_hundred() {
 }
 
 /// A jammed hall run with 1 and with 2 threads: the positions agree bit for bit, as the
-/// README says (the solver's loops sum in fixed chunks and faer picks its sequential
-/// simplicial factorization on crowds), and in any case within the certified tolerance (what
-/// `solver.threads` promises where faer's parallel supernodal factorization would run).
+/// README says (the solver's loops sum in fixed chunks, faer picks its sequential simplicial
+/// factorization on crowds, and `auto` on two threads splits its largest component's 2×2-block
+/// factorizations between two threads, in the same operations), and in any case within the
+/// certified tolerance (what `solver.threads` promises where faer's parallel supernodal
+/// factorization would run). Both the interior point alone and `auto`: over these 4 s the
+/// door's component grows to ~1,900 people, whose analyses split (33 of 55), and `auto`'s
+/// probes run split factorizations whichever way the timings then go (10 in a run measured).
 #[test]
 fn thread_count_does_not_change_the_answer() {
     let mut hall = Hall::new(3000, 2.6);
     hall.door = 2.0;
     hall.seed = 5;
-    hall.horizon = 1.5;
-    hall.solver = SolverSettings {
-        kind: SolverKind::Interior,
-        eps_kappa: 1e-3,
-        max_violation: 1e-6,
-        ..SolverSettings::default()
-    };
-    let scene = hall.scene().unwrap();
-    let run = |threads: usize| {
-        let mut s = scene.clone();
-        s.solver.threads = threads;
-        let mut sim = Simulation::new(s).unwrap();
-        let mut eps_sum = 0.0f64;
-        let mut active = 0;
-        for mu in common::steps(sim.scene()) {
-            let r = sim.step(mu).unwrap();
-            assert_eq!(r.solver, "interior");
-            eps_sum += r.eps.sqrt();
-            active = active.max(r.active);
-        }
-        (
-            sim.frame().ids.to_vec(),
-            sim.frame().positions.to_vec(),
-            eps_sum,
-            active,
-        )
-    };
-    let (ids1, q1, eps1, active) = run(1);
-    let (ids2, q2, eps2, _) = run(2);
-    assert!(
-        active > 1000,
-        "the hall must be jammed: {active} active contacts"
-    );
-    assert_eq!(ids1, ids2);
-    // Two ε-projections per step of the same point differ by at most √ε₁ + √ε₂; over the run
-    // the differences add up at most (the projection is non-expansive).
-    let dist = q1
-        .iter()
-        .zip(&q2)
-        .map(|(a, b)| (a - b) * (a - b))
-        .sum::<f64>()
-        .sqrt();
-    assert!(dist <= eps1 + eps2, "|q₁ − q₂| = {dist} > {}", eps1 + eps2);
-    let bits = |q: &[f64]| q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-    assert!(
-        bits(&q1) == bits(&q2) && eps1.to_bits() == eps2.to_bits(),
-        "1 and 2 threads differ: |q₁ − q₂| = {dist:e}"
-    );
+    hall.horizon = 4.0;
+    for kind in [SolverKind::Interior, SolverKind::Auto] {
+        hall.solver = SolverSettings {
+            kind,
+            eps_kappa: 1e-3,
+            max_violation: 1e-6,
+            ..SolverSettings::default()
+        };
+        let scene = hall.scene().unwrap();
+        let run = |threads: usize| {
+            let mut s = scene.clone();
+            s.solver.threads = threads;
+            let mut sim = Simulation::new(s).unwrap();
+            let mut eps_sum = 0.0f64;
+            let mut active = 0;
+            for mu in common::steps(sim.scene()) {
+                let r = sim.step(mu).unwrap();
+                if kind == SolverKind::Interior {
+                    assert_eq!(r.solver, "interior");
+                }
+                eps_sum += r.eps.sqrt();
+                active = active.max(r.active);
+            }
+            (
+                sim.frame().ids.to_vec(),
+                sim.frame().positions.to_vec(),
+                eps_sum,
+                active,
+            )
+        };
+        let (ids1, q1, eps1, active) = run(1);
+        let (ids2, q2, eps2, _) = run(2);
+        assert!(
+            active > 1000,
+            "{kind:?}: the hall must be jammed: {active} active contacts"
+        );
+        assert_eq!(ids1, ids2);
+        // Two ε-projections per step of the same point differ by at most √ε₁ + √ε₂; over the
+        // run the differences add up at most (the projection is non-expansive).
+        let dist = q1
+            .iter()
+            .zip(&q2)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            dist <= eps1 + eps2,
+            "{kind:?}: |q₁ − q₂| = {dist} > {}",
+            eps1 + eps2
+        );
+        let bits = |q: &[f64]| q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(
+            bits(&q1) == bits(&q2) && eps1.to_bits() == eps2.to_bits(),
+            "{kind:?}: 1 and 2 threads differ: |q₁ − q₂| = {dist:e}"
+        );
+    }
 }
 
 /// Regression: the evacuation study's jammed step (door 0.8 m, seed 20130707, step 123 at
