@@ -87,11 +87,14 @@ pub struct InteriorPointSettings {
     pub separate_steps: bool,
     /// Factorizations and triangular solves in 2×2 blocks on two threads where the
     /// elimination tree splits into two parts that pay (the loops over rows and unknowns stay
-    /// on `parallelism`): a helper thread, spinning between jobs, takes one part. The same
-    /// bits as on one thread.
+    /// on `parallelism`): a helper thread, spinning between jobs, takes one part, whenever the
+    /// run's own probes measure the split faster than one thread (what it gains depends on
+    /// where the machine puts the two threads: benches/README.md, session 16). The same bits
+    /// as on one thread.
     pub split_factorization: bool,
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
-    /// triangular solves (the 2×2-block factorization of crowds is sequential).
+    /// triangular solves (the 2×2-block factorization of crowds is sequential unless
+    /// `split_factorization`).
     pub parallelism: Parallelism,
 }
 
