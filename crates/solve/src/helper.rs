@@ -54,7 +54,9 @@ impl Helper {
     }
 
     /// Runs `b` on the helper while `a` runs here; returns `a`'s result once both are done. A
-    /// panic in either is resumed here, after both have stopped.
+    /// panic in either is resumed here, after both have stopped. One caller at a time (its
+    /// owner, the normal equations, calls it through `&mut self` paths): a second `join` while
+    /// one runs would be counted as the same job.
     pub(crate) fn join<R>(&self, a: impl FnOnce() -> R, b: &(dyn Fn() + Sync)) -> R {
         let thread = self
             .thread
