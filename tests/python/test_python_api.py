@@ -338,6 +338,44 @@ def test_two_threads_step_two_simulations_at_once_as_sequential_runs():
     assert busy > 0
 
 
+def test_a_simulation_on_two_threads_steps_on_in_a_forked_child(tmp_path):
+    """Regression: `auto` on two threads splits its largest component's factorizations with a
+    helper thread, which a child forked from the process (multiprocessing's fork start method)
+    does not have; the child must run both halves itself, not wait for the helper forever. The
+    child's run from the fork on is the parent's, bit for bit."""
+    d = moreau.Scene.from_file(ROOT / "data" / "scenes" / "cromosim-2000.toml").to_dict()
+    d["solver"]["threads"] = 2
+    d["time"]["horizon"] = 7.0
+    sim = moreau.Simulation(moreau.Scene.from_dict(d))
+    # From about 3 s on the door's component is large enough to split.
+    sim.advance_to(4.0)
+    answer, failure = tmp_path / "child.npy", tmp_path / "child-error.txt"
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            sim.advance_to(7.0)
+            np.save(answer, sim.positions)
+            code = 0
+        except BaseException as e:
+            failure.write_text(repr(e))
+        finally:
+            os._exit(code)
+    sim.advance_to(7.0)
+    deadline = time.monotonic() + 120.0
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child did not finish its steps in 120 s")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0, failure.read_text()
+    assert same_bits(np.load(answer), sim.positions)
+
+
 def test_to_pedpy_from_a_run_file_and_from_memory(room_run):
     traj_file, walk_file = moreau.to_pedpy(room_run)
     sim = moreau.Simulation(ROOM, record=True)

@@ -29,6 +29,9 @@ struct Shared {
 pub(crate) struct Helper {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
+    // The process that started the thread: a child forked from it has no helper thread, and
+    // there both halves run on the caller.
+    process: u32,
 }
 
 impl std::fmt::Debug for Helper {
@@ -50,6 +53,7 @@ impl Helper {
         Some(Self {
             shared,
             thread: Some(thread),
+            process: std::process::id(),
         })
     }
 
@@ -58,6 +62,11 @@ impl Helper {
     /// owner, the normal equations, calls it through `&mut self` paths): a second `join` while
     /// one runs would be counted as the same job.
     pub(crate) fn join<R>(&self, a: impl FnOnce() -> R, b: &(dyn Fn() + Sync)) -> R {
+        if std::process::id() != self.process {
+            let r = a();
+            b();
+            return r;
+        }
         let thread = self
             .thread
             .as_ref()
@@ -102,6 +111,11 @@ impl Helper {
 impl Drop for Helper {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::SeqCst);
+        if std::process::id() != self.process {
+            // A forked child: the thread is its parent's; nothing to join here.
+            std::mem::forget(self.thread.take());
+            return;
+        }
         if let Some(t) = self.thread.take() {
             t.thread().unpark();
             let _ = t.join();
