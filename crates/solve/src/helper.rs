@@ -1,7 +1,9 @@
 //! A second thread that runs one half of a fork–join and spins between jobs: a handoff in
 //! well under a microsecond where a thread pool's sleeping workers take tens (measured on
 //! this project's 2-core VM: a pool's join around two 49 µs halves cost 38 µs, this one
-//! under 1 µs; benches/README.md, session 16). It parks after `SPIN` without a job.
+//! under 1 µs; benches/README.md, session 16). It parks after `SPIN` without a job. In a
+//! process forked from the one that started it (which has no such thread) both halves run on
+//! the caller.
 
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
