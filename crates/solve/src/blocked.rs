@@ -375,29 +375,16 @@ impl BlockCholesky {
 
     /// Factorizes the matrix of the analysed pattern whose block columns `columns` adds as the
     /// factorization reaches them (no assembled copy); false when it is not numerically
-    /// positive definite.
+    /// positive definite. Compiled for AVX where the processor has it
+    /// ([`factor_columns_dispatch`]).
     #[inline]
     pub(crate) fn factorize_columns(&mut self, columns: &impl BlockColumns) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor has AVX (just checked), all `factorize_avx` asks for.
-            #[allow(unsafe_code)]
-            return unsafe { self.factorize_avx(columns) };
-        }
-        self.factorize_with(columns)
+        self.factorize_with(columns, false)
     }
 
-    /// [`factorize_columns`](Self::factorize_columns) compiled for AVX: each block update in
-    /// one 4-lane operation instead of two pairs of lanes. The same operations in the same
-    /// order (no fused multiply–add), so the same bits on any x86-64.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    fn factorize_avx(&mut self, columns: &impl BlockColumns) -> bool {
-        self.factorize_with(columns)
-    }
-
-    #[inline(always)]
-    fn factorize_with(&mut self, columns: &impl BlockColumns) -> bool {
+    /// All columns on this thread; `portable`: without AVX whatever the processor (the tests
+    /// compare both).
+    fn factorize_with(&mut self, columns: &impl BlockColumns, portable: bool) -> bool {
         let n = self.l.columns();
         let rows = RowLists {
             l: &self.l,
@@ -406,7 +393,12 @@ impl BlockCholesky {
             row_end: &self.row_end,
         };
         let values = SharedValues::new(&mut self.values);
-        let ok = factor_shared_columns(&rows, 0..n, columns, &mut self.work, values);
+        let work = &mut self.work[..];
+        let ok = if portable {
+            factor_shared_columns(&rows, 0..n, columns, work, values)
+        } else {
+            factor_columns_dispatch(&rows, 0..n, columns, work, values)
+        };
         if !ok {
             self.work.fill([0.0; 4]);
         }
@@ -710,8 +702,9 @@ fn factor_shared_columns(
     true
 }
 
-/// [`factor_shared_columns`] compiled for AVX where the processor has it (as
-/// [`BlockCholesky::factorize_columns`]).
+/// [`factor_shared_columns`] compiled for AVX where the processor has it: each block update
+/// in one 4-lane operation instead of two pairs of lanes. The same operations in the same
+/// order (no fused multiply–add), so the same bits on any x86-64.
 fn factor_columns_dispatch(
     rows: &RowLists<'_>,
     cols: impl Iterator<Item = usize>,
@@ -839,10 +832,13 @@ mod tests {
             assert!(chol.factorize(&values));
             // The factor is the same, bit for bit, whichever instructions computed it.
             let mut portable = chol.clone();
-            assert!(portable.factorize_with(&StoredColumns {
-                pattern: &pattern,
-                values: &values,
-            }));
+            assert!(portable.factorize_with(
+                &StoredColumns {
+                    pattern: &pattern,
+                    values: &values,
+                },
+                true
+            ));
             assert_eq!(portable.values, chol.values, "n {n}");
             let mut x = b.clone();
             chol.solve_in_place(&mut x);
