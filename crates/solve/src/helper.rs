@@ -92,6 +92,17 @@ impl Helper {
                 while self.0.finished.load(Ordering::Acquire) < self.1 {
                     std::hint::spin_loop();
                 }
+                // `a` panicked: its panic goes on; the helper's, if any, goes with this job
+                // (not to the next one's caller).
+                if std::thread::panicking() {
+                    drop(
+                        self.0
+                            .panic
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .take(),
+                    );
+                }
             }
         }
         let wait = Wait(&self.shared, epoch);
@@ -208,5 +219,13 @@ mod tests {
         let ran = AtomicBool::new(false);
         helper.join(|| (), &|| ran.store(true, Ordering::SeqCst));
         assert!(ran.load(Ordering::SeqCst));
+        // Both halves panic: the caller's panic is the one raised, and the next join is clean.
+        let caught = catch_unwind(AssertUnwindSafe(|| {
+            helper.join(|| panic!("here"), &|| panic!("in the helper"));
+        }));
+        let message = caught.expect_err("a panic");
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"here"));
+        let fine = catch_unwind(AssertUnwindSafe(|| helper.join(|| 7, &|| ())));
+        assert_eq!(fine.ok(), Some(7));
     }
 }
