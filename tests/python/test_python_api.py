@@ -376,6 +376,44 @@ def test_a_simulation_on_two_threads_steps_on_in_a_forked_child(tmp_path):
     assert same_bits(np.load(answer), sim.positions)
 
 
+@pytest.mark.parametrize("kind", ["interior", "gauss-seidel", "apgd"])
+def test_a_solver_on_a_thread_pool_steps_on_in_a_forked_child(tmp_path, kind):
+    """Regression: given two threads directly (not through `auto`) these solvers spread their
+    loops over a thread pool whose threads a child forked from the process does not have: the
+    child waited for them forever. It must run the loops itself, bit for bit the parent's run."""
+    d = moreau.Scene.from_file(ROOT / "data" / "scenes" / "cromosim-2000.toml").to_dict()
+    d["solver"]["threads"] = 2
+    d["solver"]["kind"] = kind
+    d["time"]["horizon"] = 2.0
+    sim = moreau.Simulation(moreau.Scene.from_dict(d))
+    sim.advance_to(1.0)
+    answer, failure = tmp_path / "child.npy", tmp_path / "child-error.txt"
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            sim.advance_to(1.5)
+            np.save(answer, sim.positions)
+            code = 0
+        except BaseException as e:
+            failure.write_text(repr(e))
+        finally:
+            os._exit(code)
+    sim.advance_to(1.5)
+    deadline = time.monotonic() + 120.0
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail(f"the forked child ({kind}) did not finish its steps in 120 s")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0, failure.read_text()
+    assert same_bits(np.load(answer), sim.positions)
+
+
 def test_to_pedpy_from_a_run_file_and_from_memory(room_run):
     traj_file, walk_file = moreau.to_pedpy(room_run)
     sim = moreau.Simulation(ROOM, record=True)

@@ -684,7 +684,7 @@ impl NormalEquations {
     }
 
     fn par(&self) -> Par {
-        if self.parallelism.is_sequential() {
+        if self.workers.is_sequential() {
             Par::Seq
         } else {
             Par::rayon(self.parallelism.get())

@@ -1,5 +1,6 @@
 //! Deterministic data parallelism for the solvers: fixed chunks, partial sums added in chunk
-//! order, so that no result depends on the number of threads.
+//! order, so that no result depends on the number of threads. In a process forked after the
+//! pool started (whose threads stay in the parent) everything runs on the caller.
 
 use moreau_core::Parallelism;
 use rayon::prelude::*;
@@ -13,11 +14,14 @@ const CHUNK: usize = 4096;
 /// A thread pool of the requested size, or the calling thread alone.
 pub(crate) struct Workers {
     pool: Option<rayon::ThreadPool>,
+    // The process that built the pool: a child forked from it has none of the pool's
+    // threads (a job sent there would wait forever), and runs everything on the caller.
+    process: u32,
 }
 
 impl std::fmt::Debug for Workers {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match &self.pool {
+        match self.pool() {
             None => f.write_str("Workers(1)"),
             Some(p) => write!(f, "Workers({})", p.current_num_threads()),
         }
@@ -27,8 +31,12 @@ impl std::fmt::Debug for Workers {
 impl Workers {
     /// Workers for `parallelism`.
     pub(crate) fn new(parallelism: Parallelism) -> Result<Self, SolveError> {
+        let process = std::process::id();
         if parallelism.is_sequential() {
-            return Ok(Self { pool: None });
+            return Ok(Self {
+                pool: None,
+                process,
+            });
         }
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(parallelism.get())
@@ -38,13 +46,31 @@ impl Workers {
                 value: parallelism.get().to_string(),
                 reason: "the thread pool could not be built",
             })?;
-        Ok(Self { pool: Some(pool) })
+        Ok(Self {
+            pool: Some(pool),
+            process,
+        })
+    }
+
+    /// The pool, unless there is none or this is a process forked from the one that built
+    /// it.
+    fn pool(&self) -> Option<&rayon::ThreadPool> {
+        self.pool
+            .as_ref()
+            .filter(|_| std::process::id() == self.process)
+    }
+
+    /// Whether the loops (and what runs in [`Self::install`]) run on the caller alone: no
+    /// pool, or a forked child of the process that built it (where faer must not be asked to
+    /// split either: rayon's global pool may be the parent's too).
+    pub(crate) fn is_sequential(&self) -> bool {
+        self.pool().is_none()
     }
 
     /// Runs `op` on the workers (faer's `Par::rayon` then splits over them, not over rayon's
     /// global pool).
     pub(crate) fn install<R: Send>(&self, op: impl FnOnce() -> R + Send) -> R {
-        match &self.pool {
+        match self.pool() {
             None => op(),
             Some(pool) => pool.install(op),
         }
@@ -57,7 +83,7 @@ impl Workers {
                 *x = f(c * CHUNK + k, *x);
             }
         };
-        match &self.pool {
+        match self.pool() {
             None => out.chunks_mut(CHUNK).enumerate().for_each(body),
             Some(pool) => pool.install(|| out.par_chunks_mut(CHUNK).enumerate().for_each(body)),
         }
@@ -67,7 +93,7 @@ impl Workers {
     pub(crate) fn sum(&self, n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
         let chunk = |c: usize| (c * CHUNK..((c + 1) * CHUNK).min(n)).map(&f).sum::<f64>();
         let chunks = n.div_ceil(CHUNK);
-        match &self.pool {
+        match self.pool() {
             None => (0..chunks).map(chunk).sum(),
             Some(pool) => pool
                 .install(|| (0..chunks).into_par_iter().map(chunk).collect::<Vec<f64>>())
@@ -80,7 +106,7 @@ impl Workers {
     pub(crate) fn min_pair(&self, n: usize, f: impl Fn(usize) -> (f64, f64) + Sync) -> (f64, f64) {
         let both = |a: (f64, f64), b: (f64, f64)| (a.0.min(b.0), a.1.min(b.1));
         let none = (f64::INFINITY, f64::INFINITY);
-        match &self.pool {
+        match self.pool() {
             None => (0..n).map(f).fold(none, both),
             Some(pool) => pool.install(|| {
                 (0..n)
@@ -94,7 +120,7 @@ impl Workers {
 
     /// `min_{i < n} f(i)` (order does not matter for a minimum).
     pub(crate) fn min(&self, n: usize, f: impl Fn(usize) -> f64 + Sync) -> f64 {
-        match &self.pool {
+        match self.pool() {
             None => (0..n).map(f).fold(f64::INFINITY, f64::min),
             Some(pool) => pool.install(|| {
                 (0..n)
