@@ -2,10 +2,12 @@
 //! binding set aside) goes to Gauss–Seidel, which gives it up when its own progress shows
 //! the budget will not finish it, and then to the interior point.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use moreau_core::{ConstraintKey, Parallelism, SolveStatus};
 
 use crate::certificate::certify_given;
-use crate::components::{Components, SubProblem};
+use crate::components::{CheckScratch, Components, DisjointSolution, SubProblem};
 use crate::error::SolveError;
 use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
 use crate::interior::{InteriorPoint, InteriorPointSettings};
@@ -16,6 +18,13 @@ use crate::problem::{
 /// Gauss–Seidel takes components of this many rows or more one at a time, and the smaller
 /// ones in groups of about this many rows.
 const GROUP_ROWS: usize = 256;
+
+/// With threads, Gauss–Seidel's groups are swept on all of them at once when they hold this
+/// many rows or more together; fewer stay on the caller, where starting the threads (tens of
+/// µs) would cost about what they save (a sweep costs ~50 ns a row, passes and certificates
+/// together). Measured on two threads (benches/README.md, session 17): whole evacuations of
+/// 10,000 1.15–1.27× faster (median) at 4,096, 1.05–1.10× at 8,192, the same at 16,384.
+const PARALLEL_GROUP_ROWS: usize = 4_096;
 
 /// A row's reach for setting it aside (see [`AutoSettings::set_aside_factor`]): this many
 /// times the change of its slack the caller's multipliers predict...
@@ -56,8 +65,10 @@ pub struct AutoSettings {
     /// prediction pay: cromosim's scene 2.37 → 2.24 ms, the jammed 2,000 7.5 → 6.6, whole
     /// evacuations (mean) 6.9 → 6.4 and 18.3 → 16.9.
     pub set_aside_factor: f64,
-    /// Threads: the interior point's part runs as two solves at once (the largest
-    /// component, the others), each on one thread; Gauss–Seidel runs on one.
+    /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
+    /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
+    /// point's part runs as two solves at once (the largest component, the others), each on
+    /// one thread.
     pub parallelism: Parallelism,
 }
 
@@ -92,8 +103,10 @@ impl Default for AutoSettings {
 /// those the answer violates join the others and the projection is solved again from that
 /// answer, with every row if one set aside is needed still.
 ///
-/// With threads ([`AutoSettings::parallelism`] above one), the largest component and the
-/// others are solved at once, each by its own interior point, and the largest component's
+/// With threads ([`AutoSettings::parallelism`] above one), Gauss–Seidel's groups are solved
+/// on all of them at once (each group by one thread, with its own solver and sub-problem,
+/// writing its components' answers: components share no row and no unknown), the largest
+/// component and the others are solved at once, each by its own interior point, and the largest component's
 /// factorizations and triangular solves in 2×2 blocks are split over two threads where its
 /// elimination tree has two parts that pay
 /// ([`InteriorPointSettings::split_factorization`]); the split is the same on any thread
@@ -108,7 +121,9 @@ impl Default for AutoSettings {
 #[derive(Debug)]
 pub struct AutoSolver {
     settings: AutoSettings,
-    gauss_seidel: GaussSeidel,
+    // Gauss–Seidel on one thread each (the first one also solves a whole problem of one
+    // component)
+    sweepers: Vec<GroupSweeper>,
     // the interior point of the largest component (and of the whole problem), and of the
     // other components together: two, so that they can run at once
     interiors: [InteriorPoint; 2],
@@ -125,6 +140,8 @@ pub struct AutoSolver {
     // Gauss–Seidel's groups of components: group g is group[group_start[g]..group_start[g + 1]]
     group: Vec<u32>,
     group_start: Vec<usize>,
+    // the groups of one large component each that Gauss–Seidel gave up in the last sweep
+    given_up_groups: Vec<usize>,
     warm: Vec<f64>,
     // per row: J w (the slack at w is b + J w); set aside
     jw: Vec<f64>,
@@ -133,6 +150,107 @@ pub struct AutoSolver {
     last_change: f64,
     scratch_m: Vec<f64>,
     scratch_n: Vec<f64>,
+}
+
+/// The groups of components of one sweep, shared by the threads that solve them: each takes
+/// the next group not yet taken.
+struct Groups<'a> {
+    problem: &'a ProjectionProblem<'a>,
+    target: Target,
+    components: &'a Components,
+    warm: &'a [f64],
+    // group g is group[group_start[g]..group_start[g + 1]]
+    group: &'a [u32],
+    group_start: &'a [usize],
+    next: &'a AtomicUsize,
+    solution: DisjointSolution<'a>,
+}
+
+/// One thread's Gauss–Seidel over groups of components: its own solver, sub-problem and
+/// checks' scratch, and what its last sweep found.
+#[derive(Debug)]
+struct GroupSweeper {
+    gauss_seidel: GaussSeidel,
+    part: SubProblem,
+    check: CheckScratch,
+    // per component: met its share (set for the components of this thread's groups)
+    met: Vec<bool>,
+    // the components it finished, the groups of one large component it gave up, the work in
+    // row passes, and the error of its first group that failed (with the group)
+    finished: Vec<u32>,
+    given_up: Vec<usize>,
+    row_passes: usize,
+    error: Option<(usize, SolveError)>,
+}
+
+impl GroupSweeper {
+    fn new(settings: GaussSeidelSettings) -> Result<Self, SolveError> {
+        Ok(Self {
+            gauss_seidel: GaussSeidel::new(settings)?,
+            part: SubProblem::default(),
+            check: CheckScratch::default(),
+            met: Vec::new(),
+            finished: Vec::new(),
+            given_up: Vec::new(),
+            row_passes: 0,
+            error: None,
+        })
+    }
+
+    /// Solves groups of `work` until none is left; each finished component's answer is
+    /// written into the shared solution.
+    fn sweep(&mut self, work: &Groups<'_>, components: usize) {
+        self.met.clear();
+        self.met.resize(components, false);
+        self.finished.clear();
+        self.given_up.clear();
+        self.row_passes = 0;
+        self.error = None;
+        let groups = work.group_start.len() - 1;
+        let total_rows = work.problem.rows();
+        loop {
+            let g = work.next.fetch_add(1, Ordering::Relaxed);
+            if g >= groups {
+                break;
+            }
+            let group = &work.group[work.group_start[g]..work.group_start[g + 1]];
+            let part = &mut self.part;
+            let rows = part.gather_components(work.components, work.problem, work.warm, group);
+            let rep = match AutoSolver::solve_gathered(
+                part,
+                &mut self.gauss_seidel,
+                total_rows,
+                rows,
+                work.target,
+            ) {
+                Ok(rep) => rep,
+                Err(e) => {
+                    if self.error.is_none() {
+                        self.error = Some((g, e));
+                    }
+                    continue;
+                }
+            };
+            self.row_passes += rep.iterations * rows;
+            if rep.status.is_converged() {
+                for &c in group {
+                    self.met[c as usize] = true;
+                }
+            } else {
+                work.components
+                    .check_sub(part, work.target, &mut self.check, &mut self.met);
+                if let [c] = *group
+                    && !self.met[c as usize]
+                    && rows >= GROUP_ROWS
+                {
+                    self.given_up.push(g);
+                }
+            }
+            self.finished
+                .extend(group.iter().filter(|&&c| self.met[c as usize]));
+            part.scatter_into(work.components, &work.solution, &self.met);
+        }
+    }
 }
 
 impl AutoSolver {
@@ -154,12 +272,13 @@ impl AutoSolver {
         }
         // Gauss–Seidel's certificate loops on a thread pool lost on cromosim's scene (9.2
         // against 11.7 ms a step on two threads): its parts are small; it runs on one thread.
-        let gauss_seidel = GaussSeidel::new(
-            GaussSeidelSettings::builder()
-                .max_passes(settings.first_order_passes)
-                .abandon_when_slow(true)
-                .build()?,
-        )?;
+        let gauss_seidel = GaussSeidelSettings::builder()
+            .max_passes(settings.first_order_passes)
+            .abandon_when_slow(true)
+            .build()?;
+        let sweepers = (0..settings.parallelism.get())
+            .map(|_| GroupSweeper::new(gauss_seidel.clone()))
+            .collect::<Result<_, _>>()?;
         // Each interior point's loops run on one thread: with threads, the largest component
         // and the others run at once (two interior points each spreading its loops over the
         // same cores would only contend), and the largest one's factorizations split in two
@@ -175,7 +294,7 @@ impl AutoSolver {
         let threads = !settings.parallelism.is_sequential();
         Ok(Self {
             settings,
-            gauss_seidel,
+            sweepers,
             interiors: [interior(threads)?, interior(false)?],
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
@@ -186,6 +305,7 @@ impl AutoSolver {
             next_given_up: Vec::new(),
             group: Vec::new(),
             group_start: Vec::new(),
+            given_up_groups: Vec::new(),
             warm: Vec::new(),
             jw: Vec::new(),
             set_aside: Vec::new(),
@@ -388,29 +508,67 @@ impl AutoSolver {
         if rows > 0 {
             self.group_start.push(self.group.len());
         }
+        let groups = self.group_start.len() - 1;
+        let grouped_rows: usize = self.group.iter().map(|&c| size(c as usize)).sum();
+        let threads = if grouped_rows >= PARALLEL_GROUP_ROWS {
+            self.sweepers.len().min(groups).max(1)
+        } else {
+            1
+        };
+        let sweepers = &mut self.sweepers[..threads];
+        let next = AtomicUsize::new(0);
+        let work = Groups {
+            problem: p,
+            target,
+            components: &self.components,
+            warm: &self.warm,
+            group: &self.group,
+            group_start: &self.group_start,
+            next: &next,
+            solution: DisjointSolution::new(sol),
+        };
+        // Each group is solved the same way whichever thread takes it (its own sub-problem,
+        // from the same warm start): the answers do not depend on the threads.
+        match sweepers {
+            [one] => one.sweep(&work, count),
+            [first, others @ ..] => std::thread::scope(|scope| {
+                for s in others {
+                    let work = &work;
+                    scope.spawn(move || s.sweep(work, count));
+                }
+                first.sweep(&work, count);
+            }),
+            [] => unreachable!("at least one sweeper"),
+        }
         let mut row_passes = 0;
-        let part = &mut self.parts[0];
-        for g in self.group_start.windows(2) {
-            let group = &self.group[g[0]..g[1]];
-            let rows = part.gather_components(&self.components, p, &self.warm, group);
-            let rep = Self::solve_gathered(part, &mut self.gauss_seidel, m, rows, target)?;
-            row_passes += rep.iterations * rows;
-            if rep.status.is_converged() {
-                for &c in group {
-                    self.finished[c as usize] = true;
-                }
-            } else {
-                self.components.check_sub(part, target, &mut self.finished);
-                if let [c] = *group {
-                    let c = c as usize;
-                    let rows = self.components.rows_of(c);
-                    if !self.finished[c] && rows.len() >= GROUP_ROWS {
-                        let again = self.settings.retry_after as u32;
-                        Self::remember(&mut self.next_given_up, p, rows, again);
-                    }
-                }
+        let mut error: Option<(usize, SolveError)> = None;
+        self.given_up_groups.clear();
+        for s in sweepers.iter_mut() {
+            row_passes += s.row_passes;
+            for &c in &s.finished {
+                self.finished[c as usize] = true;
             }
-            part.scatter(&self.components, sol, &self.finished);
+            self.given_up_groups.extend_from_slice(&s.given_up);
+            if let Some((g, e)) = s.error.take()
+                && error.as_ref().is_none_or(|(first, _)| g < *first)
+            {
+                error = Some((g, e));
+            }
+        }
+        if let Some((_, e)) = error {
+            return Err(e);
+        }
+        // Remembered in the groups' order, as one thread would.
+        self.given_up_groups.sort_unstable();
+        for &g in &self.given_up_groups {
+            let c = self.group[self.group_start[g]] as usize;
+            let again = self.settings.retry_after as u32;
+            Self::remember(
+                &mut self.next_given_up,
+                p,
+                self.components.rows_of(c),
+                again,
+            );
         }
         Ok(row_passes.div_ceil(m.max(1)))
     }
@@ -528,7 +686,7 @@ impl AutoSolver {
         } else if count == 1 && !any_aside {
             // The whole problem: no copy.
             sol.lambda.copy_from_slice(&self.warm);
-            let rep = self.gauss_seidel.solve(p, target, sol)?;
+            let rep = self.sweepers[0].gauss_seidel.solve(p, target, sol)?;
             report.add_work(&rep);
             self.finished[0] = rep.status.is_converged();
             if !self.finished[0] && m >= GROUP_ROWS {
@@ -637,6 +795,106 @@ impl AutoSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use moreau_core::ConstraintRows;
+
+    /// Many small components (three unknowns pushed together, two rows each) and three long
+    /// chains pushed together that Gauss–Seidel does not finish in its budget: more rows in
+    /// Gauss–Seidel's groups than it sweeps on one thread, so with threads the groups are
+    /// swept on all of them. Three solves in a row (the chains given up, then skipped, as
+    /// remembered), on one, two and three threads: the same bits, reports and memory.
+    #[test]
+    fn gauss_seidels_groups_swept_on_threads_give_the_same_bits() {
+        let (triples, chains, chain_len) = (9_000, 3, 400);
+        let n = 3 * triples + chains * chain_len;
+        let mut rows = ConstraintRows::new(n);
+        let (mut w, mut b) = (vec![0.0; n], Vec::new());
+        let mut state = 12345u64;
+        let mut random = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64) / ((1u64 << 53) as f64)
+        };
+        let mut key = 0u64;
+        let mut row = |rows: &mut ConstraintRows, b: &mut Vec<f64>, a: usize, gap: f64| {
+            // x_{a+1} − x_a ≥ gap
+            rows.push(key, 0.0, [(a, -1.0), (a + 1, 1.0)]);
+            b.push(-gap);
+            key += 1;
+        };
+        for t in 0..triples {
+            let a = 3 * t;
+            let push = 0.5 + random();
+            (w[a], w[a + 2]) = (push, -push);
+            row(&mut rows, &mut b, a, 0.1 * random());
+            row(&mut rows, &mut b, a + 1, 0.1 * random());
+        }
+        for c in 0..chains {
+            let start = 3 * triples + c * chain_len;
+            for k in 0..chain_len {
+                w[start + k] = -(k as f64) / chain_len as f64 + 0.1 * random();
+                if k + 1 < chain_len {
+                    row(&mut rows, &mut b, start + k, 0.05);
+                }
+            }
+        }
+        assert!(
+            2 * triples >= PARALLEL_GROUP_ROWS,
+            "the groups are swept on threads"
+        );
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
+        let t = Target {
+            gap: 1e-6,
+            violation: 1e-9,
+        };
+        let timeless = |r: SolveReport| SolveReport {
+            time_analyse: 0.0,
+            time_factorize: 0.0,
+            ..r
+        };
+        let run = |threads: usize| {
+            let mut auto = AutoSolver::new(AutoSettings {
+                retry_after: 1,
+                parallelism: Parallelism::threads(threads),
+                ..AutoSettings::default()
+            })
+            .unwrap();
+            let mut sol = ProjectionSolution::default();
+            let mut out = Vec::new();
+            for _ in 0..3 {
+                let rep = auto.solve(&p, t, &mut sol).unwrap();
+                assert!(
+                    rep.status.is_converged() && rep.gap <= t.gap && rep.violation <= t.violation,
+                    "{threads} threads: {rep:?}"
+                );
+                let bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                out.push((
+                    timeless(rep),
+                    bits(&sol.v),
+                    bits(&sol.lambda),
+                    auto.memory(),
+                ));
+            }
+            out
+        };
+        let one = run(1);
+        assert_eq!(one[0].0.solver, "gs+interior", "{:?}", one[0].0);
+        assert!(
+            one[0].3.len() > 3 + 3 * chain_len,
+            "the chains were given up"
+        );
+        for threads in [2, 3] {
+            let other = run(threads);
+            for (k, (a, b)) in one.iter().zip(&other).enumerate() {
+                assert_eq!(a.0, b.0, "solve {k} on {threads} threads");
+                assert!(a == b, "solve {k} on {threads} threads: other bits");
+            }
+        }
+    }
 
     /// Keys above 2⁵³ (a crowd's contact keys use all 64 bits) survive the trip through
     /// the f64 memory, and the layouts of earlier builds still restore.

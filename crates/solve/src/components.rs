@@ -19,10 +19,66 @@ pub(crate) struct Components {
     // the rows of component c are rows[start[c]..start[c + 1]], in storage order
     start: Vec<u32>,
     rows: Vec<u32>,
-    // per row of the problem checked: its slack; per component: gap and violation
+}
+
+/// The scratch of a check of components against their shares of a target: per row of the
+/// problem checked its slack, per component its gap and violation. One per thread that
+/// checks sub-problems of the same [`Components`] at once.
+#[derive(Debug, Default)]
+pub(crate) struct CheckScratch {
     slack: Vec<f64>,
     gap: Vec<f64>,
     violation: Vec<f64>,
+}
+
+/// The whole problem's solution as several threads write it at once, each the answers of
+/// sub-problems of its own components (see [`SubProblem::scatter_into`]): components share no
+/// row and no unknown, so no entry is written by two threads.
+pub(crate) struct DisjointSolution<'a> {
+    v: *mut f64,
+    v_len: usize,
+    lambda: *mut f64,
+    lambda_len: usize,
+    _solution: std::marker::PhantomData<&'a mut ProjectionSolution>,
+}
+
+// SAFETY: the threads sharing one write disjoint entries (the rows and unknowns of their own
+// components) and read none; the entries are plain numbers.
+#[allow(unsafe_code)]
+unsafe impl Send for DisjointSolution<'_> {}
+#[allow(unsafe_code)]
+unsafe impl Sync for DisjointSolution<'_> {}
+
+impl<'a> DisjointSolution<'a> {
+    /// `sol`, lent for the writes.
+    pub fn new(sol: &'a mut ProjectionSolution) -> Self {
+        Self {
+            v: sol.v.as_mut_ptr(),
+            v_len: sol.v.len(),
+            lambda: sol.lambda.as_mut_ptr(),
+            lambda_len: sol.lambda.len(),
+            _solution: std::marker::PhantomData,
+        }
+    }
+
+    fn set(ptr: *mut f64, len: usize, i: usize, x: f64) {
+        assert!(i < len, "entry {i} of {len}");
+        // SAFETY: in bounds (checked); the entry belongs to a component of the calling thread
+        // (the only writer of its rows and unknowns while the solution is lent), and no
+        // reference to it exists meanwhile.
+        #[allow(unsafe_code)]
+        unsafe {
+            ptr.add(i).write(x);
+        }
+    }
+
+    fn set_v(&self, c: usize, x: f64) {
+        Self::set(self.v, self.v_len, c, x);
+    }
+
+    fn set_lambda(&self, i: usize, x: f64) {
+        Self::set(self.lambda, self.lambda_len, i, x);
+    }
 }
 
 /// A sub-problem made of some components: their rows, the unknowns those rows touch
@@ -142,44 +198,59 @@ impl Components {
     /// `met[c]` for every component.
     #[cfg(test)]
     pub fn check_whole(
-        &mut self,
+        &self,
         p: &ProjectionProblem<'_>,
         sol: &ProjectionSolution,
         target: Target,
         met: &mut [bool],
     ) {
-        self.check(p.jacobian, p.b, sol, None, target, met);
+        let mut scratch = CheckScratch::default();
+        self.check(p.jacobian, p.b, sol, None, target, &mut scratch, met);
     }
 
     /// [`check_whole`](Self::check_whole) for a sub-problem of these components and its
     /// solution: sets `met[c]` for the components of the sub-problem only.
-    pub fn check_sub(&mut self, sub: &SubProblem, target: Target, met: &mut [bool]) {
+    pub fn check_sub(
+        &self,
+        sub: &SubProblem,
+        target: Target,
+        scratch: &mut CheckScratch,
+        met: &mut [bool],
+    ) {
         self.check(
             &sub.jacobian,
             &sub.b,
             &sub.solution,
             Some(&sub.rows),
             target,
+            scratch,
             met,
         );
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn check(
-        &mut self,
+        &self,
         j: &ConstraintRows,
         b: &[f64],
         sol: &ProjectionSolution,
         sub_rows: Option<&[u32]>,
         target: Target,
+        scratch: &mut CheckScratch,
         met: &mut [bool],
     ) {
         let total_rows = self.row_component.len();
-        self.slack.clear();
-        self.slack.resize(b.len(), 0.0);
-        j.mul(&sol.v, &mut self.slack);
+        let CheckScratch {
+            slack,
+            gap,
+            violation,
+        } = scratch;
+        slack.clear();
+        slack.resize(b.len(), 0.0);
+        j.mul(&sol.v, slack);
         let k = self.start.len() - 1;
-        self.gap.resize(k, 0.0);
-        self.violation.resize(k, 0.0);
+        gap.resize(k, 0.0);
+        violation.resize(k, 0.0);
         let component = |r: usize| {
             let i = sub_rows.map_or(r, |rows| rows[r] as usize);
             self.row_component[i]
@@ -188,19 +259,19 @@ impl Components {
         for r in 0..b.len() {
             let c = component(r);
             if c != NONE {
-                self.gap[c as usize] = 0.0;
-                self.violation[c as usize] = 0.0;
+                gap[c as usize] = 0.0;
+                violation[c as usize] = 0.0;
             }
         }
-        for (r, (&jv, &b)) in self.slack.iter().zip(b).enumerate() {
+        for (r, (&jv, &b)) in slack.iter().zip(b).enumerate() {
             let c = component(r);
             if c == NONE {
                 continue;
             }
             let c = c as usize;
             let s = jv + b;
-            self.gap[c] += sol.lambda[r].max(0.0) * s.max(0.0);
-            self.violation[c] = self.violation[c].max(-s);
+            gap[c] += sol.lambda[r].max(0.0) * s.max(0.0);
+            violation[c] = violation[c].max(-s);
         }
         for r in 0..b.len() {
             let c = component(r);
@@ -210,7 +281,7 @@ impl Components {
             let c = c as usize;
             let share =
                 target.gap * (self.start[c + 1] - self.start[c]) as f64 / total_rows.max(1) as f64;
-            met[c] = self.gap[c] <= share && self.violation[c] <= target.violation;
+            met[c] = gap[c] <= share && violation[c] <= target.violation;
         }
     }
 }
@@ -334,14 +405,21 @@ impl SubProblem {
 
     /// Writes the sub-problem's solution into `sol` (its rows' multipliers, its unknowns'
     /// velocities) for the components `c` with `keep[c]`.
+    #[cfg(test)]
     pub fn scatter(&self, parts: &Components, sol: &mut ProjectionSolution, keep: &[bool]) {
+        self.scatter_into(parts, &DisjointSolution::new(sol), keep);
+    }
+
+    /// [`scatter`](Self::scatter) into a solution other threads write at the same time
+    /// (the answers of other components).
+    pub fn scatter_into(&self, parts: &Components, sol: &DisjointSolution<'_>, keep: &[bool]) {
         let local_sol = &self.solution;
         for (k, &i) in self.rows.iter().enumerate() {
             let i = i as usize;
             if keep[parts.row_component[i] as usize] {
-                sol.lambda[i] = local_sol.lambda[k];
+                sol.set_lambda(i, local_sol.lambda[k]);
                 for &c in self.jacobian.row(k).0 {
-                    sol.v[self.unknowns[c] as usize] = local_sol.v[c];
+                    sol.set_v(self.unknowns[c] as usize, local_sol.v[c]);
                 }
             }
         }
@@ -470,6 +548,7 @@ mod tests {
         };
         let mut parts = Components::default();
         parts.split(&p, &[]);
+        let mut scratch = CheckScratch::default();
         // The first solved exactly (λ = 1, s = 0); the second with λ = 0.5 (v = 0.5:
         // s = −0.5, violated).
         let mut sol = ProjectionSolution {
@@ -499,7 +578,7 @@ mod tests {
             sub_sol.lambda = vec![1.0];
         }
         let mut met = [false, false];
-        parts.check_sub(&part, t, &mut met);
+        parts.check_sub(&part, t, &mut scratch, &mut met);
         assert_eq!(met, [false, true]);
     }
 }
