@@ -1,5 +1,6 @@
 //! Broad phase: every pair of disks whose gap `|q_i − q_j| − r_i − r_j` is at most a margin.
 
+use moreau_core::Parallelism;
 use parry2d_f64::bounding_volume::Aabb;
 use parry2d_f64::math::Vector;
 use parry2d_f64::partitioning::{Bvh, BvhBuildStrategy, BvhWorkspace};
@@ -42,9 +43,18 @@ impl BroadPhase for BruteForce {
     }
 }
 
+/// With threads, the grid's cells are swept on all of them from this many disks on (fewer:
+/// on the caller, where starting threads costs about what they save).
+const PARALLEL_DISKS: usize = 20_000;
+
 /// A uniform grid of square cells of side `2 r_max + margin`: fast when radii are similar.
+/// With threads ([`CellGrid::on_threads`]) its rows of cells are swept in bands, one a thread;
+/// the pairs are sorted at the end, so they are the same on any thread count.
 #[derive(Debug, Clone, Default)]
 pub struct CellGrid {
+    threads: usize,
+    // each band's pairs, from the threads after the first
+    bands: Vec<Vec<(u32, u32)>>,
     cell_start: Vec<u32>,
     fill: Vec<u32>,
     cell_of: Vec<u32>,
@@ -120,7 +130,72 @@ impl BroadPhase for CellGrid {
         } else {
             f64::INFINITY
         };
-        let (sorted, packed) = (&self.sorted, &self.packed);
+        let grid = Grid {
+            sorted: &self.sorted,
+            packed: &self.packed,
+            cell_start: &self.cell_start,
+            nx,
+            ny,
+            reach2,
+            margin,
+        };
+        let threads = if n >= PARALLEL_DISKS {
+            self.threads.min(ny)
+        } else {
+            1
+        };
+        if threads <= 1 {
+            grid.sweep(0..ny, out);
+        } else {
+            // Bands of rows of cells, the first on the caller.
+            self.bands.resize_with(threads - 1, Vec::new);
+            let band = |k: usize| k * ny / threads..(k + 1) * ny / threads;
+            std::thread::scope(|scope| {
+                for (k, pairs) in self.bands.iter_mut().enumerate() {
+                    let grid = &grid;
+                    scope.spawn(move || {
+                        pairs.clear();
+                        grid.sweep(band(k + 1), pairs);
+                    });
+                }
+                grid.sweep(band(0), out);
+            });
+            for pairs in &self.bands {
+                out.extend_from_slice(pairs);
+            }
+        }
+        self.sort.sort(n, out);
+    }
+}
+
+impl CellGrid {
+    /// A grid that sweeps its cells on `parallelism`'s threads when there are many disks.
+    pub fn on_threads(parallelism: Parallelism) -> Self {
+        Self {
+            threads: parallelism.get(),
+            ..Self::default()
+        }
+    }
+}
+
+/// One call's grid, shared by the threads that sweep it: the disks in cell order, packed,
+/// and the cells.
+struct Grid<'a> {
+    sorted: &'a [u32],
+    packed: &'a [[f64; 3]],
+    cell_start: &'a [u32],
+    nx: usize,
+    ny: usize,
+    reach2: f64,
+    margin: f64,
+}
+
+impl Grid<'_> {
+    /// The pairs of the disks in the rows of cells `rows` with their own cell and four forward
+    /// neighbours, appended to `out` (not sorted).
+    fn sweep(&self, rows: std::ops::Range<usize>, out: &mut Vec<(u32, u32)>) {
+        let (sorted, packed, margin, reach2) = (self.sorted, self.packed, self.margin, self.reach2);
+        let (nx, ny) = (self.nx, self.ny);
         let mut test = |a: usize, b: usize| {
             let (dx, dy) = (packed[a][0] - packed[b][0], packed[a][1] - packed[b][1]);
             if dx * dx + dy * dy > reach2 {
@@ -139,7 +214,7 @@ impl BroadPhase for CellGrid {
         };
         // Each disk against its own cell (later entries) and four forward neighbours.
         let range = |c: usize| self.cell_start[c] as usize..self.cell_start[c + 1] as usize;
-        for cy in 0..ny {
+        for cy in rows {
             for cx in 0..nx {
                 let own = range(cy * nx + cx);
                 if own.is_empty() {
@@ -164,7 +239,6 @@ impl BroadPhase for CellGrid {
                 }
             }
         }
-        self.sort.sort(n, out);
     }
 }
 
@@ -435,8 +509,14 @@ pub fn choose_broad_phase(min_radius: f64, max_radius: f64) -> BroadPhaseKind {
 impl BroadPhaseKind {
     /// A fresh backend of this kind, under a [`VerletList`].
     pub fn build(self) -> Box<dyn BroadPhase> {
+        self.build_on(Parallelism::SEQUENTIAL)
+    }
+
+    /// [`build`](Self::build), sweeping on `parallelism`'s threads where the backend can (the
+    /// grid).
+    pub fn build_on(self, parallelism: Parallelism) -> Box<dyn BroadPhase> {
         let inner: Box<dyn BroadPhase> = match self {
-            BroadPhaseKind::Grid => Box::new(CellGrid::default()),
+            BroadPhaseKind::Grid => Box::new(CellGrid::on_threads(parallelism)),
             BroadPhaseKind::Bvh => Box::new(TreeBroadPhase::default()),
         };
         Box::new(VerletList::new(inner))

@@ -2,7 +2,7 @@
 
 use std::cell::RefCell;
 
-use moreau_core::Field;
+use moreau_core::{Field, Parallelism};
 use ndarray::Array2;
 
 use crate::people::{PeopleView, Place};
@@ -290,7 +290,14 @@ pub struct DesiredVelocity<'a> {
     pub kind: DesiredVelocityKind,
     /// Scratch for the walls near a person.
     pub near: &'a RefCell<Vec<u32>>,
+    /// Threads: from [`PARALLEL_PEOPLE`] people on, each takes a band of them (with scratch
+    /// of its own); every person's velocity is the same whoever computes it.
+    pub parallelism: Parallelism,
 }
+
+/// With threads, the desired velocities are computed on all of them from this many people on
+/// (fewer: on the caller, where starting threads costs about what they save).
+pub const PARALLEL_PEOPLE: usize = 20_000;
 
 impl DesiredVelocity<'_> {
     /// How close to a wall (beyond the radius) the sliding starts.
@@ -352,9 +359,62 @@ impl Field for DesiredVelocity<'_> {
     /// The desired velocities of the step that starts at `t`: zero for the people whose
     /// group is released after `t`.
     fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
-        let mut near = self.near.borrow_mut();
         let n = self.people.id.len();
-        for i in 0..n {
+        let out = &mut out[..2 * n];
+        let threads = if n >= PARALLEL_PEOPLE {
+            self.parallelism.get()
+        } else {
+            1
+        };
+        if threads <= 1 {
+            self.eval_people(t, q, 0, out, &mut self.near.borrow_mut());
+            return;
+        }
+        // Bands of people, the first on the caller; the others with their own scratch.
+        let per = n.div_ceil(threads);
+        let DesiredVelocity {
+            fields,
+            goals,
+            walls,
+            people,
+            stand_until,
+            speed_factor,
+            kind,
+            ..
+        } = *self;
+        std::thread::scope(|scope| {
+            let mut bands = out.chunks_mut(2 * per).enumerate();
+            let first = bands.next().map(|(_, band)| band);
+            for (k, band) in bands {
+                scope.spawn(move || {
+                    let near = RefCell::new(Vec::new());
+                    let field = DesiredVelocity {
+                        fields,
+                        goals,
+                        walls,
+                        people,
+                        stand_until,
+                        speed_factor,
+                        kind,
+                        near: &near,
+                        parallelism: Parallelism::SEQUENTIAL,
+                    };
+                    field.eval_people(t, q, k * per, band, &mut near.borrow_mut());
+                });
+            }
+            if let Some(band) = first {
+                self.eval_people(t, q, 0, band, &mut self.near.borrow_mut());
+            }
+        });
+    }
+}
+
+impl DesiredVelocity<'_> {
+    /// [`Field::eval`] for the people from `start` on, as many as `out` holds pairs.
+    fn eval_people(&self, t: f64, q: &[f64], start: usize, out: &mut [f64], near: &mut Vec<u32>) {
+        let n = self.people.id.len();
+        for (k, out) in out.chunks_exact_mut(2).enumerate() {
+            let i = start + k;
             let ahead = i + PREFETCH_AHEAD;
             if ahead < n
                 && let Some(g) = self.goal(ahead)
@@ -364,10 +424,10 @@ impl Field for DesiredVelocity<'_> {
             let v = if t < self.stand_until[self.people.group[i] as usize] {
                 [0.0, 0.0]
             } else {
-                self.velocity(i, [q[2 * i], q[2 * i + 1]], &mut near)
+                self.velocity(i, [q[2 * i], q[2 * i + 1]], near)
             };
-            out[2 * i] = v[0];
-            out[2 * i + 1] = v[1];
+            out[0] = v[0];
+            out[1] = v[1];
         }
     }
 }

@@ -285,7 +285,9 @@ impl Simulation {
             BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
         };
         let mut sources: Vec<Box<dyn crate::contacts::ContactSource>> = vec![
-            Box::new(PersonPairs::new(broad.build())),
+            Box::new(PersonPairs::new(
+                broad.build_on(Parallelism::threads(threads)),
+            )),
             Box::new(PersonWalls::default()),
         ];
         if !moving.is_empty() {
@@ -583,6 +585,7 @@ impl Simulation {
                 speed_factor: self.speed_factor,
                 kind: self.scene.model.desired_velocity,
                 near: &self.near,
+                parallelism: Parallelism::threads(self.scene.solver.threads),
             },
             contacts: CrowdContacts {
                 people,

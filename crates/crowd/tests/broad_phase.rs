@@ -115,3 +115,37 @@ fn a_verlet_list_returns_the_brute_force_pairs_as_people_move_and_leave() {
         }
     }
 }
+
+/// The grid on threads (from 20,000 disks its rows of cells are swept in bands) returns the
+/// one-thread grid's pairs, and every pair the brute force finds for a sample of the disks.
+#[test]
+fn the_grid_on_threads_finds_the_same_pairs() {
+    use moreau_core::Parallelism;
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let n = 30_000;
+    let side = 150.0;
+    let pos: Vec<f64> = (0..2 * n).map(|_| rng.random_range(0.0..side)).collect();
+    let radius: Vec<f64> = (0..n).map(|_| rng.random_range(0.18..0.25)).collect();
+    let margin = 0.1;
+    let mut one = Vec::new();
+    CellGrid::default().pairs(&pos, &radius, margin, &mut one);
+    assert!(one.len() > 10_000, "{} pairs", one.len());
+    for threads in [2, 3, 7] {
+        let mut many = Vec::new();
+        CellGrid::on_threads(Parallelism::threads(threads)).pairs(&pos, &radius, margin, &mut many);
+        assert_eq!(one, many, "{threads} threads");
+    }
+    // The brute force's pairs of the first 500 disks with any other.
+    let gap = |i: usize, j: usize| {
+        let (dx, dy) = (pos[2 * i] - pos[2 * j], pos[2 * i + 1] - pos[2 * j + 1]);
+        (dx * dx + dy * dy).sqrt() - radius[i] - radius[j]
+    };
+    for i in 0..500 {
+        for j in 0..n {
+            let listed = one
+                .binary_search(&(i.min(j) as u32, i.max(j) as u32))
+                .is_ok();
+            assert_eq!(i != j && gap(i, j) <= margin, listed, "pair ({i}, {j})");
+        }
+    }
+}
