@@ -63,6 +63,27 @@ impl ConstraintRows {
         self.row_start.push(self.cols.len());
     }
 
+    /// Appends `other`'s rows after these, in their order (the same rows as pushing them
+    /// here one by one).
+    ///
+    /// # Panics
+    /// If `other` has columns beyond this dimension (a bug in the caller).
+    pub fn append(&mut self, other: &ConstraintRows) {
+        assert!(
+            other.cols.iter().all(|&c| c < self.dim),
+            "appended rows of dimension {} to rows of dimension {}",
+            other.dim,
+            self.dim
+        );
+        let shift = self.cols.len();
+        self.cols.extend_from_slice(&other.cols);
+        self.coefs.extend_from_slice(&other.coefs);
+        self.keys.extend_from_slice(&other.keys);
+        self.values.extend_from_slice(&other.values);
+        self.row_start
+            .extend(other.row_start[1..].iter().map(|&s| s + shift));
+    }
+
     /// Number of rows (assembled constraints).
     #[inline]
     pub fn len(&self) -> usize {
@@ -175,5 +196,32 @@ mod tests {
         assert_eq!(r.row_norm_sq(0), 5.0);
         r.clear(3);
         assert!(r.is_empty());
+    }
+
+    #[test]
+    fn appended_rows_are_the_rows_pushed_one_by_one() {
+        let rows: [(u64, f64, &[(usize, f64)]); 4] = [
+            (7, 1.0, &[(0, 1.0), (2, -2.0)]),
+            (8, -0.5, &[]),
+            (9, 0.0, &[(1, 3.0)]),
+            (10, 2.0, &[(2, 1.0), (0, 4.0), (1, 5.0)]),
+        ];
+        let mut pushed = ConstraintRows::new(3);
+        for &(k, g, a) in &rows {
+            pushed.push(k, g, a.iter().copied());
+        }
+        let mut first = ConstraintRows::new(3);
+        let mut second = ConstraintRows::new(3);
+        for (n, &(k, g, a)) in rows.iter().enumerate() {
+            let into = if n < 2 { &mut first } else { &mut second };
+            into.push(k, g, a.iter().copied());
+        }
+        first.append(&second);
+        first.append(&ConstraintRows::new(3));
+        assert_eq!(first.keys(), pushed.keys());
+        assert_eq!(first.values(), pushed.values());
+        assert_eq!(first.row_starts(), pushed.row_starts());
+        assert_eq!(first.columns(), pushed.columns());
+        assert_eq!(first.coefficients(), pushed.coefficients());
     }
 }

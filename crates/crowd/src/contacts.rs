@@ -2,7 +2,7 @@
 //! each behind [`ContactSource`] with its own stable key, and the crowd's constraint set for
 //! one step, borrowed from the people and the walls.
 
-use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet, count_outside};
+use moreau_core::{ConstraintKey, ConstraintRows, ConstraintSet, Parallelism, count_outside};
 
 use crate::broad::BroadPhase;
 use crate::moving::MovingBodies;
@@ -84,6 +84,7 @@ pub trait ContactSource: std::fmt::Debug + Send {
 pub struct PersonPairs {
     broad: Box<dyn BroadPhase>,
     pairs: Vec<(u32, u32)>,
+    bands: Bands,
 }
 
 impl PersonPairs {
@@ -92,6 +93,72 @@ impl PersonPairs {
         Self {
             broad,
             pairs: Vec::new(),
+            bands: Bands::default(),
+        }
+    }
+
+    /// Its rows assembled on `parallelism`'s threads when there are many (see [`Bands`]).
+    pub fn on_threads(mut self, parallelism: Parallelism) -> Self {
+        self.bands = Bands::new(parallelism);
+        self
+    }
+}
+
+/// With threads, a source's rows are assembled in bands of its items (pairs, people) from this
+/// many items on, each band by one thread into rows of its own, appended in order after: the
+/// same rows as one thread's (fewer items: on the caller, where starting threads costs about
+/// what they save).
+const PARALLEL_ITEMS: usize = 20_000;
+
+/// The threads a source assembles its rows on, and the rows of the bands after the first.
+#[derive(Debug, Default)]
+struct Bands {
+    threads: usize,
+    rows: Vec<ConstraintRows>,
+}
+
+impl Bands {
+    fn new(parallelism: Parallelism) -> Self {
+        Self {
+            threads: parallelism.get(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// `assemble(items, rows, scratch)` for the items `0..count` in order, appending to
+    /// `rows`: in bands on threads when there are many (the caller's band with `scratch`, the
+    /// others with scratch of their own).
+    fn assemble<S: Default>(
+        &mut self,
+        count: usize,
+        rows: &mut ConstraintRows,
+        scratch: &mut S,
+        assemble: impl Fn(std::ops::Range<usize>, &mut ConstraintRows, &mut S) + Sync,
+    ) {
+        let threads = if count >= PARALLEL_ITEMS {
+            self.threads.min(count)
+        } else {
+            1
+        };
+        if threads <= 1 {
+            assemble(0..count, rows, scratch);
+            return;
+        }
+        let band = |k: usize| k * count / threads..(k + 1) * count / threads;
+        let dim = rows.dim();
+        self.rows.resize_with(threads - 1, ConstraintRows::default);
+        let assemble = &assemble;
+        std::thread::scope(|scope| {
+            for (k, own) in self.rows.iter_mut().enumerate() {
+                scope.spawn(move || {
+                    own.clear(dim);
+                    assemble(band(k + 1), own, &mut S::default());
+                });
+            }
+            assemble(band(0), rows, scratch);
+        });
+        for own in &self.rows {
+            rows.append(own);
         }
     }
 }
@@ -102,9 +169,26 @@ impl ContactSource for PersonPairs {
     }
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
-        let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+        let (q, radius) = (at.q, at.people.radius);
         self.broad.pairs(q, radius, at.margin, &mut self.pairs);
-        for &(i, j) in &self.pairs {
+        let pairs = &self.pairs;
+        self.bands
+            .assemble(pairs.len(), rows, &mut (), |band, rows, _| {
+                push_pair_rows(at, &pairs[band], rows);
+            });
+    }
+
+    /// `|q_i − q_j| − r_i − r_j`.
+    fn people_per_gap(&self) -> Option<usize> {
+        Some(2)
+    }
+}
+
+/// Appends the row of each pair of people in `pairs`, `g = |q_i − q_j| − r_i − r_j`.
+fn push_pair_rows(at: &ContactQuery<'_>, pairs: &[(u32, u32)], rows: &mut ConstraintRows) {
+    let (q, radius, id) = (at.q, at.people.radius, at.people.id);
+    {
+        for &(i, j) in pairs {
             let (i, j) = (i as usize, j as usize);
             let (dx, dy) = (q[2 * i] - q[2 * j], q[2 * i + 1] - q[2 * j + 1]);
             let d = (dx * dx + dy * dy).sqrt();
@@ -128,11 +212,6 @@ impl ContactSource for PersonPairs {
             );
         }
     }
-
-    /// `|q_i − q_j| − r_i − r_j`.
-    fn people_per_gap(&self) -> Option<usize> {
-        Some(2)
-    }
 }
 
 /// People against wall segments, through the walls' grid index: the cost follows the walls
@@ -140,6 +219,18 @@ impl ContactSource for PersonPairs {
 #[derive(Debug, Default)]
 pub struct PersonWalls {
     near: Vec<u32>,
+    bands: Bands,
+}
+
+impl PersonWalls {
+    /// Its rows assembled on `parallelism`'s threads when there are many people (see
+    /// [`Bands`]).
+    pub fn on_threads(parallelism: Parallelism) -> Self {
+        Self {
+            near: Vec::new(),
+            bands: Bands::new(parallelism),
+        }
+    }
 }
 
 impl ContactSource for PersonWalls {
@@ -148,7 +239,11 @@ impl ContactSource for PersonWalls {
     }
 
     fn assemble(&mut self, at: &ContactQuery<'_>, rows: &mut ConstraintRows) {
-        push_segment_rows(ContactKind::PersonWall, at, at.walls, &mut self.near, rows);
+        let people = at.people.radius.len();
+        self.bands
+            .assemble(people, rows, &mut self.near, |band, rows, near| {
+                push_segment_rows_of(ContactKind::PersonWall, at, at.walls, band, near, rows);
+            });
     }
 
     /// `dist(q_i, wall) − r_i`.
@@ -167,9 +262,22 @@ pub(crate) fn push_segment_rows(
     near: &mut Vec<u32>,
     rows: &mut ConstraintRows,
 ) {
+    let people = 0..at.people.radius.len();
+    push_segment_rows_of(kind, at, walls, people, near, rows);
+}
+
+/// [`push_segment_rows`] for the people `people` only.
+fn push_segment_rows_of(
+    kind: ContactKind,
+    at: &ContactQuery<'_>,
+    walls: &Walls,
+    people: std::ops::Range<usize>,
+    near: &mut Vec<u32>,
+    rows: &mut ConstraintRows,
+) {
     let (q, radius, id) = (at.q, at.people.radius, at.people.id);
     let segments = walls.segments();
-    for i in 0..radius.len() {
+    for i in people {
         let p = [q[2 * i], q[2 * i + 1]];
         walls.near(p, radius[i] + at.margin.max(0.0), near);
         for &w in near.iter() {

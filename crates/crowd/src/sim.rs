@@ -285,10 +285,11 @@ impl Simulation {
             BroadPhaseChoice::Auto => choose_broad_phase(scene.min_radius(), scene.max_radius()),
         };
         let mut sources: Vec<Box<dyn crate::contacts::ContactSource>> = vec![
-            Box::new(PersonPairs::new(
-                broad.build_on(Parallelism::threads(threads)),
-            )),
-            Box::new(PersonWalls::default()),
+            Box::new(
+                PersonPairs::new(broad.build_on(Parallelism::threads(threads)))
+                    .on_threads(Parallelism::threads(threads)),
+            ),
+            Box::new(PersonWalls::on_threads(Parallelism::threads(threads))),
         ];
         if !moving.is_empty() {
             sources.push(Box::new(PersonMovingWalls::default()));
