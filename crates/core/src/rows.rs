@@ -200,7 +200,8 @@ mod tests {
 
     #[test]
     fn appended_rows_are_the_rows_pushed_one_by_one() {
-        let rows: [(u64, f64, &[(usize, f64)]); 4] = [
+        type Row<'a> = (u64, f64, &'a [(usize, f64)]);
+        let rows: [Row; 4] = [
             (7, 1.0, &[(0, 1.0), (2, -2.0)]),
             (8, -0.5, &[]),
             (9, 0.0, &[(1, 3.0)]),
