@@ -338,6 +338,36 @@ def test_two_threads_step_two_simulations_at_once_as_sequential_runs():
     assert busy > 0
 
 
+def step_on_in_a_forked_child(sim, t_end, tmp_path, what):
+    """Forks: the child and this process each advance `sim` to `t_end`; returns the child's
+    positions (the child must finish within 120 s, without an error)."""
+    answer, failure = tmp_path / "child.npy", tmp_path / "child-error.txt"
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            sim.advance_to(t_end)
+            np.save(answer, sim.positions)
+            code = 0
+        except BaseException as e:
+            failure.write_text(repr(e))
+        finally:
+            os._exit(code)
+    sim.advance_to(t_end)
+    deadline = time.monotonic() + 120.0
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail(f"the forked child ({what}) did not finish its steps in 120 s")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0, failure.read_text()
+    return np.load(answer)
+
+
 def test_a_simulation_on_two_threads_steps_on_in_a_forked_child(tmp_path):
     """Regression: `auto` on two threads splits its largest component's factorizations with a
     helper thread, which a child forked from the process (multiprocessing's fork start method)
@@ -349,31 +379,8 @@ def test_a_simulation_on_two_threads_steps_on_in_a_forked_child(tmp_path):
     sim = moreau.Simulation(moreau.Scene.from_dict(d))
     # From about 3 s on the door's component is large enough to split.
     sim.advance_to(4.0)
-    answer, failure = tmp_path / "child.npy", tmp_path / "child-error.txt"
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            sim.advance_to(7.0)
-            np.save(answer, sim.positions)
-            code = 0
-        except BaseException as e:
-            failure.write_text(repr(e))
-        finally:
-            os._exit(code)
-    sim.advance_to(7.0)
-    deadline = time.monotonic() + 120.0
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, 9)
-            os.waitpid(pid, 0)
-            pytest.fail("the forked child did not finish its steps in 120 s")
-        time.sleep(0.05)
-    assert os.waitstatus_to_exitcode(status) == 0, failure.read_text()
-    assert same_bits(np.load(answer), sim.positions)
+    child = step_on_in_a_forked_child(sim, 7.0, tmp_path, "auto")
+    assert same_bits(child, sim.positions)
 
 
 @pytest.mark.parametrize("kind", ["interior", "gauss-seidel", "apgd"])
@@ -387,31 +394,8 @@ def test_a_solver_on_a_thread_pool_steps_on_in_a_forked_child(tmp_path, kind):
     d["time"]["horizon"] = 2.0
     sim = moreau.Simulation(moreau.Scene.from_dict(d))
     sim.advance_to(1.0)
-    answer, failure = tmp_path / "child.npy", tmp_path / "child-error.txt"
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            sim.advance_to(1.5)
-            np.save(answer, sim.positions)
-            code = 0
-        except BaseException as e:
-            failure.write_text(repr(e))
-        finally:
-            os._exit(code)
-    sim.advance_to(1.5)
-    deadline = time.monotonic() + 120.0
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, 9)
-            os.waitpid(pid, 0)
-            pytest.fail(f"the forked child ({kind}) did not finish its steps in 120 s")
-        time.sleep(0.05)
-    assert os.waitstatus_to_exitcode(status) == 0, failure.read_text()
-    assert same_bits(np.load(answer), sim.positions)
+    child = step_on_in_a_forked_child(sim, 1.5, tmp_path, kind)
+    assert same_bits(child, sim.positions)
 
 
 def test_to_pedpy_from_a_run_file_and_from_memory(room_run):

@@ -187,30 +187,28 @@ impl ContactSource for PersonPairs {
 /// Appends the row of each pair of people in `pairs`, `g = |q_i − q_j| − r_i − r_j`.
 fn push_pair_rows(at: &ContactQuery<'_>, pairs: &[(u32, u32)], rows: &mut ConstraintRows) {
     let (q, radius, id) = (at.q, at.people.radius, at.people.id);
-    {
-        for &(i, j) in pairs {
-            let (i, j) = (i as usize, j as usize);
-            let (dx, dy) = (q[2 * i] - q[2 * j], q[2 * i + 1] - q[2 * j + 1]);
-            let d = (dx * dx + dy * dy).sqrt();
-            // Coincident centres: any unit direction is a subgradient.
-            let e = if d > 0.0 {
-                [dx / d, dy / d]
-            } else {
-                [1.0, 0.0]
-            };
-            let g = d - radius[i] - radius[j];
-            let (a, b) = (id[i].min(id[j]), id[i].max(id[j]));
-            rows.push(
-                ContactKind::PersonPerson.key(a, b),
-                g,
-                [
-                    (2 * i, e[0]),
-                    (2 * i + 1, e[1]),
-                    (2 * j, -e[0]),
-                    (2 * j + 1, -e[1]),
-                ],
-            );
-        }
+    for &(i, j) in pairs {
+        let (i, j) = (i as usize, j as usize);
+        let (dx, dy) = (q[2 * i] - q[2 * j], q[2 * i + 1] - q[2 * j + 1]);
+        let d = (dx * dx + dy * dy).sqrt();
+        // Coincident centres: any unit direction is a subgradient.
+        let e = if d > 0.0 {
+            [dx / d, dy / d]
+        } else {
+            [1.0, 0.0]
+        };
+        let g = d - radius[i] - radius[j];
+        let (a, b) = (id[i].min(id[j]), id[i].max(id[j]));
+        rows.push(
+            ContactKind::PersonPerson.key(a, b),
+            g,
+            [
+                (2 * i, e[0]),
+                (2 * i + 1, e[1]),
+                (2 * j, -e[0]),
+                (2 * j + 1, -e[1]),
+            ],
+        );
     }
 }
 

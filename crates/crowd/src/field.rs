@@ -1,6 +1,6 @@
 //! Desired velocities: geodesic distance to each goal (fast marching) and its descent direction.
 
-use std::cell::RefCell;
+use std::sync::Mutex;
 
 use moreau_core::{Field, Parallelism};
 use ndarray::Array2;
@@ -288,8 +288,8 @@ pub struct DesiredVelocity<'a> {
     pub speed_factor: f64,
     /// Classic (jumps at the wall slide and on arrival) or Lipschitz.
     pub kind: DesiredVelocityKind,
-    /// Scratch for the walls near a person.
-    pub near: &'a RefCell<Vec<u32>>,
+    /// Scratch for the walls near a person (the caller's thread's; other threads use their own).
+    pub near: &'a Mutex<Vec<u32>>,
     /// Threads: from [`PARALLEL_PEOPLE`] people on, each takes a band of them (with scratch
     /// of its own); every person's velocity is the same whoever computes it.
     pub parallelism: Parallelism,
@@ -366,44 +366,21 @@ impl Field for DesiredVelocity<'_> {
         } else {
             1
         };
+        let mut near = self.near.lock().unwrap_or_else(|e| e.into_inner());
         if threads <= 1 {
-            self.eval_people(t, q, 0, out, &mut self.near.borrow_mut());
+            self.eval_people(t, q, 0, out, &mut near);
             return;
         }
-        // Bands of people, the first on the caller; the others with their own scratch.
+        // Bands of people, the first on the caller; the others with scratch of their own.
         let per = n.div_ceil(threads);
-        let DesiredVelocity {
-            fields,
-            goals,
-            walls,
-            people,
-            stand_until,
-            speed_factor,
-            kind,
-            ..
-        } = *self;
         std::thread::scope(|scope| {
             let mut bands = out.chunks_mut(2 * per).enumerate();
             let first = bands.next().map(|(_, band)| band);
             for (k, band) in bands {
-                scope.spawn(move || {
-                    let near = RefCell::new(Vec::new());
-                    let field = DesiredVelocity {
-                        fields,
-                        goals,
-                        walls,
-                        people,
-                        stand_until,
-                        speed_factor,
-                        kind,
-                        near: &near,
-                        parallelism: Parallelism::SEQUENTIAL,
-                    };
-                    field.eval_people(t, q, k * per, band, &mut near.borrow_mut());
-                });
+                scope.spawn(move || self.eval_people(t, q, k * per, band, &mut Vec::new()));
             }
             if let Some(band) = first {
-                self.eval_people(t, q, 0, band, &mut self.near.borrow_mut());
+                self.eval_people(t, q, 0, band, &mut near);
             }
         });
     }

@@ -2,8 +2,6 @@
 //! `advance_to`, the one loop over its steps, which reports steps, frames and exits to an
 //! observer the caller passes.
 
-use std::cell::RefCell;
-
 use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, RunStats, StepReport};
 use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Stepping};
 use moreau_solve::ProjectionSolver;
@@ -205,7 +203,7 @@ pub struct Simulation {
     total: usize,
     broad: BroadPhaseKind,
     // scratch
-    near: RefCell<Vec<u32>>,
+    near: std::sync::Mutex<Vec<u32>>,
     keep: Vec<bool>,
     gap_rows: ConstraintRows,
 }
@@ -334,7 +332,7 @@ impl Simulation {
             speed_factor: 1.0,
             total: n,
             broad,
-            near: RefCell::new(Vec::new()),
+            near: std::sync::Mutex::new(Vec::new()),
             keep: Vec::new(),
             gap_rows: ConstraintRows::default(),
         })

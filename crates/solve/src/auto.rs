@@ -106,7 +106,8 @@ impl Default for AutoSettings {
 /// With threads ([`AutoSettings::parallelism`] above one), Gauss–Seidel's groups are solved
 /// on all of them at once (each group by one thread, with its own solver and sub-problem,
 /// writing its components' answers: components share no row and no unknown), the largest
-/// component and the others are solved at once, each by its own interior point, and the largest component's
+/// component and the others are solved at once, each by its own interior point, and the
+/// largest component's
 /// factorizations and triangular solves in 2×2 blocks are split over two threads where its
 /// elimination tree has two parts that pay
 /// ([`InteriorPointSettings::split_factorization`]); the split is the same on any thread
