@@ -1,6 +1,7 @@
 //! The connected components of a projection problem, and the sub-problems made of some of
 //! them: rows that share no unknown, directly or through other rows, are independent
-//! problems whose gaps add up.
+//! problems whose gaps add up, checked each against its share and answered into the whole
+//! solution, by several threads at once if need be.
 
 use moreau_core::ConstraintRows;
 
