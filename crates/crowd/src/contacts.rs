@@ -108,7 +108,7 @@ impl PersonPairs {
 /// many items on, each band by one thread into rows of its own, appended in order after: the
 /// same rows as one thread's (fewer items: on the caller, where starting threads costs about
 /// what they save).
-const PARALLEL_ITEMS: usize = 20_000;
+const PARALLEL_ITEMS: usize = 10_000;
 
 /// The threads a source assembles its rows on, and the rows of the bands after the first.
 #[derive(Debug, Default)]

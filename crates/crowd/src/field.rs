@@ -297,7 +297,7 @@ pub struct DesiredVelocity<'a> {
 
 /// With threads, the desired velocities are computed on all of them from this many people on
 /// (fewer: on the caller, where starting threads costs about what they save).
-pub const PARALLEL_PEOPLE: usize = 20_000;
+pub const PARALLEL_PEOPLE: usize = 10_000;
 
 impl DesiredVelocity<'_> {
     /// How close to a wall (beyond the radius) the sliding starts.

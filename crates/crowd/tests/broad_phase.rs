@@ -116,7 +116,7 @@ fn a_verlet_list_returns_the_brute_force_pairs_as_people_move_and_leave() {
     }
 }
 
-/// The grid on threads (from 20,000 disks its rows of cells are swept in bands) returns the
+/// The grid on threads (from 10,000 disks its rows of cells are swept in bands) returns the
 /// one-thread grid's pairs, and every pair the brute force finds for a sample of the disks.
 #[test]
 fn the_grid_on_threads_finds_the_same_pairs() {
