@@ -43,10 +43,6 @@ impl BroadPhase for BruteForce {
     }
 }
 
-/// With threads, the grid's cells are swept on all of them from this many disks on (fewer:
-/// on the caller, where starting threads costs about what they save).
-const PARALLEL_DISKS: usize = 10_000;
-
 /// A uniform grid of square cells of side `2 r_max + margin`: fast when radii are similar.
 /// With threads ([`CellGrid::on_threads`]) its rows of cells are swept in bands, one a thread;
 /// the pairs are sorted at the end, so they are the same on any thread count.
@@ -139,7 +135,7 @@ impl BroadPhase for CellGrid {
             reach2,
             margin,
         };
-        let threads = if n >= PARALLEL_DISKS {
+        let threads = if n >= crate::PARALLEL_FROM {
             self.threads.min(ny)
         } else {
             1

@@ -97,20 +97,18 @@ impl PersonPairs {
         }
     }
 
-    /// Its rows assembled on `parallelism`'s threads when there are many (see [`Bands`]).
+    /// Its rows assembled on `parallelism`'s threads, in bands of pairs, from 10,000 pairs on
+    /// (the same rows as on one thread).
     pub fn on_threads(mut self, parallelism: Parallelism) -> Self {
         self.bands = Bands::new(parallelism);
         self
     }
 }
 
-/// With threads, a source's rows are assembled in bands of its items (pairs, people) from this
-/// many items on, each band by one thread into rows of its own, appended in order after: the
-/// same rows as one thread's (fewer items: on the caller, where starting threads costs about
-/// what they save).
-const PARALLEL_ITEMS: usize = 10_000;
-
-/// The threads a source assembles its rows on, and the rows of the bands after the first.
+/// The threads a source assembles its rows on, and the rows of the bands after the first:
+/// with threads, from [`PARALLEL_FROM`](crate::PARALLEL_FROM) items (pairs, people) on, each
+/// band by one thread into rows of its own, appended in order after (the same rows as one
+/// thread's).
 #[derive(Debug, Default)]
 struct Bands {
     threads: usize,
@@ -135,7 +133,7 @@ impl Bands {
         scratch: &mut S,
         assemble: impl Fn(std::ops::Range<usize>, &mut ConstraintRows, &mut S) + Sync,
     ) {
-        let threads = if count >= PARALLEL_ITEMS {
+        let threads = if count >= crate::PARALLEL_FROM {
             self.threads.min(count)
         } else {
             1
@@ -221,8 +219,8 @@ pub struct PersonWalls {
 }
 
 impl PersonWalls {
-    /// Its rows assembled on `parallelism`'s threads when there are many people (see
-    /// [`Bands`]).
+    /// Its rows assembled on `parallelism`'s threads, in bands of people, from 10,000 people
+    /// on (the same rows as on one thread).
     pub fn on_threads(parallelism: Parallelism) -> Self {
         Self {
             near: Vec::new(),

@@ -290,14 +290,10 @@ pub struct DesiredVelocity<'a> {
     pub kind: DesiredVelocityKind,
     /// Scratch for the walls near a person (the caller's thread's; other threads use their own).
     pub near: &'a Mutex<Vec<u32>>,
-    /// Threads: from [`PARALLEL_PEOPLE`] people on, each takes a band of them (with scratch
-    /// of its own); every person's velocity is the same whoever computes it.
+    /// Threads: from 10,000 people on, each takes a band of them (with scratch of its own);
+    /// every person's velocity is the same whoever computes it.
     pub parallelism: Parallelism,
 }
-
-/// With threads, the desired velocities are computed on all of them from this many people on
-/// (fewer: on the caller, where starting threads costs about what they save).
-pub const PARALLEL_PEOPLE: usize = 10_000;
 
 impl DesiredVelocity<'_> {
     /// How close to a wall (beyond the radius) the sliding starts.
@@ -361,7 +357,7 @@ impl Field for DesiredVelocity<'_> {
     fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
         let n = self.people.id.len();
         let out = &mut out[..2 * n];
-        let threads = if n >= PARALLEL_PEOPLE {
+        let threads = if n >= crate::PARALLEL_FROM {
             self.parallelism.get()
         } else {
             1
