@@ -553,14 +553,7 @@ impl InteriorPoint {
         let mut kept = false;
         let mut iterations = 0;
         let status = loop {
-            // Residuals r_d = v − w − Jᵀλ, r_p = s − b − J v.
-            let (wk, jt) = (self.normal.workers(), self.normal.transpose());
-            {
-                let (v, lam): (&[f64], &[f64]) = (v, lam);
-                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(lam, c));
-                let s = &self.s;
-                wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
-            }
+            let wk = self.normal.workers();
             // Once the residuals vanish the certificate is sᵀλ: below the target gap is
             // when it is worth computing.
             let sl = {
@@ -568,7 +561,18 @@ impl InteriorPoint {
                 wk.sum(m, |i| s[i] * lam[i])
             };
             let last = iterations == budget;
-            if sl <= target.gap || last {
+            let check = sl <= target.gap || last;
+            // The residuals r_d = v − w − Jᵀλ, r_p = s − b − J v from the iterate at the start
+            // and where the certificate is consulted; in between they follow from the Newton
+            // system (after the step, below): two passes over J fewer an iteration.
+            if iterations == 0 || check {
+                let jt = self.normal.transpose();
+                let (v, lam): (&[f64], &[f64]) = (v, lam);
+                wk.map(&mut self.rd, |c, _| v[c] - p.w[c] - jt.dot(lam, c));
+                let s = &self.s;
+                wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
+            }
+            if check {
                 let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
                 if c.gap <= target.gap && c.violation <= target.violation {
                     break SolveStatus::Converged;
@@ -667,6 +671,13 @@ impl InteriorPoint {
             wk.map(v, |k, x| x + alpha_primal * dv[k]);
             wk.map(&mut self.s, |i, x| x + alpha_primal * ds[i]);
             wk.map(lam, |i, x| x + alpha_dual * dl[i]);
+            // The residuals after the step, from `JᵀΔλ = Δv + r_d` and `Δs = JΔv − r_p`:
+            // `r_d ← (1 − α_d) r_d + (α_p − α_d) Δv`, `r_p ← (1 − α_p) r_p` (to the rounding
+            // of the triangular solves, which the exact residuals at a check bring back).
+            wk.map(&mut self.rd, |c, r| {
+                (1.0 - alpha_dual) * r + (alpha_primal - alpha_dual) * dv[c]
+            });
+            wk.map(&mut self.rp, |_, r| (1.0 - alpha_primal) * r);
         };
         (status, iterations)
     }
