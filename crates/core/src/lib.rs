@@ -10,6 +10,7 @@
 //! box and a crowd.
 
 mod error;
+mod helper;
 mod num;
 mod parallel;
 mod report;
@@ -18,6 +19,7 @@ mod sets;
 mod traits;
 
 pub use error::CoreError;
+pub use helper::Helper;
 pub use num::Num;
 pub use parallel::Parallelism;
 pub use report::{RunStats, SolveStatus, StageTimings, StepReport};

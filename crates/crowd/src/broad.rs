@@ -49,6 +49,7 @@ impl BroadPhase for BruteForce {
 #[derive(Debug, Clone, Default)]
 pub struct CellGrid {
     threads: usize,
+    helper: Option<std::sync::Arc<moreau_core::Helper>>,
     // each band's pairs, from the threads after the first
     bands: Vec<Vec<(u32, u32)>>,
     cell_start: Vec<u32>,
@@ -135,27 +136,24 @@ impl BroadPhase for CellGrid {
             reach2,
             margin,
         };
-        let threads = if n >= crate::PARALLEL_FROM {
-            self.threads.min(ny)
-        } else {
-            1
-        };
+        let threads = crate::bands::count(self.threads, n).min(ny);
         if threads <= 1 {
             grid.sweep(0..ny, out);
         } else {
             // Bands of rows of cells, the first on the caller.
             self.bands.resize_with(threads - 1, Vec::new);
             let band = |k: usize| k * ny / threads..(k + 1) * ny / threads;
-            std::thread::scope(|scope| {
-                for (k, pairs) in self.bands.iter_mut().enumerate() {
-                    let grid = &grid;
-                    scope.spawn(move || {
+            let grid = &grid;
+            crate::bands::run(
+                self.helper.as_deref(),
+                || grid.sweep(band(0), out),
+                self.bands.iter_mut().enumerate().map(|(k, pairs)| {
+                    move || {
                         pairs.clear();
                         grid.sweep(band(k + 1), pairs);
-                    });
-                }
-                grid.sweep(band(0), out);
-            });
+                    }
+                }),
+            );
             for pairs in &self.bands {
                 out.extend_from_slice(pairs);
             }
@@ -169,6 +167,7 @@ impl CellGrid {
     pub fn on_threads(parallelism: Parallelism) -> Self {
         Self {
             threads: parallelism.get(),
+            helper: crate::bands::helper_for(parallelism),
             ..Self::default()
         }
     }

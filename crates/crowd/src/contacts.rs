@@ -97,7 +97,7 @@ impl PersonPairs {
         }
     }
 
-    /// Its rows assembled on `parallelism`'s threads, in bands of pairs, from 10,000 pairs on
+    /// Its rows assembled on `parallelism`'s threads, in bands of pairs where there are many
     /// (the same rows as on one thread).
     pub fn on_threads(mut self, parallelism: Parallelism) -> Self {
         self.bands = Bands::new(parallelism);
@@ -106,12 +106,13 @@ impl PersonPairs {
 }
 
 /// The threads a source assembles its rows on, and the rows of the bands after the first:
-/// with threads, from [`PARALLEL_FROM`](crate::PARALLEL_FROM) items (pairs, people) on, each
-/// band by one thread into rows of its own, appended in order after (the same rows as one
-/// thread's).
+/// with threads and many items (pairs, people: two bands from a thousand, one a thread from
+/// ten thousand), each band by one thread into rows of its own, appended in order after (the
+/// same rows as one thread's).
 #[derive(Debug, Default)]
 struct Bands {
     threads: usize,
+    helper: Option<std::sync::Arc<moreau_core::Helper>>,
     rows: Vec<ConstraintRows>,
 }
 
@@ -119,6 +120,7 @@ impl Bands {
     fn new(parallelism: Parallelism) -> Self {
         Self {
             threads: parallelism.get(),
+            helper: crate::bands::helper_for(parallelism),
             rows: Vec::new(),
         }
     }
@@ -133,11 +135,7 @@ impl Bands {
         scratch: &mut S,
         assemble: impl Fn(std::ops::Range<usize>, &mut ConstraintRows, &mut S) + Sync,
     ) {
-        let threads = if count >= crate::PARALLEL_FROM {
-            self.threads.min(count)
-        } else {
-            1
-        };
+        let threads = crate::bands::count(self.threads, count);
         if threads <= 1 {
             assemble(0..count, rows, scratch);
             return;
@@ -146,15 +144,16 @@ impl Bands {
         let dim = rows.dim();
         self.rows.resize_with(threads - 1, ConstraintRows::default);
         let assemble = &assemble;
-        std::thread::scope(|scope| {
-            for (k, own) in self.rows.iter_mut().enumerate() {
-                scope.spawn(move || {
+        crate::bands::run(
+            self.helper.as_deref(),
+            || assemble(band(0), rows, scratch),
+            self.rows.iter_mut().enumerate().map(|(k, own)| {
+                move || {
                     own.clear(dim);
                     assemble(band(k + 1), own, &mut S::default());
-                });
-            }
-            assemble(band(0), rows, scratch);
-        });
+                }
+            }),
+        );
         for own in &self.rows {
             rows.append(own);
         }

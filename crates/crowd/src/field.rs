@@ -290,9 +290,12 @@ pub struct DesiredVelocity<'a> {
     pub kind: DesiredVelocityKind,
     /// Scratch for the walls near a person (the caller's thread's; other threads use their own).
     pub near: &'a Mutex<Vec<u32>>,
-    /// Threads: from 10,000 people on, each takes a band of them (with scratch of its own);
-    /// every person's velocity is the same whoever computes it.
+    /// Threads: from a thousand people on, two bands of them, the second on `helper`; from
+    /// ten thousand on, one band a thread (each with scratch of its own); every person's
+    /// velocity is the same whoever computes it.
     pub parallelism: Parallelism,
+    /// The helper thread for the second band (without one, a thread of its own).
+    pub helper: Option<&'a moreau_core::Helper>,
 }
 
 impl DesiredVelocity<'_> {
@@ -357,11 +360,7 @@ impl Field for DesiredVelocity<'_> {
     fn eval(&self, t: f64, q: &[f64], out: &mut [f64]) {
         let n = self.people.id.len();
         let out = &mut out[..2 * n];
-        let threads = if n >= crate::PARALLEL_FROM {
-            self.parallelism.get()
-        } else {
-            1
-        };
+        let threads = crate::bands::count(self.parallelism.get(), n);
         let mut near = self.near.lock().unwrap_or_else(|e| e.into_inner());
         if threads <= 1 {
             self.eval_people(t, q, 0, out, &mut near);
@@ -369,16 +368,14 @@ impl Field for DesiredVelocity<'_> {
         }
         // Bands of people, the first on the caller; the others with scratch of their own.
         let per = n.div_ceil(threads);
-        std::thread::scope(|scope| {
-            let mut bands = out.chunks_mut(2 * per).enumerate();
-            let first = bands.next().map(|(_, band)| band);
-            for (k, band) in bands {
-                scope.spawn(move || self.eval_people(t, q, k * per, band, &mut Vec::new()));
-            }
-            if let Some(band) = first {
-                self.eval_people(t, q, 0, band, &mut near);
-            }
-        });
+        let (first, others) = out.split_at_mut((2 * per).min(out.len()));
+        crate::bands::run(
+            self.helper,
+            || self.eval_people(t, q, 0, first, &mut near),
+            others.chunks_mut(2 * per).enumerate().map(|(k, band)| {
+                move || self.eval_people(t, q, (k + 1) * per, band, &mut Vec::new())
+            }),
+        );
     }
 }
 

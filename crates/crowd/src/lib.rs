@@ -9,13 +9,7 @@
 //! [`Inflow`] sources bringing people in) act between steps. [`Simulation::advance_to`] is the
 //! one step loop; [`SimState`] is its state as a value. Only what the scene declares is built.
 
-/// With threads, the crowd's loops over people (desired velocities, the grid's cells, the
-/// contact rows) run in bands, one a thread, from this many people (or disks, or pairs) on;
-/// fewer stay on the caller, where starting threads costs about what they save (measured on
-/// whole evacuations, benches/README.md, session 17: 10,000 beats 20,000 at 10,000 people;
-/// 4,096 loses at 2,000).
-const PARALLEL_FROM: usize = 10_000;
-
+mod bands;
 mod broad;
 mod contacts;
 mod error;

@@ -202,6 +202,8 @@ pub struct Simulation {
     speed_factor: f64,
     total: usize,
     broad: BroadPhaseKind,
+    // the helper thread of the loops over people with threads (shared with the solver's)
+    helper: Option<std::sync::Arc<moreau_core::Helper>>,
     // scratch
     near: std::sync::Mutex<Vec<u32>>,
     keep: Vec<bool>,
@@ -311,6 +313,7 @@ impl Simulation {
         if let Stepping::Adaptive(c) = &stepping {
             scheme.set_eps(c.settings().eps_policy());
         }
+        let helper = crate::bands::helper_for(Parallelism::threads(scene.solver.threads));
         Ok(Self {
             scene,
             exits,
@@ -332,6 +335,7 @@ impl Simulation {
             speed_factor: 1.0,
             total: n,
             broad,
+            helper,
             near: std::sync::Mutex::new(Vec::new()),
             keep: Vec::new(),
             gap_rows: ConstraintRows::default(),
@@ -585,6 +589,7 @@ impl Simulation {
                 kind: self.scene.model.desired_velocity,
                 near: &self.near,
                 parallelism: Parallelism::threads(self.scene.solver.threads),
+                helper: self.helper.as_deref(),
             },
             contacts: CrowdContacts {
                 people,

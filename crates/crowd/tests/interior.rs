@@ -221,27 +221,49 @@ fn a_large_crowd_steps_the_same_on_one_and_three_threads() {
     hall.seed = 3;
     hall.horizon = 0.3;
     let scene = hall.scene().unwrap();
-    let run = |threads: usize| {
-        let mut s = scene.clone();
-        s.solver.threads = threads;
-        let mut sim = Simulation::new(s).unwrap();
-        let mut rows = Vec::new();
-        for mu in common::steps(sim.scene()) {
-            rows.push(sim.step(mu).unwrap().assembled);
-        }
-        let bits = sim
-            .frame()
-            .positions
-            .iter()
-            .map(|x| x.to_bits())
-            .collect::<Vec<_>>();
-        (sim.frame().ids.to_vec(), bits, rows)
-    };
-    let (ids1, q1, rows1) = run(1);
+    let (ids1, q1, rows1) = steps_on(&scene, 1);
     let most = rows1.iter().copied().max().unwrap_or(0);
     assert!(most > 30_000, "contacts enough for threads: {most} rows");
-    let (ids3, q3, rows3) = run(3);
+    let (ids3, q3, rows3) = steps_on(&scene, 3);
     assert_eq!(rows1, rows3, "rows assembled a step");
     assert_eq!(ids1, ids3);
     assert!(q1 == q3, "other positions on three threads");
+}
+
+/// Below ten thousand people the loops run in two bands on two threads, the second on the
+/// helper thread (which the interior point's split factorization shares).
+#[test]
+fn a_crowd_of_thousands_steps_the_same_with_its_second_band_on_the_helper() {
+    let mut hall = Hall::new(3_000, 2.5);
+    hall.seed = 5;
+    hall.horizon = 0.5;
+    let scene = hall.scene().unwrap();
+    let (ids1, q1, rows1) = steps_on(&scene, 1);
+    let most = rows1.iter().copied().max().unwrap_or(0);
+    assert!(
+        (2_000..10_000).contains(&most),
+        "contacts for two bands: {most} rows"
+    );
+    let (ids2, q2, rows2) = steps_on(&scene, 2);
+    assert_eq!(rows1, rows2, "rows assembled a step");
+    assert_eq!(ids1, ids2);
+    assert!(q1 == q2, "other positions on two threads");
+}
+
+/// The run of `scene` on `threads` threads: ids and position bits at the end, rows a step.
+fn steps_on(scene: &Scene, threads: usize) -> (Vec<u32>, Vec<u64>, Vec<usize>) {
+    let mut s = scene.clone();
+    s.solver.threads = threads;
+    let mut sim = Simulation::new(s).unwrap();
+    let mut rows = Vec::new();
+    for mu in common::steps(sim.scene()) {
+        rows.push(sim.step(mu).unwrap().assembled);
+    }
+    let bits = sim
+        .frame()
+        .positions
+        .iter()
+        .map(|x| x.to_bits())
+        .collect::<Vec<_>>();
+    (sim.frame().ids.to_vec(), bits, rows)
 }

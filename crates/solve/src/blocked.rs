@@ -18,8 +18,8 @@
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::helper::Helper;
 use crate::products::Index;
+use moreau_core::Helper;
 
 /// Block products (2×2) of a factorization below which it is not split over two threads:
 /// a handoff costs about a microsecond, ~5,000 products about eight.

@@ -19,7 +19,6 @@ mod components;
 mod dissection;
 mod error;
 mod gauss_seidel;
-mod helper;
 mod interior;
 mod newton;
 mod normal;

@@ -32,10 +32,10 @@ use moreau_core::{ConstraintRows, Parallelism};
 use crate::blocked::{Block, BlockCholesky, BlockColumns, BlockPattern};
 use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
-use crate::helper::Helper;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
 use crate::workers::Workers;
+use moreau_core::Helper;
 
 /// What the factorization machinery did over the solver's life (for benchmarks).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -532,7 +532,7 @@ pub(crate) struct NormalEquations {
     x: Vec<f64>,
     // The second thread of factorizations and solves in 2×2 blocks split in two, whether
     // the split pays here, and whether the last factorization was split.
-    helper: Option<Helper>,
+    helper: Option<std::sync::Arc<Helper>>,
     split_choice: SplitChoice,
     last_split: bool,
 }
@@ -650,12 +650,12 @@ impl NormalEquations {
     }
 
     /// From the next analysis on, factorizations and triangular solves in 2×2 blocks run on
-    /// two threads where the elimination tree splits in two parts that pay (a helper thread
-    /// for the second part; the same bits as on one thread). Without a thread to be had,
+    /// two threads where the elimination tree splits in two parts that pay (the shared helper
+    /// thread, [`Helper::shared`], for the second part; the same bits as on one thread). Without a thread to be had,
     /// nothing changes.
     pub(crate) fn split_over_two_threads(&mut self) {
         if self.helper.is_none() {
-            self.helper = Helper::start();
+            self.helper = Helper::shared();
         }
     }
 

@@ -1,0 +1,409 @@
+//! A second thread for fork–joins, shared by everything that forks in two: one half of a join runs on it while the caller
+//! runs the other, and it spins between jobs, so a handoff takes well under a microsecond
+//! where a thread pool's sleeping workers take tens (measured on this project's 2-core VM: a
+//! pool's join around two 49 µs halves cost 38 µs, this one under 1 µs; benches/README.md,
+//! session 16). It parks after `SPIN` without a job; a job it has not started by the time the
+//! caller's half ends (it is waking, or its core is busy) is taken back and run by the caller,
+//! so a late helper costs no more than one thread. One join at a time holds it: a join
+//! while it is held (from another thread, or nested in a join's half) runs both halves on its
+//! caller, as does every join in a process forked from the one that started it (which has no
+//! such thread). Whichever way a join runs, both halves run, so results cannot depend on it.
+
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, Weak};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// How long the helper spins after a job before it parks.
+const SPIN: Duration = Duration::from_millis(1);
+
+/// A job the helper runs: a borrowed closure whose lifetime [`Helper::join`] guarantees.
+type Job = &'static (dyn Fn() + Sync);
+
+#[derive(Default)]
+struct Shared {
+    posted: AtomicU64,
+    finished: AtomicU64,
+    job: Mutex<Option<Job>>,
+    panic: Mutex<Option<Box<dyn std::any::Any + Send>>>,
+    parked: AtomicBool,
+    stop: AtomicBool,
+}
+
+/// A helper thread (joined when dropped).
+pub struct Helper {
+    shared: Arc<Shared>,
+    // Held by the join running on it (see `join`).
+    held: AtomicBool,
+    thread: Option<JoinHandle<()>>,
+    // The process that started the thread: a child forked from it has no helper thread, and
+    // there both halves run on the caller.
+    process: u32,
+}
+
+impl std::fmt::Debug for Helper {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Helper")
+    }
+}
+
+/// The helper in use, if any (see [`Helper::shared`]).
+static SHARED: Mutex<Weak<Helper>> = Mutex::new(Weak::new());
+
+impl Helper {
+    /// The helper the stages and solvers that fork in two share: the one in use if there is
+    /// one, else a new one (its thread is joined when the last user drops it, so a library
+    /// that is unloaded after its last simulation leaves no thread behind). `None` when the
+    /// system refuses a thread (callers then run both halves themselves). One thread for all:
+    /// two helpers would spin against each other on two cores.
+    pub fn shared() -> Option<Arc<Helper>> {
+        let mut shared = SHARED.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(helper) = shared.upgrade() {
+            return Some(helper);
+        }
+        let helper = Arc::new(Helper::start()?);
+        *shared = Arc::downgrade(&helper);
+        Some(helper)
+    }
+
+    /// A helper of its own (tests; callers share [`Helper::shared`]); `None` when the system
+    /// refuses a thread.
+    pub fn start() -> Option<Self> {
+        let shared = Arc::new(Shared::default());
+        let theirs = Arc::clone(&shared);
+        let thread = std::thread::Builder::new()
+            .name("moreau-helper".into())
+            .spawn(move || serve(&theirs))
+            .ok()?;
+        Some(Self {
+            shared,
+            held: AtomicBool::new(false),
+            thread: Some(thread),
+            process: std::process::id(),
+        })
+    }
+
+    /// Runs `b` on the helper while `a` runs here; returns `a`'s result once both are done. A
+    /// panic in either is resumed here, after both have stopped. When the helper is held by
+    /// another join (another thread's, or the one whose half this is) or the process was
+    /// forked from the one that started it, `a` then `b` run here.
+    pub fn join<R>(&self, a: impl FnOnce() -> R, b: &(dyn Fn() + Sync)) -> R {
+        if std::process::id() != self.process || self.held.swap(true, Ordering::Acquire) {
+            let r = a();
+            b();
+            return r;
+        }
+        // Let go once both halves are done (declared before `wait`, so dropped after it, also
+        // when `a` panics).
+        struct Hold<'a>(&'a AtomicBool);
+        impl Drop for Hold<'_> {
+            fn drop(&mut self) {
+                self.0.store(false, Ordering::Release);
+            }
+        }
+        let _hold = Hold(&self.held);
+        let thread = self
+            .thread
+            .as_ref()
+            .expect("running until dropped")
+            .thread();
+        // SAFETY: the helper calls the job only if it takes it from the slot, and this
+        // function neither returns nor unwinds before it has either taken the job back itself
+        // (then the helper never sees it) or seen `finished` reach the epoch (`Wait` below, in
+        // its drop, so also when `a` panics): the borrow outlives every use. The job is
+        // `Sync`, so calling it from the helper is sound.
+        #[allow(unsafe_code)]
+        let job: Job =
+            unsafe { std::mem::transmute::<&(dyn Fn() + Sync), &'static (dyn Fn() + Sync)>(b) };
+        *self.shared.job.lock().unwrap_or_else(|e| e.into_inner()) = Some(job);
+        let epoch = self.shared.posted.fetch_add(1, Ordering::SeqCst) + 1;
+        if self.shared.parked.load(Ordering::SeqCst) {
+            thread.unpark();
+        }
+        struct Wait<'a> {
+            shared: &'a Shared,
+            epoch: u64,
+            armed: bool,
+        }
+        impl Wait<'_> {
+            /// The job, if the helper has not taken it (asleep, or its core busy).
+            fn take_back(&mut self) -> Option<Job> {
+                let job = self
+                    .shared
+                    .job
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .take();
+                self.armed &= job.is_none();
+                job
+            }
+        }
+        impl Drop for Wait<'_> {
+            fn drop(&mut self) {
+                if !self.armed || self.take_back().is_some() {
+                    return;
+                }
+                while self.shared.finished.load(Ordering::Acquire) < self.epoch {
+                    std::hint::spin_loop();
+                }
+                // `a` panicked: its panic goes on; the helper's, if any, goes with this job
+                // (not to the next one's caller).
+                if std::thread::panicking() {
+                    drop(
+                        self.shared
+                            .panic
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .take(),
+                    );
+                }
+            }
+        }
+        let mut wait = Wait {
+            shared: &self.shared,
+            epoch,
+            armed: true,
+        };
+        let r = a();
+        // Not started by the helper while `a` ran: it runs here (a helper woken late costs
+        // no more than running both halves here).
+        if let Some(job) = wait.take_back() {
+            job();
+            return r;
+        }
+        drop(wait);
+        if let Some(p) = self
+            .shared
+            .panic
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
+            resume_unwind(p);
+        }
+        r
+    }
+}
+
+impl Drop for Helper {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::SeqCst);
+        if std::process::id() != self.process {
+            // A forked child: the thread is its parent's; nothing to join here.
+            std::mem::forget(self.thread.take());
+            return;
+        }
+        if let Some(t) = self.thread.take() {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
+}
+
+/// The helper's loop: wait (spinning, then parked) for the next epoch, run its job, publish
+/// `finished`.
+fn serve(shared: &Shared) {
+    let mut seen = 0;
+    loop {
+        let mut since = None;
+        let mut spins = 0u32;
+        loop {
+            let posted = shared.posted.load(Ordering::SeqCst);
+            if posted != seen {
+                seen = posted;
+                break;
+            }
+            if shared.stop.load(Ordering::SeqCst) {
+                return;
+            }
+            spins = spins.wrapping_add(1);
+            if !spins.is_multiple_of(256) {
+                std::hint::spin_loop();
+                continue;
+            }
+            let start = *since.get_or_insert_with(Instant::now);
+            if start.elapsed() < SPIN {
+                continue;
+            }
+            // No lost wake-up: `join` posts, then reads `parked`; here `parked` is set, then
+            // `posted` read again (both sequentially consistent).
+            shared.parked.store(true, Ordering::SeqCst);
+            if shared.posted.load(Ordering::SeqCst) == seen && !shared.stop.load(Ordering::SeqCst) {
+                std::thread::park();
+            }
+            shared.parked.store(false, Ordering::SeqCst);
+            since = None;
+        }
+        let job = shared.job.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(job) = job
+            && let Err(p) = catch_unwind(AssertUnwindSafe(job))
+        {
+            *shared.panic.lock().unwrap_or_else(|e| e.into_inner()) = Some(p);
+        }
+        shared.finished.store(seen, Ordering::Release);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    #[test]
+    fn both_halves_run_every_time_also_after_the_helper_parked() {
+        let helper = Helper::start().expect("a thread");
+        let count = AtomicUsize::new(0);
+        for round in 0..200 {
+            if round % 50 == 49 {
+                // Long enough for the helper to park.
+                std::thread::sleep(SPIN * 3);
+            }
+            let mut mine = 0;
+            let r = helper.join(
+                || {
+                    mine += 1;
+                    round
+                },
+                &|| {
+                    count.fetch_add(1, Ordering::SeqCst);
+                },
+            );
+            assert_eq!((r, mine), (round, 1));
+            assert_eq!(count.load(Ordering::SeqCst), round + 1);
+        }
+    }
+
+    #[test]
+    fn the_shared_helper_is_one_while_in_use_and_gone_after() {
+        let (a, b) = (
+            Helper::shared().expect("a thread"),
+            Helper::shared().expect("a thread"),
+        );
+        assert!(Arc::ptr_eq(&a, &b), "one helper for all its users");
+        let ran = AtomicUsize::new(0);
+        a.join(|| (), &|| {
+            ran.fetch_add(1, Ordering::SeqCst);
+        });
+        assert_eq!(ran.load(Ordering::SeqCst), 1);
+        let weak = Arc::downgrade(&a);
+        drop((a, b));
+        // Dropped with its last user (and its thread joined): a library unloaded after its
+        // last simulation leaves no thread running its code.
+        assert!(weak.upgrade().is_none());
+    }
+
+    #[test]
+    fn a_job_the_parked_helper_has_not_started_runs_once_on_the_caller() {
+        let helper = Helper::start().expect("a thread");
+        let here = std::thread::current().id();
+        let (runs, on_caller) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        for _ in 0..50 {
+            // Long enough for the helper to park: waking it takes far longer than `a`.
+            std::thread::sleep(SPIN * 2);
+            helper.join(|| (), &|| {
+                runs.fetch_add(1, Ordering::SeqCst);
+                if std::thread::current().id() == here {
+                    on_caller.fetch_add(1, Ordering::SeqCst);
+                }
+            });
+        }
+        // Each job once, whoever ran it, and the helper serves on after jobs taken back.
+        assert_eq!(runs.load(Ordering::SeqCst), 50);
+        assert!(on_caller.load(Ordering::SeqCst) > 0, "no job taken back");
+        let ran = Mutex::new(None);
+        helper.join(|| std::thread::sleep(Duration::from_millis(20)), &|| {
+            *ran.lock().unwrap() = Some(std::thread::current().id())
+        });
+        assert_ne!(
+            *ran.lock().unwrap(),
+            Some(here),
+            "the helper takes a job it has time for"
+        );
+    }
+
+    #[test]
+    fn a_join_while_the_helper_is_held_runs_both_halves_on_its_caller() {
+        let helper = Helper::start().expect("a thread");
+        let here = std::thread::current().id();
+        let ran = Mutex::new(Vec::new());
+        let record = |what: &'static str| {
+            ran.lock()
+                .unwrap()
+                .push((what, std::thread::current().id()))
+        };
+        // Nested in the caller's half, and in the helper's half: each inner join runs on the
+        // thread that called it.
+        // (The caller's half sleeps first: time for the helper to take the other.)
+        let nap = || std::thread::sleep(Duration::from_millis(20));
+        helper.join(
+            || {
+                nap();
+                helper.join(|| record("a.a"), &|| record("a.b"))
+            },
+            &|| helper.join(|| record("b.a"), &|| record("b.b")),
+        );
+        let ran = ran.into_inner().unwrap();
+        assert_eq!(ran.len(), 4, "{ran:?}");
+        let on = |what| ran.iter().find(|r| r.0 == what).expect("ran").1;
+        assert_eq!((on("a.a"), on("a.b")), (here, here));
+        assert_eq!(on("b.a"), on("b.b"));
+        assert_ne!(on("b.a"), here);
+        // Held no longer: the next join's second half runs on the helper again.
+        let (mut first, second) = (None, Mutex::new(None));
+        helper.join(
+            || {
+                nap();
+                first = Some(std::thread::current().id());
+            },
+            &|| *second.lock().unwrap() = Some(std::thread::current().id()),
+        );
+        assert_eq!(first, Some(here));
+        assert_eq!(*second.lock().unwrap(), Some(on("b.a")));
+    }
+
+    #[test]
+    fn joins_from_many_threads_at_once_each_run_both_halves() {
+        let helper = Helper::start().expect("a thread");
+        let count = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..4 {
+                scope.spawn(|| {
+                    for round in 0..500 {
+                        let r = helper.join(
+                            || {
+                                count.fetch_add(1, Ordering::SeqCst);
+                                round
+                            },
+                            &|| {
+                                count.fetch_add(1, Ordering::SeqCst);
+                            },
+                        );
+                        assert_eq!(r, round);
+                    }
+                });
+            }
+        });
+        assert_eq!(count.load(Ordering::SeqCst), 4 * 500 * 2);
+    }
+
+    #[test]
+    fn a_panic_on_the_helper_reaches_the_caller_and_the_helper_serves_on() {
+        let helper = Helper::start().expect("a thread");
+        let caught = catch_unwind(AssertUnwindSafe(|| {
+            helper.join(|| (), &|| panic!("in the helper"));
+        }));
+        assert!(caught.is_err());
+        let ran = AtomicBool::new(false);
+        helper.join(|| (), &|| ran.store(true, Ordering::SeqCst));
+        assert!(ran.load(Ordering::SeqCst));
+        // Both halves panic: the caller's panic is the one raised, and the next join is clean.
+        let caught = catch_unwind(AssertUnwindSafe(|| {
+            helper.join(|| panic!("here"), &|| panic!("in the helper"));
+        }));
+        let message = caught.expect_err("a panic");
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"here"));
+        let fine = catch_unwind(AssertUnwindSafe(|| helper.join(|| 7, &|| ())));
+        assert_eq!(fine.ok(), Some(7));
+    }
+}
