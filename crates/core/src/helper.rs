@@ -4,10 +4,10 @@
 //! pool's join around two 49 µs halves cost 38 µs, this one under 1 µs; benches/README.md,
 //! session 16). It parks after `SPIN` without a job; a job it has not started by the time the
 //! caller's half ends (it is waking, or its core is busy) is taken back and run by the caller,
-//! so a late helper costs no more than one thread. One join at a time holds it: a join
-//! while it is held (from another thread, or nested in a join's half) runs both halves on its
-//! caller, as does every join in a process forked from the one that started it (which has no
-//! such thread). Whichever way a join runs, both halves run, so results cannot depend on it.
+//! so a late helper costs no more than one thread. One job at a time holds it: a join while it
+//! is held (from another thread, or nested in a join's half while the other half runs) runs
+//! both halves on its caller, as does every join in a process forked from the one that started
+//! it (which has no such thread). Whichever way a join runs, both halves run, so results cannot depend on it.
 
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -29,13 +29,13 @@ struct Shared {
     panic: Mutex<Option<Box<dyn std::any::Any + Send>>>,
     parked: AtomicBool,
     stop: AtomicBool,
+    // A job is posted and neither finished nor taken back (see `Helper::join`).
+    held: AtomicBool,
 }
 
 /// A helper thread (joined when dropped).
 pub struct Helper {
     shared: Arc<Shared>,
-    // Held by the join running on it (see `join`).
-    held: AtomicBool,
     thread: Option<JoinHandle<()>>,
     // The process that started the thread: a child forked from it has no helper thread, and
     // there both halves run on the caller.
@@ -78,31 +78,27 @@ impl Helper {
             .ok()?;
         Some(Self {
             shared,
-            held: AtomicBool::new(false),
             thread: Some(thread),
             process: std::process::id(),
         })
     }
 
+    /// Whether a job holds the helper now (a join would run both halves on its caller).
+    pub fn is_held(&self) -> bool {
+        self.shared.held.load(Ordering::Acquire)
+    }
+
     /// Runs `b` on the helper while `a` runs here; returns `a`'s result once both are done. A
-    /// panic in either is resumed here, after both have stopped. When the helper is held by
-    /// another join (another thread's, or the one whose half this is) or the process was
-    /// forked from the one that started it, `a` then `b` run here.
+    /// panic in either is resumed here, after both have stopped. The helper is held from the
+    /// post of `b` until `b` is done (so a join nested in `a` finds it free again once `b` is):
+    /// a join while it is held (another thread's, or one nested in `b`, or in `a` while `b`
+    /// runs) or in a process forked from the one that started it runs `a` then `b` here.
     pub fn join<R>(&self, a: impl FnOnce() -> R, b: &(dyn Fn() + Sync)) -> R {
-        if std::process::id() != self.process || self.held.swap(true, Ordering::Acquire) {
+        if std::process::id() != self.process || self.shared.held.swap(true, Ordering::Acquire) {
             let r = a();
             b();
             return r;
         }
-        // Let go once both halves are done (declared before `wait`, so dropped after it, also
-        // when `a` panics).
-        struct Hold<'a>(&'a AtomicBool);
-        impl Drop for Hold<'_> {
-            fn drop(&mut self) {
-                self.0.store(false, Ordering::Release);
-            }
-        }
-        let _hold = Hold(&self.held);
         let thread = self
             .thread
             .as_ref()
@@ -127,7 +123,8 @@ impl Helper {
             armed: bool,
         }
         impl Wait<'_> {
-            /// The job, if the helper has not taken it (asleep, or its core busy).
+            /// The job, if the helper has not taken it (asleep, or its core busy); the helper
+            /// is then free again.
             fn take_back(&mut self) -> Option<Job> {
                 let job = self
                     .shared
@@ -135,7 +132,10 @@ impl Helper {
                     .lock()
                     .unwrap_or_else(|e| e.into_inner())
                     .take();
-                self.armed &= job.is_none();
+                if job.is_some() {
+                    self.armed = false;
+                    self.shared.held.store(false, Ordering::Release);
+                }
                 job
             }
         }
@@ -236,10 +236,11 @@ fn serve(shared: &Shared) {
             since = None;
         }
         let job = shared.job.lock().unwrap_or_else(|e| e.into_inner()).take();
-        if let Some(job) = job
-            && let Err(p) = catch_unwind(AssertUnwindSafe(job))
-        {
-            *shared.panic.lock().unwrap_or_else(|e| e.into_inner()) = Some(p);
+        if let Some(job) = job {
+            if let Err(p) = catch_unwind(AssertUnwindSafe(job)) {
+                *shared.panic.lock().unwrap_or_else(|e| e.into_inner()) = Some(p);
+            }
+            shared.held.store(false, Ordering::Release);
         }
         shared.finished.store(seen, Ordering::Release);
     }
@@ -311,10 +312,19 @@ mod tests {
         // Each job once, whoever ran it, and the helper serves on after jobs taken back.
         assert_eq!(runs.load(Ordering::SeqCst), 50);
         assert!(on_caller.load(Ordering::SeqCst) > 0, "no job taken back");
-        let ran = Mutex::new(None);
-        helper.join(|| std::thread::sleep(Duration::from_millis(20)), &|| {
-            *ran.lock().unwrap() = Some(std::thread::current().id())
-        });
+        // (Its first half waits for the second: nothing is taken back.)
+        let (ran, done) = (Mutex::new(None), AtomicBool::new(false));
+        helper.join(
+            || {
+                while !done.load(Ordering::SeqCst) {
+                    std::hint::spin_loop();
+                }
+            },
+            &|| {
+                *ran.lock().unwrap() = Some(std::thread::current().id());
+                done.store(true, Ordering::SeqCst);
+            },
+        );
         assert_ne!(
             *ran.lock().unwrap(),
             Some(here),
@@ -332,16 +342,24 @@ mod tests {
                 .unwrap()
                 .push((what, std::thread::current().id()))
         };
-        // Nested in the caller's half, and in the helper's half: each inner join runs on the
-        // thread that called it.
-        // (The caller's half sleeps first: time for the helper to take the other.)
-        let nap = || std::thread::sleep(Duration::from_millis(20));
+        // A join nested in each half while the helper runs its own: each runs on the thread
+        // that called it.
+        let (started, nested_done) = (AtomicBool::new(false), AtomicBool::new(false));
         helper.join(
             || {
-                nap();
-                helper.join(|| record("a.a"), &|| record("a.b"))
+                while !started.load(Ordering::SeqCst) {
+                    std::hint::spin_loop();
+                }
+                helper.join(|| record("a.a"), &|| record("a.b"));
+                nested_done.store(true, Ordering::SeqCst);
             },
-            &|| helper.join(|| record("b.a"), &|| record("b.b")),
+            &|| {
+                started.store(true, Ordering::SeqCst);
+                helper.join(|| record("b.a"), &|| record("b.b"));
+                while !nested_done.load(Ordering::SeqCst) {
+                    std::hint::spin_loop();
+                }
+            },
         );
         let ran = ran.into_inner().unwrap();
         assert_eq!(ran.len(), 4, "{ran:?}");
@@ -349,17 +367,33 @@ mod tests {
         assert_eq!((on("a.a"), on("a.b")), (here, here));
         assert_eq!(on("b.a"), on("b.b"));
         assert_ne!(on("b.a"), here);
-        // Held no longer: the next join's second half runs on the helper again.
-        let (mut first, second) = (None, Mutex::new(None));
+        // Its job done, the helper takes the second half of a join nested in the first (whose
+        // own first half waits for it: nothing is taken back).
+        let (done, nested) = (AtomicBool::new(false), Mutex::new(None));
         helper.join(
             || {
-                nap();
-                first = Some(std::thread::current().id());
+                while !done.load(Ordering::SeqCst) {
+                    std::hint::spin_loop();
+                }
+                // (The helper lets go just after its job returns.)
+                std::thread::sleep(Duration::from_millis(1));
+                let ran = AtomicBool::new(false);
+                helper.join(
+                    || {
+                        let start = Instant::now();
+                        while !ran.load(Ordering::SeqCst) && start.elapsed().as_secs() < 10 {
+                            std::hint::spin_loop();
+                        }
+                    },
+                    &|| {
+                        *nested.lock().unwrap() = Some(std::thread::current().id());
+                        ran.store(true, Ordering::SeqCst);
+                    },
+                );
             },
-            &|| *second.lock().unwrap() = Some(std::thread::current().id()),
+            &|| done.store(true, Ordering::SeqCst),
         );
-        assert_eq!(first, Some(here));
-        assert_eq!(*second.lock().unwrap(), Some(on("b.a")));
+        assert_eq!(*nested.lock().unwrap(), Some(on("b.a")));
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //! the budget will not finish it, and then to the interior point.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
-use moreau_core::{ConstraintKey, Parallelism, SolveStatus};
+use moreau_core::{ConstraintKey, Helper, Parallelism, SolveStatus};
 
 use crate::certificate::certify_given;
 use crate::components::{CheckScratch, Components, DisjointSolution, SubProblem};
@@ -67,8 +68,9 @@ pub struct AutoSettings {
     pub set_aside_factor: f64,
     /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
     /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
-    /// point's part runs as two solves at once (the largest component, the others), each on
-    /// one thread.
+    /// point's part runs as two solves at once (the largest component here, the others on the
+    /// shared helper thread), the largest one's factorizations split with the helper when it
+    /// is free; a large component Gauss–Seidel skips is solved while it sweeps the others.
     pub parallelism: Parallelism,
 }
 
@@ -106,12 +108,15 @@ impl Default for AutoSettings {
 /// With threads ([`AutoSettings::parallelism`] above one), Gauss–Seidel's groups are solved
 /// on all of them at once (each group by one thread, with its own solver and sub-problem,
 /// writing its components' answers: components share no row and no unknown), the largest
-/// component and the others are solved at once, each by its own interior point, and the
-/// largest component's
-/// factorizations and triangular solves in 2×2 blocks are split over two threads where its
-/// elimination tree has two parts that pay
-/// ([`InteriorPointSettings::split_factorization`]); the split is the same on any thread
-/// count, and so are the answers, bit for bit.
+/// component and the others are solved at once, each by its own interior point (the others on
+/// the helper thread, [`moreau_core::Helper`]), and the largest component's factorizations and
+/// triangular solves in 2×2 blocks are split with the helper where its elimination tree has
+/// two parts that pay and the helper is free ([`InteriorPointSettings::split_factorization`]).
+/// When Gauss–Seidel sweeps fewer than 4,096 rows and skips a large component (given up
+/// lately), that component goes to the interior point whatever Gauss–Seidel makes of the
+/// others: it is solved while they are swept (on the helper), then the others Gauss–Seidel
+/// leaves. Which component goes where does not depend on the threads, and the answers are
+/// the same on any thread count, bit for bit.
 ///
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
@@ -124,10 +129,12 @@ pub struct AutoSolver {
     settings: AutoSettings,
     // Gauss–Seidel on one thread each (the first one also solves a whole problem of one
     // component)
-    sweepers: Vec<GroupSweeper>,
+    gauss_seidel: GaussSeidelGroups,
     // the interior point of the largest component (and of the whole problem), and of the
     // other components together: two, so that they can run at once
     interiors: [InteriorPoint; 2],
+    // with threads, the helper thread the largest component's interior point shares
+    helper: Option<Arc<Helper>>,
     components: Components,
     parts: [SubProblem; 2],
     // per component: not tried by Gauss–Seidel; finished (by it); left to the interior point
@@ -138,11 +145,6 @@ pub struct AutoSolver {
     // with the solves left before it tries them again; and the next solve's
     given_up: Vec<(ConstraintKey, u32)>,
     next_given_up: Vec<(ConstraintKey, u32)>,
-    // Gauss–Seidel's groups of components: group g is group[group_start[g]..group_start[g + 1]]
-    group: Vec<u32>,
-    group_start: Vec<usize>,
-    // the groups of one large component each that Gauss–Seidel gave up in the last sweep
-    given_up_groups: Vec<usize>,
     warm: Vec<f64>,
     // per row: J w (the slack at w is b + J w); set aside
     jw: Vec<f64>,
@@ -151,6 +153,21 @@ pub struct AutoSolver {
     last_change: f64,
     scratch_m: Vec<f64>,
     scratch_n: Vec<f64>,
+}
+
+/// Gauss–Seidel on the components not skipped, by groups (a large component alone, small ones
+/// together), on one sweeper a thread.
+#[derive(Debug)]
+struct GaussSeidelGroups {
+    // Gauss–Seidel on one thread each (the first one also solves a whole problem of one
+    // component)
+    sweepers: Vec<GroupSweeper>,
+    // group g is group[group_start[g]..group_start[g + 1]]
+    group: Vec<u32>,
+    group_start: Vec<usize>,
+    // the groups of one large component each that Gauss–Seidel gave up in the last sweep
+    given_up_groups: Vec<usize>,
+    retry_after: u32,
 }
 
 /// The groups of components of one sweep, shared by the threads that solve them: each takes
@@ -280,6 +297,13 @@ impl AutoSolver {
         let sweepers = (0..settings.parallelism.get())
             .map(|_| GroupSweeper::new(gauss_seidel.clone()))
             .collect::<Result<_, _>>()?;
+        let gauss_seidel = GaussSeidelGroups {
+            sweepers,
+            group: Vec::new(),
+            group_start: Vec::new(),
+            given_up_groups: Vec::new(),
+            retry_after: settings.retry_after as u32,
+        };
         // Each interior point's loops run on one thread: with threads, the largest component
         // and the others run at once (two interior points each spreading its loops over the
         // same cores would only contend), and the largest one's factorizations split in two
@@ -295,8 +319,9 @@ impl AutoSolver {
         let threads = !settings.parallelism.is_sequential();
         Ok(Self {
             settings,
-            sweepers,
+            gauss_seidel,
             interiors: [interior(threads)?, interior(false)?],
+            helper: threads.then(Helper::shared).flatten(),
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
             finished: Vec::new(),
@@ -304,9 +329,6 @@ impl AutoSolver {
             skip_gs: Vec::new(),
             given_up: Vec::new(),
             next_given_up: Vec::new(),
-            group: Vec::new(),
-            group_start: Vec::new(),
-            given_up_groups: Vec::new(),
             warm: Vec::new(),
             jw: Vec::new(),
             set_aside: Vec::new(),
@@ -473,26 +495,31 @@ impl ProjectionSolver for AutoSolver {
 /// with `last_change`, at least −1).
 const MEMORY_LAYOUT: f64 = -2.0;
 
-impl AutoSolver {
-    /// Gauss–Seidel on every component, by groups: each component of
+impl GaussSeidelGroups {
+    /// Gauss–Seidel on every component not skipped, by groups: each component of
     /// [`GROUP_ROWS`] rows or more alone, the smaller ones together in groups of about that
     /// many rows (so that a component stops being swept when it is finished, and one that
     /// Gauss–Seidel will not finish is given up by its own progress). Marks the components
-    /// finished, writes their answers into `sol`, and returns the work done in passes over
-    /// all of `p`'s rows (rounded up).
-    fn gauss_seidel_by_groups(
+    /// finished, writes their answers into `sol`, remembers the large ones given up in
+    /// `next_given_up`, and returns the work done in passes over all of `p`'s rows (rounded
+    /// up).
+    fn solve(
         &mut self,
         p: &ProjectionProblem<'_>,
         target: Target,
+        components: &Components,
+        warm: &[f64],
+        skip: &[bool],
+        finished: &mut [bool],
+        next_given_up: &mut Vec<(ConstraintKey, u32)>,
         sol: &mut ProjectionSolution,
     ) -> Result<usize, SolveError> {
         let m = p.rows();
-        let count = self.finished.len();
-        let size = |c: usize| self.components.rows_of(c).len();
+        let count = finished.len();
+        let size = |c: usize| components.rows_of(c).len();
         self.group.clear();
         self.group_start.clear();
         self.group_start.push(0);
-        let skip = &self.skip_gs;
         for c in (0..count).filter(|&c| !skip[c] && size(c) >= GROUP_ROWS) {
             self.group.push(c as u32);
             self.group_start.push(self.group.len());
@@ -521,8 +548,8 @@ impl AutoSolver {
         let work = Groups {
             problem: p,
             target,
-            components: &self.components,
-            warm: &self.warm,
+            components,
+            warm,
             group: &self.group,
             group_start: &self.group_start,
             next: &next,
@@ -547,7 +574,7 @@ impl AutoSolver {
         for s in sweepers.iter_mut() {
             row_passes += s.row_passes;
             for &c in &s.finished {
-                self.finished[c as usize] = true;
+                finished[c as usize] = true;
             }
             self.given_up_groups.extend_from_slice(&s.given_up);
             if let Some((g, e)) = s.error.take()
@@ -563,17 +590,13 @@ impl AutoSolver {
         self.given_up_groups.sort_unstable();
         for &g in &self.given_up_groups {
             let c = self.group[self.group_start[g]] as usize;
-            let again = self.settings.retry_after as u32;
-            Self::remember(
-                &mut self.next_given_up,
-                p,
-                self.components.rows_of(c),
-                again,
-            );
+            AutoSolver::remember(next_given_up, p, components.rows_of(c), self.retry_after);
         }
         Ok(row_passes.div_ceil(m.max(1)))
     }
+}
 
+impl AutoSolver {
     /// Decides which components skip Gauss–Seidel: those of [`GROUP_ROWS`] rows or more
     /// whose rows were mostly (in a sample of up to 16) in a component given up, with
     /// solves left before the retry; their rows are remembered for the next solve with one
@@ -682,83 +705,134 @@ impl AutoSolver {
         self.choose_skips(p);
 
         let mut report = SolveReport::default();
-        if count == 1 && !any_aside && self.skip_gs[0] {
-            // Straight to the interior point (below).
-        } else if count == 1 && !any_aside {
-            // The whole problem: no copy.
-            sol.lambda.copy_from_slice(&self.warm);
-            let rep = self.sweepers[0].gauss_seidel.solve(p, target, sol)?;
-            report.add_work(&rep);
-            self.finished[0] = rep.status.is_converged();
-            if !self.finished[0] && m >= GROUP_ROWS {
-                Self::remember(
-                    &mut self.next_given_up,
-                    p,
-                    self.components.rows_of(0),
-                    self.settings.retry_after as u32,
-                );
+        let mut status = SolveStatus::Converged;
+        let mut interior_answered = false;
+        if count == 1 && !any_aside {
+            // The whole problem: no copy. Gauss–Seidel first unless it gave it up lately.
+            if !self.skip_gs[0] {
+                sol.lambda.copy_from_slice(&self.warm);
+                let rep = self.gauss_seidel.sweepers[0]
+                    .gauss_seidel
+                    .solve(p, target, sol)?;
+                report.add_work(&rep);
+                self.finished[0] = rep.status.is_converged();
+                if !self.finished[0] && m >= GROUP_ROWS {
+                    Self::remember(
+                        &mut self.next_given_up,
+                        p,
+                        self.components.rows_of(0),
+                        self.settings.retry_after as u32,
+                    );
+                }
+            }
+            if !self.finished[0] {
+                // Again, from the caller's warm start.
+                sol.lambda.copy_from_slice(&self.warm);
+                let rep = self.interiors[0].solve(p, target, sol)?;
+                report.add_work(&rep);
+                status = rep.status;
+                interior_answered = true;
             }
         } else {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
-            report.iterations += self.gauss_seidel_by_groups(p, target, sol)?;
-        }
-        let gs_answered = self.finished.iter().any(|&f| f);
-        self.to_interior.clear();
-        self.to_interior.extend(self.finished.iter().map(|&f| !f));
-        let mut interior_answered = false;
-        let mut status = SolveStatus::Converged;
-        if self.to_interior.iter().all(|&t| t) && count > 0 && !any_aside {
-            // The whole problem again, from the caller's warm start.
-            sol.lambda.copy_from_slice(&self.warm);
-            let rep = self.interiors[0].solve(p, target, sol)?;
-            report.add_work(&rep);
-            status = rep.status;
-            interior_answered = true;
-        } else if self.to_interior.iter().any(|&t| t) {
-            // The largest component on its own (it takes the iterations it needs, not the
-            // most any component needs), then the others together.
-            let largest = (0..count)
-                .filter(|&c| self.to_interior[c])
-                .max_by_key(|&c| (self.components.rows_of(c).len(), std::cmp::Reverse(c)))
-                .expect("some component goes to the interior point");
-            let [largest_part, rest_part] = &mut self.parts;
-            let largest_rows = largest_part.gather_one(&self.components, p, &self.warm, largest);
-            self.to_interior[largest] = false;
-            let rest = self.to_interior.iter().any(|&t| t);
-            let rest_rows = if rest {
-                rest_part.gather(&self.components, p, &self.warm, &self.to_interior)
-            } else {
-                0
+            let Self {
+                gauss_seidel,
+                interiors: [first, second],
+                parts: [largest_part, rest_part],
+                components,
+                warm,
+                skip_gs,
+                finished,
+                to_interior,
+                next_given_up,
+                helper,
+                ..
+            } = self;
+            let (components, warm, skip_gs): (&Components, &[f64], &[bool]) =
+                (components, warm, skip_gs);
+            let by_size = |c: &usize| (components.rows_of(*c).len(), std::cmp::Reverse(*c));
+            // The interior point takes the largest component on its own (it takes the
+            // iterations it needs, not the most any component needs), the others together.
+            // The largest that Gauss–Seidel skips goes to it whatever Gauss–Seidel makes of the
+            // others: solved while they are swept (on the helper thread), then the others it
+            // leaves; without one, the largest Gauss–Seidel leaves, solved with the others.
+            // (Only where Gauss–Seidel sweeps on one thread: with more rows its groups take
+            // every thread.)
+            let swept_rows: usize = (0..count)
+                .filter(|&c| !skip_gs[c])
+                .map(|c| components.rows_of(c).len())
+                .sum();
+            let known = (swept_rows < PARALLEL_GROUP_ROWS)
+                .then(|| (0..count).filter(|&c| skip_gs[c]).max_by_key(by_size))
+                .flatten();
+            let (swept, largest) = match known {
+                Some(c) => (None, Some(c)),
+                None => {
+                    let passes = gauss_seidel.solve(
+                        p,
+                        target,
+                        components,
+                        warm,
+                        skip_gs,
+                        finished,
+                        next_given_up,
+                        sol,
+                    );
+                    let largest = (0..count).filter(|&c| !finished[c]).max_by_key(by_size);
+                    (Some(passes), largest)
+                }
             };
-            let [first, second] = &mut self.interiors;
-            let (a, b) = if rest && !self.settings.parallelism.is_sequential() {
-                std::thread::scope(|scope| {
-                    let other = scope
-                        .spawn(|| Self::solve_gathered(rest_part, second, m, rest_rows, target));
-                    let a = Self::solve_gathered(largest_part, first, m, largest_rows, target);
-                    let b = other.join().expect("the interior point's thread panicked");
-                    (a, Some(b))
-                })
-            } else {
-                let a = Self::solve_gathered(largest_part, first, m, largest_rows, target);
-                let b = rest.then(|| Self::solve_gathered(rest_part, second, m, rest_rows, target));
-                (a, b)
-            };
-            let a = a?;
-            report.add_work(&a);
-            status = a.status;
-            largest_part.scatter_all(sol);
-            if let Some(b) = b {
+            let largest = largest.map(|c| (c, largest_part.gather_one(components, p, warm, c)));
+            let (largest_report, (passes, rest)) = both(
+                helper.as_deref(),
+                || {
+                    largest
+                        .map(|(_, rows)| Self::solve_gathered(largest_part, first, m, rows, target))
+                },
+                || {
+                    let passes = swept.unwrap_or_else(|| {
+                        gauss_seidel.solve(
+                            p,
+                            target,
+                            components,
+                            warm,
+                            skip_gs,
+                            finished,
+                            next_given_up,
+                            sol,
+                        )
+                    });
+                    to_interior.clear();
+                    to_interior.extend(
+                        (0..count).map(|c| !finished[c] && largest.is_none_or(|(l, _)| l != c)),
+                    );
+                    let rest = to_interior.iter().any(|&t| t).then(|| {
+                        let rows = rest_part.gather(components, p, warm, to_interior);
+                        Self::solve_gathered(rest_part, second, m, rows, target)
+                    });
+                    (passes, rest)
+                },
+            );
+            report.iterations += passes?;
+            if let Some(a) = largest_report {
+                let a = a?;
+                report.add_work(&a);
+                status = a.status;
+                largest_part.scatter_all(sol);
+                interior_answered = true;
+            }
+            if let Some(b) = rest {
                 let b = b?;
                 report.add_work(&b);
                 if status.is_converged() {
                     status = b.status;
                 }
                 rest_part.scatter_all(sol);
+                interior_answered = true;
             }
-            interior_answered = true;
         }
+        let gs_answered = self.finished.iter().any(|&f| f);
         // Unknowns in no row have v = w; the whole answer is certified here.
         self.scratch_m.resize(m, 0.0);
         self.scratch_n.resize(p.dim(), 0.0);
@@ -791,6 +865,27 @@ impl AutoSolver {
             .count();
         Ok(report)
     }
+}
+
+/// `a` here and `b` on `helper` at once (without a helper, `b` after `a`); both results.
+fn both<A, B: Send>(
+    helper: Option<&Helper>,
+    a: impl FnOnce() -> A,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    let Some(helper) = helper else {
+        let a = a();
+        return (a, b());
+    };
+    let b = Mutex::new((Some(b), None));
+    let a = helper.join(a, &|| {
+        let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(f) = b.0.take() {
+            b.1 = Some(f());
+        }
+    });
+    let (_, b) = b.into_inner().unwrap_or_else(|e| e.into_inner());
+    (a, b.expect("the join ran both halves"))
 }
 
 #[cfg(test)]

@@ -936,8 +936,12 @@ impl NormalEquations {
                 shift,
                 d,
             };
-            let split =
-                self.helper.is_some() && self.block.is_split() && self.split_choice.split_now();
+            // (While another job holds the helper, one thread, and no probe recorded.)
+            let held = self.helper.as_ref().is_some_and(|h| h.is_held());
+            let split = self.helper.is_some()
+                && self.block.is_split()
+                && self.split_choice.split_now()
+                && !held;
             let ok = match &self.helper {
                 Some(helper) if split => {
                     self.counts.split_factorizations += 1;
@@ -947,7 +951,7 @@ impl NormalEquations {
             };
             let seconds = clock.elapsed().as_secs_f64();
             self.times.factorize += seconds;
-            if self.helper.is_some() && self.block.is_split() && ok {
+            if self.helper.is_some() && self.block.is_split() && ok && !held {
                 self.split_choice.record(seconds);
             }
             self.last_split = split;
