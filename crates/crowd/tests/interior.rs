@@ -217,37 +217,36 @@ fn the_jam_step_that_clarabel_and_apgd_could_not_certify_is_certified_by_the_int
 /// count too).
 #[test]
 fn a_large_crowd_steps_the_same_on_one_and_three_threads() {
-    let mut hall = Hall::new(32_000, 2.5);
-    hall.seed = 3;
-    hall.horizon = 0.3;
-    let scene = hall.scene().unwrap();
-    let (ids1, q1, rows1) = steps_on(&scene, 1);
-    let most = rows1.iter().copied().max().unwrap_or(0);
-    assert!(most > 30_000, "contacts enough for threads: {most} rows");
-    let (ids3, q3, rows3) = steps_on(&scene, 3);
-    assert_eq!(rows1, rows3, "rows assembled a step");
-    assert_eq!(ids1, ids3);
-    assert!(q1 == q3, "other positions on three threads");
+    steps_the_same_on(32_000, 3, 0.3, 3, 30_000..usize::MAX);
 }
 
 /// Below ten thousand people the loops run in two bands on two threads, the second on the
 /// helper thread (which the interior point's split factorization shares).
 #[test]
 fn a_crowd_of_thousands_steps_the_same_with_its_second_band_on_the_helper() {
-    let mut hall = Hall::new(3_000, 2.5);
-    hall.seed = 5;
-    hall.horizon = 0.5;
+    steps_the_same_on(3_000, 5, 0.5, 2, 2_000..10_000);
+}
+
+/// A hall of `people` (seed, horizon) steps the same on one and on `threads` threads: the
+/// rows assembled a step (the most of them in `rows`) and the positions, bit for bit.
+fn steps_the_same_on(
+    people: usize,
+    seed: u64,
+    horizon: f64,
+    threads: usize,
+    rows: std::ops::Range<usize>,
+) {
+    let mut hall = Hall::new(people, 2.5);
+    hall.seed = seed;
+    hall.horizon = horizon;
     let scene = hall.scene().unwrap();
     let (ids1, q1, rows1) = steps_on(&scene, 1);
     let most = rows1.iter().copied().max().unwrap_or(0);
-    assert!(
-        (2_000..10_000).contains(&most),
-        "contacts for two bands: {most} rows"
-    );
-    let (ids2, q2, rows2) = steps_on(&scene, 2);
-    assert_eq!(rows1, rows2, "rows assembled a step");
-    assert_eq!(ids1, ids2);
-    assert!(q1 == q2, "other positions on two threads");
+    assert!(rows.contains(&most), "contacts for the bands: {most} rows");
+    let (ids, q, rows) = steps_on(&scene, threads);
+    assert_eq!(rows1, rows, "rows assembled a step");
+    assert_eq!(ids1, ids);
+    assert!(q1 == q, "other positions on {threads} threads");
 }
 
 /// The run of `scene` on `threads` threads: ids and position bits at the end, rows a step.

@@ -170,13 +170,21 @@ struct GaussSeidelGroups {
     retry_after: u32,
 }
 
-/// The groups of components of one sweep, shared by the threads that solve them: each takes
-/// the next group not yet taken.
-struct Groups<'a> {
+/// What a sweep of [`GaussSeidelGroups`] solves: the components of `problem` not skipped,
+/// from the caller's multipliers `warm`.
+#[derive(Clone, Copy)]
+struct Sweep<'a> {
     problem: &'a ProjectionProblem<'a>,
     target: Target,
     components: &'a Components,
     warm: &'a [f64],
+    skip: &'a [bool],
+}
+
+/// The groups of components of one sweep, shared by the threads that solve them: each takes
+/// the next group not yet taken.
+struct Groups<'a> {
+    on: Sweep<'a>,
     // group g is group[group_start[g]..group_start[g + 1]]
     group: &'a [u32],
     group_start: &'a [usize],
@@ -225,7 +233,7 @@ impl GroupSweeper {
         self.row_passes = 0;
         self.error = None;
         let groups = work.group_start.len() - 1;
-        let total_rows = work.problem.rows();
+        let total_rows = work.on.problem.rows();
         loop {
             let g = work.next.fetch_add(1, Ordering::Relaxed);
             if g >= groups {
@@ -233,13 +241,14 @@ impl GroupSweeper {
             }
             let group = &work.group[work.group_start[g]..work.group_start[g + 1]];
             let part = &mut self.part;
-            let rows = part.gather_components(work.components, work.problem, work.warm, group);
+            let rows =
+                part.gather_components(work.on.components, work.on.problem, work.on.warm, group);
             let rep = match AutoSolver::solve_gathered(
                 part,
                 &mut self.gauss_seidel,
                 total_rows,
                 rows,
-                work.target,
+                work.on.target,
             ) {
                 Ok(rep) => rep,
                 Err(e) => {
@@ -255,8 +264,9 @@ impl GroupSweeper {
                     self.met[c as usize] = true;
                 }
             } else {
-                work.components
-                    .check_sub(part, work.target, &mut self.check, &mut self.met);
+                work.on
+                    .components
+                    .check_sub(part, work.on.target, &mut self.check, &mut self.met);
                 if let [c] = *group
                     && !self.met[c as usize]
                     && rows >= GROUP_ROWS
@@ -266,7 +276,7 @@ impl GroupSweeper {
             }
             self.finished
                 .extend(group.iter().filter(|&&c| self.met[c as usize]));
-            part.scatter_into(work.components, &work.solution, &self.met);
+            part.scatter_into(work.on.components, &work.solution, &self.met);
         }
     }
 }
@@ -505,15 +515,18 @@ impl GaussSeidelGroups {
     /// up).
     fn solve(
         &mut self,
-        p: &ProjectionProblem<'_>,
-        target: Target,
-        components: &Components,
-        warm: &[f64],
-        skip: &[bool],
+        on: &Sweep<'_>,
         finished: &mut [bool],
         next_given_up: &mut Vec<(ConstraintKey, u32)>,
         sol: &mut ProjectionSolution,
     ) -> Result<usize, SolveError> {
+        let Sweep {
+            problem: p,
+            target,
+            components,
+            warm,
+            skip,
+        } = *on;
         let m = p.rows();
         let count = finished.len();
         let size = |c: usize| components.rows_of(c).len();
@@ -546,10 +559,7 @@ impl GaussSeidelGroups {
         let sweepers = &mut self.sweepers[..threads];
         let next = AtomicUsize::new(0);
         let work = Groups {
-            problem: p,
-            target,
-            components,
-            warm,
+            on: *on,
             group: &self.group,
             group_start: &self.group_start,
             next: &next,
@@ -766,19 +776,17 @@ impl AutoSolver {
             let known = (swept_rows < PARALLEL_GROUP_ROWS)
                 .then(|| (0..count).filter(|&c| skip_gs[c]).max_by_key(by_size))
                 .flatten();
+            let on = Sweep {
+                problem: p,
+                target,
+                components,
+                warm,
+                skip: skip_gs,
+            };
             let (swept, largest) = match known {
                 Some(c) => (None, Some(c)),
                 None => {
-                    let passes = gauss_seidel.solve(
-                        p,
-                        target,
-                        components,
-                        warm,
-                        skip_gs,
-                        finished,
-                        next_given_up,
-                        sol,
-                    );
+                    let passes = gauss_seidel.solve(&on, finished, next_given_up, sol);
                     let largest = (0..count).filter(|&c| !finished[c]).max_by_key(by_size);
                     (Some(passes), largest)
                 }
@@ -791,18 +799,8 @@ impl AutoSolver {
                         .map(|(_, rows)| Self::solve_gathered(largest_part, first, m, rows, target))
                 },
                 || {
-                    let passes = swept.unwrap_or_else(|| {
-                        gauss_seidel.solve(
-                            p,
-                            target,
-                            components,
-                            warm,
-                            skip_gs,
-                            finished,
-                            next_given_up,
-                            sol,
-                        )
-                    });
+                    let passes = swept
+                        .unwrap_or_else(|| gauss_seidel.solve(&on, finished, next_given_up, sol));
                     to_interior.clear();
                     to_interior.extend(
                         (0..count).map(|c| !finished[c] && largest.is_none_or(|(l, _)| l != c)),
