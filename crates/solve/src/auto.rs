@@ -522,10 +522,9 @@ impl GaussSeidelGroups {
     ) -> Result<usize, SolveError> {
         let Sweep {
             problem: p,
-            target,
             components,
-            warm,
             skip,
+            ..
         } = *on;
         let m = p.rows();
         let count = finished.len();
