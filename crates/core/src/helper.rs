@@ -1,13 +1,14 @@
-//! A second thread for fork–joins, shared by everything that forks in two: one half of a join runs on it while the caller
-//! runs the other, and it spins between jobs, so a handoff takes well under a microsecond
-//! where a thread pool's sleeping workers take tens (measured on this project's 2-core VM: a
-//! pool's join around two 49 µs halves cost 38 µs, this one under 1 µs; benches/README.md,
-//! session 16). It parks after `SPIN` without a job; a job it has not started by the time the
-//! caller's half ends (it is waking, or its core is busy) is taken back and run by the caller,
-//! so a late helper costs no more than one thread. One job at a time holds it: a join while it
-//! is held (from another thread, or nested in a join's half while the other half runs) runs
-//! both halves on its caller, as does every join in a process forked from the one that started
-//! it (which has no such thread). Whichever way a join runs, both halves run, so results cannot depend on it.
+//! A second thread for fork–joins, shared by everything that forks in two: one half of a
+//! join runs on it while the caller runs the other, and it spins between jobs, so a handoff
+//! takes well under a microsecond where a thread pool's sleeping workers take tens (measured
+//! on this project's 2-core VM: a pool's join around two 49 µs halves cost 38 µs, this one
+//! under 1 µs; benches/README.md, session 16). It parks after `SPIN` without a job; a job it
+//! has not started by the time the caller's half ends (it is waking, or its core is busy) is
+//! taken back and run by the caller, so a late helper costs no more than one thread. One job
+//! at a time holds it: a join while it is held (from another thread, or nested in a join's
+//! half while the other half runs) runs both halves on its caller, as does every join in a
+//! process forked from the one that started it (which has no such thread). Whichever way a
+//! join runs, both halves run, so results cannot depend on it.
 
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -21,15 +22,21 @@ const SPIN: Duration = Duration::from_millis(1);
 /// A job the helper runs: a borrowed closure whose lifetime [`Helper::join`] guarantees.
 type Job = &'static (dyn Fn() + Sync);
 
+/// A job's panic, for the join that posted it.
+type Panic = Box<dyn std::any::Any + Send>;
+
 #[derive(Default)]
 struct Shared {
+    // The epoch of the last job posted (what wakes the helper) and of the last one it ran.
     posted: AtomicU64,
     finished: AtomicU64,
-    job: Mutex<Option<Job>>,
-    panic: Mutex<Option<Box<dyn std::any::Any + Send>>>,
+    // The job posted and not yet taken, with its epoch (a join takes back only its own).
+    job: Mutex<Option<(u64, Job)>>,
+    panics: Mutex<Vec<(u64, Panic)>>,
     parked: AtomicBool,
     stop: AtomicBool,
-    // A job is posted and neither finished nor taken back (see `Helper::join`).
+    // A job is posted and neither finished nor taken back (see `Helper::join`): only its
+    // poster posts until it is let go, so epochs are posted, taken and finished in order.
     held: AtomicBool,
 }
 
@@ -106,14 +113,16 @@ impl Helper {
             .thread();
         // SAFETY: the helper calls the job only if it takes it from the slot, and this
         // function neither returns nor unwinds before it has either taken the job back itself
-        // (then the helper never sees it) or seen `finished` reach the epoch (`Wait` below, in
-        // its drop, so also when `a` panics): the borrow outlives every use. The job is
-        // `Sync`, so calling it from the helper is sound.
+        // (then the helper never sees it) or seen `finished` reach its epoch (`Wait` below, in
+        // its drop, so also when `a` panics), which the helper stores after the call: the
+        // borrow outlives every use. The job is `Sync`, so calling it from the helper is sound.
         #[allow(unsafe_code)]
         let job: Job =
             unsafe { std::mem::transmute::<&(dyn Fn() + Sync), &'static (dyn Fn() + Sync)>(b) };
-        *self.shared.job.lock().unwrap_or_else(|e| e.into_inner()) = Some(job);
-        let epoch = self.shared.posted.fetch_add(1, Ordering::SeqCst) + 1;
+        // (Held: no other join posts until this job is done or taken back.)
+        let epoch = self.shared.posted.load(Ordering::SeqCst) + 1;
+        *self.shared.job.lock().unwrap_or_else(|e| e.into_inner()) = Some((epoch, job));
+        self.shared.posted.store(epoch, Ordering::SeqCst);
         if self.shared.parked.load(Ordering::SeqCst) {
             thread.unpark();
         }
@@ -123,40 +132,44 @@ impl Helper {
             armed: bool,
         }
         impl Wait<'_> {
-            /// The job, if the helper has not taken it (asleep, or its core busy); the helper
-            /// is then free again.
+            /// This join's job, if the helper has not taken it (asleep, or its core busy); the
+            /// helper is then free again.
             fn take_back(&mut self) -> Option<Job> {
-                let job = self
-                    .shared
-                    .job
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .take();
-                if job.is_some() {
-                    self.armed = false;
-                    self.shared.held.store(false, Ordering::Release);
-                }
-                job
+                let mut slot = self.shared.job.lock().unwrap_or_else(|e| e.into_inner());
+                let (_, job) = slot.take_if(|(epoch, _)| *epoch == self.epoch)?;
+                self.armed = false;
+                self.shared.held.store(false, Ordering::Release);
+                Some(job)
+            }
+
+            /// The panic of this join's job on the helper, if it panicked.
+            fn panic(&self) -> Option<Panic> {
+                let mut panics = self.shared.panics.lock().unwrap_or_else(|e| e.into_inner());
+                let at = panics.iter().position(|(epoch, _)| *epoch == self.epoch)?;
+                Some(panics.swap_remove(at).1)
             }
         }
-        impl Drop for Wait<'_> {
-            fn drop(&mut self) {
+        impl Wait<'_> {
+            /// Until the helper has run this join's job (unless taken back); then disarmed.
+            fn wait_done(&mut self) {
                 if !self.armed || self.take_back().is_some() {
                     return;
                 }
                 while self.shared.finished.load(Ordering::Acquire) < self.epoch {
                     std::hint::spin_loop();
                 }
-                // `a` panicked: its panic goes on; the helper's, if any, goes with this job
-                // (not to the next one's caller).
+                self.armed = false;
+            }
+        }
+        impl Drop for Wait<'_> {
+            fn drop(&mut self) {
+                if !self.armed {
+                    return;
+                }
+                self.wait_done();
+                // `a` panicked: its panic goes on; the helper's, if any, goes with this job.
                 if std::thread::panicking() {
-                    drop(
-                        self.shared
-                            .panic
-                            .lock()
-                            .unwrap_or_else(|e| e.into_inner())
-                            .take(),
-                    );
+                    drop(self.panic());
                 }
             }
         }
@@ -172,14 +185,8 @@ impl Helper {
             job();
             return r;
         }
-        drop(wait);
-        if let Some(p) = self
-            .shared
-            .panic
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take()
-        {
+        wait.wait_done();
+        if let Some(p) = wait.panic() {
             resume_unwind(p);
         }
         r
@@ -235,14 +242,16 @@ fn serve(shared: &Shared) {
             shared.parked.store(false, Ordering::SeqCst);
             since = None;
         }
+        // (Empty when its poster took the job back.)
         let job = shared.job.lock().unwrap_or_else(|e| e.into_inner()).take();
-        if let Some(job) = job {
+        if let Some((epoch, job)) = job {
             if let Err(p) = catch_unwind(AssertUnwindSafe(job)) {
-                *shared.panic.lock().unwrap_or_else(|e| e.into_inner()) = Some(p);
+                let mut panics = shared.panics.lock().unwrap_or_else(|e| e.into_inner());
+                panics.push((epoch, p));
             }
             shared.held.store(false, Ordering::Release);
+            shared.finished.store(epoch, Ordering::Release);
         }
-        shared.finished.store(seen, Ordering::Release);
     }
 }
 
@@ -394,6 +403,58 @@ mod tests {
             &|| done.store(true, Ordering::SeqCst),
         );
         assert_eq!(*nested.lock().unwrap(), Some(on("b.a")));
+    }
+
+    /// A regression: a join took back whatever job was in the slot when its own half ended,
+    /// also another thread's posted after its own job had run; that job then ran on the wrong
+    /// thread and its own join could return before it had finished.
+    #[test]
+    fn a_join_takes_back_only_its_own_job() {
+        let helper = Helper::start().expect("a thread");
+        let x = std::thread::current().id();
+        let spin_until = |flag: &AtomicBool| {
+            while !flag.load(Ordering::SeqCst) {
+                std::hint::spin_loop();
+            }
+        };
+        // (Whether X's join would reach the slot before the helper wakes is a race: rounds.)
+        for _ in 0..40 {
+            let (x_job_done, y_posted, x_returned) = (
+                AtomicBool::new(false),
+                AtomicBool::new(false),
+                AtomicBool::new(false),
+            );
+            let (y_ran_on, y_job_runs) = (Mutex::new(None), AtomicUsize::new(0));
+            std::thread::scope(|scope| {
+                scope.spawn(|| {
+                    spin_until(&x_job_done);
+                    // Long enough for the helper to park: Y's job then waits for it to wake.
+                    std::thread::sleep(SPIN * 3);
+                    helper.join(
+                        || {
+                            y_posted.store(true, Ordering::SeqCst);
+                            spin_until(&x_returned);
+                        },
+                        &|| {
+                            *y_ran_on.lock().unwrap() = Some(std::thread::current().id());
+                            std::thread::sleep(Duration::from_millis(2));
+                            y_job_runs.fetch_add(1, Ordering::SeqCst);
+                        },
+                    );
+                    assert_eq!(
+                        y_job_runs.load(Ordering::SeqCst),
+                        1,
+                        "Y's job done when it returns"
+                    );
+                });
+                helper.join(|| spin_until(&y_posted), &|| {
+                    x_job_done.store(true, Ordering::SeqCst)
+                });
+                x_returned.store(true, Ordering::SeqCst);
+            });
+            assert_eq!(y_job_runs.load(Ordering::SeqCst), 1);
+            assert_ne!(*y_ran_on.lock().unwrap(), Some(x), "X ran Y's job");
+        }
     }
 
     #[test]
