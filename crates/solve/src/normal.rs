@@ -651,8 +651,8 @@ impl NormalEquations {
 
     /// From the next analysis on, factorizations and triangular solves in 2×2 blocks run on
     /// two threads where the elimination tree splits in two parts that pay (the shared helper
-    /// thread, [`Helper::shared`], for the second part; the same bits as on one thread). Without a thread to be had,
-    /// nothing changes.
+    /// thread, [`Helper::shared`], for the second part, when no other job holds it; the same
+    /// bits as on one thread). Without a thread to be had, nothing changes.
     pub(crate) fn split_over_two_threads(&mut self) {
         if self.helper.is_none() {
             self.helper = Helper::shared();
