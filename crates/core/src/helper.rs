@@ -90,6 +90,24 @@ impl Helper {
         })
     }
 
+    /// [`join`](Self::join) for a second half called once, with its result: `a` here and `b`
+    /// on the helper (or both here, as `join` decides); both results.
+    pub fn join_once<A, B: Send>(
+        &self,
+        a: impl FnOnce() -> A,
+        b: impl FnOnce() -> B + Send,
+    ) -> (A, B) {
+        let b = Mutex::new((Some(b), None));
+        let a = self.join(a, &|| {
+            let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some(f) = b.0.take() {
+                b.1 = Some(f());
+            }
+        });
+        let (_, b) = b.into_inner().unwrap_or_else(|e| e.into_inner());
+        (a, b.expect("a join runs both halves"))
+    }
+
     /// Whether a job holds the helper now (a join would run both halves on its caller).
     pub fn is_held(&self) -> bool {
         self.shared.held.load(Ordering::Acquire)
@@ -454,6 +472,16 @@ mod tests {
             });
             assert_eq!(y_job_runs.load(Ordering::SeqCst), 1);
             assert_ne!(*y_ran_on.lock().unwrap(), Some(x), "X ran Y's job");
+        }
+    }
+
+    #[test]
+    fn join_once_returns_both_halves_results() {
+        let helper = Helper::start().expect("a thread");
+        let owned = vec![1, 2, 3];
+        for round in 0..100 {
+            let (a, b) = helper.join_once(|| round * 2, || owned.iter().sum::<i32>() + round);
+            assert_eq!((a, b), (round * 2, 6 + round));
         }
     }
 

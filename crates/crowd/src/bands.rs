@@ -54,13 +54,7 @@ pub(crate) fn run<F: FnOnce() + Send>(
         }
         match helper {
             Some(helper) => {
-                let second = std::sync::Mutex::new(Some(second));
-                helper.join(first, &|| {
-                    let band = second.lock().unwrap_or_else(|e| e.into_inner()).take();
-                    if let Some(band) = band {
-                        band();
-                    }
-                });
+                helper.join_once(first, second);
             }
             None => {
                 scope.spawn(second);

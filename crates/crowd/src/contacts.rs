@@ -218,8 +218,8 @@ pub struct PersonWalls {
 }
 
 impl PersonWalls {
-    /// Its rows assembled on `parallelism`'s threads, in bands of people, from 10,000 people
-    /// on (the same rows as on one thread).
+    /// Its rows assembled on `parallelism`'s threads, in bands of people where there are many
+    /// (the same rows as on one thread).
     pub fn on_threads(parallelism: Parallelism) -> Self {
         Self {
             near: Vec::new(),

@@ -2,8 +2,8 @@
 //! binding set aside) goes to Gauss–Seidel, which gives it up when its own progress shows
 //! the budget will not finish it, and then to the interior point.
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 
 use moreau_core::{ConstraintKey, Helper, Parallelism, SolveStatus};
 
@@ -870,19 +870,13 @@ fn both<A, B: Send>(
     a: impl FnOnce() -> A,
     b: impl FnOnce() -> B + Send,
 ) -> (A, B) {
-    let Some(helper) = helper else {
-        let a = a();
-        return (a, b());
-    };
-    let b = Mutex::new((Some(b), None));
-    let a = helper.join(a, &|| {
-        let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(f) = b.0.take() {
-            b.1 = Some(f());
+    match helper {
+        Some(helper) => helper.join_once(a, b),
+        None => {
+            let a = a();
+            (a, b())
         }
-    });
-    let (_, b) = b.into_inner().unwrap_or_else(|e| e.into_inner());
-    (a, b.expect("the join ran both halves"))
+    }
 }
 
 #[cfg(test)]
