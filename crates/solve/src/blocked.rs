@@ -105,8 +105,9 @@ pub(crate) struct BlockCholesky {
     row_col: Vec<Index>,
     values: Vec<Block>,
     work: Vec<Block>,
-    // scratch of the analysis
+    // scratch of the analysis, kept from analysis to analysis
     mark: Vec<Index>,
+    scratch: AnalysisScratch,
     // The columns in two parts for two threads, if the analysis was asked for one and found
     // it worth it, with the second thread's workspace.
     split: Option<Split>,
@@ -121,6 +122,20 @@ pub(crate) struct BlockCholesky {
 struct Split {
     part: Vec<u8>,
     cols: [Vec<Index>; 3],
+}
+
+/// The analysis's scratch: the elimination tree's children as linked lists, a column's
+/// rows, the row lists' fill pointers, the split's subtree weights and frontier, and the
+/// last split's lists when the last analysis made none.
+#[derive(Debug, Clone, Default)]
+struct AnalysisScratch {
+    head: Vec<Index>,
+    next: Vec<Index>,
+    col: Vec<Index>,
+    fill: Vec<Index>,
+    weight: Vec<u64>,
+    frontier: Vec<usize>,
+    split: Split,
 }
 
 /// The rest's part number in [`Split::part`].
@@ -145,9 +160,13 @@ impl BlockCholesky {
         self.mark.resize(n, Index::MAX);
         // children[k]: the columns whose elimination-tree parent is k, as linked lists.
         let none = Index::MAX;
-        let mut head = vec![none; n];
-        let mut next = vec![none; n];
-        let mut col: Vec<Index> = Vec::new();
+        let AnalysisScratch {
+            head, next, col, ..
+        } = &mut self.scratch;
+        head.clear();
+        head.resize(n, none);
+        next.clear();
+        next.resize(n, none);
         for k in 0..n {
             col.clear();
             self.mark[k] = k as Index;
@@ -172,7 +191,7 @@ impl BlockCholesky {
             }
             col.sort_unstable();
             l.row.push(k as Index);
-            l.row.extend_from_slice(&col);
+            l.row.extend_from_slice(col);
             l.ptr.push(l.row.len() as Index);
             if let Some(&parent) = col.first() {
                 let p = parent as usize;
@@ -201,7 +220,9 @@ impl BlockCholesky {
         if split {
             self.row_col.resize(self.row_ptr[n] as usize, 0);
         }
-        let mut fill: Vec<Index> = self.row_ptr[..n].to_vec();
+        let fill = &mut self.scratch.fill;
+        fill.clear();
+        fill.extend_from_slice(&self.row_ptr[..n]);
         for k in 0..n {
             for p in l.ptr[k] as usize + 1..l.ptr[k + 1] as usize {
                 let r = l.row[p] as usize;
@@ -217,6 +238,9 @@ impl BlockCholesky {
         self.values.resize(self.l.row.len(), [0.0; 4]);
         self.work.clear();
         self.work.resize(n, [0.0; 4]);
+        if let Some(last) = self.split.take() {
+            self.scratch.split = last;
+        }
         self.split = if split { self.split_columns() } else { None };
         if self.split.is_some() {
             self.work2.clear();
@@ -240,7 +264,7 @@ impl BlockCholesky {
     /// best split of cromosim's scene takes 0.69 of one thread's time and measured 0.74–0.76
     /// (counted as the products each column sends, 0.60: the updates a part's columns send
     /// to the rest are gathered by the rest).
-    fn split_columns(&self) -> Option<Split> {
+    fn split_columns(&mut self) -> Option<Split> {
         const NONE: usize = usize::MAX;
         let l = &self.l;
         let n = l.columns();
@@ -254,30 +278,38 @@ impl BlockCholesky {
         };
         // A column's work in the left-looking factorization: the updates it gathers (each the
         // rest of a descendant's column from its row on) and its own blocks.
+        let (row_ptr, row_pos, row_end) = (&self.row_ptr, &self.row_pos, &self.row_end);
         let cost = |k: usize| {
-            let row = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
-            let gathered: u64 = (self.row_pos[row.clone()].iter().zip(&self.row_end[row]))
+            let row = row_ptr[k] as usize..row_ptr[k + 1] as usize;
+            let gathered: u64 = (row_pos[row.clone()].iter().zip(&row_end[row]))
                 .map(|(&p, &end)| u64::from(end - p))
                 .sum();
             gathered + l.col(k).len() as u64
         };
-        let mut weight: Vec<u64> = (0..n).map(cost).collect();
+        // (The analysis is done with the children's lists: here they list the same children.)
+        let AnalysisScratch {
+            head,
+            next,
+            weight,
+            frontier,
+            split,
+            ..
+        } = &mut self.scratch;
+        weight.clear();
+        weight.extend((0..n).map(cost));
         let total: u64 = weight.iter().sum();
         if total < SPLIT_MIN_PRODUCTS {
             return None;
         }
-        let (mut head, mut next) = (vec![NONE; n], vec![NONE; n]);
-        let mut frontier = Vec::new();
+        let child = |x: Index| if x == Index::MAX { NONE } else { x as usize };
+        frontier.clear();
         for k in 0..n {
             match parent(k) {
                 NONE => frontier.push(k),
-                p => {
-                    weight[p] += weight[k];
-                    next[k] = head[p];
-                    head[p] = k;
-                }
+                p => weight[p] += weight[k],
             }
         }
+        let weight = &*weight;
         // The two threads' loads, the heaviest subtrees first, each to the lighter thread.
         let deal = |frontier: &mut Vec<usize>, bins: Option<&mut Vec<u8>>| {
             frontier.sort_unstable_by_key(|&k| (std::cmp::Reverse(weight[k]), k));
@@ -293,23 +325,22 @@ impl BlockCholesky {
             load[0].max(load[1])
         };
         let (mut rest, mut best, mut best_steps) = (0u64, total, None);
-        let mut part = vec![REST; n];
         for steps in 0..=64 {
-            let time = deal(&mut frontier, None) + rest;
+            let time = deal(frontier, None) + rest;
             if time < best {
                 (best, best_steps) = (time, Some(steps));
             }
             // The heaviest subtree (first after the deal) gives way to its children.
             let k = frontier[0];
-            if head[k] == NONE {
+            if child(head[k]) == NONE {
                 break;
             }
             frontier.swap_remove(0);
             rest += cost(k);
-            let mut c = head[k];
+            let mut c = child(head[k]);
             while c != NONE {
                 frontier.push(c);
-                c = next[c];
+                c = child(next[c]);
             }
         }
         let steps = best_steps?;
@@ -320,15 +351,18 @@ impl BlockCholesky {
         frontier.clear();
         frontier.extend((0..n).filter(|&k| parent(k) == NONE));
         for _ in 0..steps {
-            deal(&mut frontier, None);
+            deal(frontier, None);
             let k = frontier.swap_remove(0);
-            let mut c = head[k];
+            let mut c = child(head[k]);
             while c != NONE {
                 frontier.push(c);
-                c = next[c];
+                c = child(next[c]);
             }
         }
-        deal(&mut frontier, Some(&mut part));
+        let Split { mut part, mut cols } = std::mem::take(split);
+        part.clear();
+        part.resize(n, REST);
+        deal(frontier, Some(&mut part));
         // Descendants follow their subtree's root (parents come after children).
         for k in (0..n).rev() {
             let p = parent(k);
@@ -336,7 +370,9 @@ impl BlockCholesky {
                 part[k] = part[p];
             }
         }
-        let mut cols: [Vec<Index>; 3] = Default::default();
+        for c in &mut cols {
+            c.clear();
+        }
         for (k, &b) in part.iter().enumerate() {
             cols[b as usize].push(k as Index);
         }
@@ -935,6 +971,44 @@ mod tests {
             }
         }
         (pattern, values)
+    }
+
+    /// The analysis keeps its scratch and the last split's lists: after a larger and a smaller
+    /// pattern, an analysis gives what a fresh one gives (the pattern of `L`, its row lists,
+    /// the split).
+    #[test]
+    fn an_analysis_after_others_gives_what_a_fresh_one_gives() {
+        let (grids, _) = two_grids_and_a_separator();
+        let small = BlockPattern {
+            ptr: vec![0, 2, 4, 5],
+            row: vec![0, 1, 1, 2, 2],
+        };
+        let mut reused = BlockCholesky::default();
+        for pattern in [&grids, &grids, &small, &grids] {
+            reused.analyse(pattern.clone(), true);
+            let mut fresh = BlockCholesky::default();
+            fresh.analyse(pattern.clone(), true);
+            assert_eq!(reused.l.ptr, fresh.l.ptr);
+            assert_eq!(reused.l.row, fresh.l.row);
+            assert_eq!(
+                (
+                    &reused.row_ptr,
+                    &reused.row_pos,
+                    &reused.row_end,
+                    &reused.row_col
+                ),
+                (
+                    &fresh.row_ptr,
+                    &fresh.row_pos,
+                    &fresh.row_end,
+                    &fresh.row_col
+                )
+            );
+            let parts =
+                |c: &BlockCholesky| c.split.as_ref().map(|s| (s.part.clone(), s.cols.clone()));
+            assert_eq!(parts(&reused), parts(&fresh));
+            assert_eq!(reused.is_split(), pattern.columns() > 100);
+        }
     }
 
     #[test]
