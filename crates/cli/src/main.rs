@@ -32,6 +32,15 @@ interrupted): an older NAME stays whole until then. A run killed outright (SIGKI
 loss) leaves its frames in .NAME.partial (status `running`), which `moreau inspect`, h5py and
 PedPy open; a later run to NAME refuses to replace it without --force.";
 
+const TRADEOFF_EXIT_CODES: &str = "\
+Exit codes:
+  0    every run reached its horizon; tradeoff.json, .md and .svg written
+  1    a run failed (e.g. a projection its solver could not certify): it is in tradeoff.json
+       and tradeoff.md as failed, with why, and left out of the plot; the others were run
+  2    bad input (command line, scene file, output directory), or the reference run failed
+
+The three files are rewritten after each run: an interrupted study keeps the runs it measured.";
+
 /// moreau: Moreau's catching-up scheme for first-order nonsmooth dynamics, with crowds of
 /// rigid disks that never overlap.
 #[derive(Debug, Parser)]
@@ -54,7 +63,9 @@ enum Command {
     /// against a fine reference, the fitted order, as JSON, Markdown and a log–log SVG.
     Converge(converge::ConvergeArgs),
     /// Work–precision: error against wall time for fixed steps, adaptive steps at several
-    /// tolerances and each solver, against a fine reference; JSON, Markdown and SVG.
+    /// tolerances and each solver, against a fine reference; JSON, Markdown and SVG. A run
+    /// that fails is recorded as failed and the others still run (exit status 1).
+    #[command(after_help = TRADEOFF_EXIT_CODES)]
     Tradeoff(tradeoff::TradeoffArgs),
     /// The scale table: dense evacuation halls of 10³…10⁶ people, per-step time and stages,
     /// iterations, certified ε, violation, peak memory; the cost exponent; Clarabel at 40k.
@@ -174,7 +185,7 @@ fn run() -> Result<ExitCode> {
         Command::Run(args) => run::run(&args),
         Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
         Command::Bench(args) => bench::bench(&args).map(|()| ExitCode::SUCCESS),
-        Command::Tradeoff(args) => tradeoff::tradeoff(&args).map(|()| ExitCode::SUCCESS),
+        Command::Tradeoff(args) => tradeoff::tradeoff(&args),
         Command::View(args) => view::view(&args).map(|()| ExitCode::SUCCESS),
         Command::Inspect { file } => inspect(&file).map(|()| ExitCode::SUCCESS),
         Command::Example82 { h, t_end, out } => {

@@ -4,6 +4,7 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use moreau_crowd::{Scene, SolverKind};
@@ -51,13 +52,19 @@ struct Point {
     steps: usize,
     rejected: usize,
     wall_seconds: f64,
-    error: f64,
+    /// Error (24); `None` (`null`) for a run that failed.
+    error: Option<f64>,
     evacuation_error: usize,
     passed_exit: usize,
+    /// Why the run stopped before its horizon (then the numbers above are not measured:
+    /// zero, and no error); `None` for a run that finished.
+    #[serde(default)]
+    failed: Option<String>,
 }
 
-/// Runs `moreau tradeoff`.
-pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
+/// Runs `moreau tradeoff`: success when every run reached its horizon, 1 when one failed
+/// (recorded as failed, the others run).
+pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
     let mut scene = Scene::from_file(&args.scene)?;
     if let Some(t) = args.horizon {
         scene.time.horizon = t;
@@ -70,7 +77,9 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
             .with_context(|| format!("reading '{}'", json.display()))?;
         let points: Vec<Point> =
             serde_json::from_str(&text).with_context(|| format!("parsing '{}'", json.display()))?;
-        return write(args, &scene, &points);
+        write(args, &scene, &points)?;
+        println!("wrote {}/tradeoff.md, tradeoff.svg", args.out.display());
+        return Ok(ExitCode::SUCCESS);
     }
     let mut reference_scene = scene.clone();
     reference_scene.solver.eps_kappa = 1e-5;
@@ -123,10 +132,31 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
             How::Adaptive(tol, Estimate::Velocity),
         ));
     }
+    // Each run's point is written as soon as it is measured; a run that fails is recorded as
+    // failed and the others still run: one uncertified projection loses nothing already
+    // measured (the exit status says whether every run finished).
     let mut points = Vec::new();
     for (method, setting, s, how) in &runs {
-        let r = sample(s, how, args.samples, Leaving::Refused)
-            .with_context(|| format!("{method} at {setting}"))?;
+        let r = match sample(s, how, args.samples, Leaving::Refused) {
+            Ok(r) => r,
+            Err(e) => {
+                let why = format!("{e:#}");
+                eprintln!("  {method:<36} {setting:<6} failed: {why}");
+                points.push(Point {
+                    method: method.clone(),
+                    setting: *setting,
+                    steps: 0,
+                    rejected: 0,
+                    wall_seconds: 0.0,
+                    error: None,
+                    evacuation_error: 0,
+                    passed_exit: 0,
+                    failed: Some(why),
+                });
+                save(args, &scene, &points)?;
+                continue;
+            }
+        };
         let (error, _) = study::error(&reference.states, &r.states);
         let evacuation_error = reference
             .passed
@@ -145,17 +175,36 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<()> {
             steps: r.steps,
             rejected: r.rejected,
             wall_seconds: r.wall,
-            error,
+            error: Some(error),
             evacuation_error,
             passed_exit: *r.passed.last().unwrap_or(&0),
+            failed: None,
         });
+        save(args, &scene, &points)?;
     }
+    println!(
+        "wrote {}/tradeoff.json, tradeoff.md, tradeoff.svg",
+        args.out.display()
+    );
+    let failed = points.iter().filter(|p| p.failed.is_some()).count();
+    if failed > 0 {
+        eprintln!(
+            "moreau: {failed} of {} runs failed (recorded as failed in {}/tradeoff.md)",
+            points.len(),
+            args.out.display()
+        );
+        return Ok(ExitCode::from(1));
+    }
+    Ok(ExitCode::SUCCESS)
+}
 
+/// Writes tradeoff.json, then tradeoff.md and tradeoff.svg, from the points measured so far.
+fn save(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
     std::fs::write(
         args.out.join("tradeoff.json"),
-        serde_json::to_string_pretty(&points)? + "\n",
+        serde_json::to_string_pretty(points)? + "\n",
     )?;
-    write(args, &scene, &points)
+    write(args, scene, points)
 }
 
 /// Writes tradeoff.md and tradeoff.svg from the measured points.
@@ -176,21 +225,37 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|");
     for p in points {
-        let _ = writeln!(
-            md,
-            "| {} | {} | {} | {} | {:.3} | {} | {:.2} |",
-            p.method, p.setting, p.steps, p.rejected, p.error, p.evacuation_error, p.wall_seconds
-        );
+        let _ = match &p.failed {
+            None => writeln!(
+                md,
+                "| {} | {} | {} | {} | {:.3} | {} | {:.2} |",
+                p.method,
+                p.setting,
+                p.steps,
+                p.rejected,
+                p.error.unwrap_or(f64::NAN),
+                p.evacuation_error,
+                p.wall_seconds
+            ),
+            Some(why) => writeln!(
+                md,
+                "| {} | {} | failed: {} | | | | |",
+                p.method,
+                p.setting,
+                why.replace('|', "\\|")
+            ),
+        };
     }
     std::fs::write(args.out.join("tradeoff.md"), md)?;
 
     let mut series: Vec<Series> = Vec::new();
-    for p in points {
+    for p in points.iter().filter(|p| p.failed.is_none()) {
+        let Some(error) = p.error else { continue };
         match series.iter_mut().find(|s| s.name == p.method) {
-            Some(s) => s.points.push((p.wall_seconds, p.error)),
+            Some(s) => s.points.push((p.wall_seconds, error)),
             None => series.push(Series {
                 name: p.method.clone(),
-                points: vec![(p.wall_seconds, p.error)],
+                points: vec![(p.wall_seconds, error)],
                 dashed: false,
             }),
         }
@@ -203,9 +268,5 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
         series,
     };
     std::fs::write(args.out.join("tradeoff.svg"), plot.render())?;
-    println!(
-        "wrote {}/tradeoff.json, tradeoff.md, tradeoff.svg",
-        args.out.display()
-    );
     Ok(())
 }
