@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+import re
 import shutil
 
 import h5py
@@ -188,6 +189,28 @@ def test_the_plot_script_writes_its_pngs(room_run, tmp_path):
         png = tmp_path / "plots" / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
         assert png.stat().st_size > 10_000, name
+
+
+def test_an_adaptive_run_with_clarabel_asks_no_less_than_clarabel_certifies(tmp_path):
+    # Clarabel's certificates stop at ε/μ² = 4–7·10⁻⁷ on 10,000 people, above the default
+    # floor 2·10⁻⁷: with kind = "clarabel" the floor is 2·10⁻⁶ (CLARABEL_EPS_FLOOR), so an
+    # adaptive run on dense-10k no longer halves its steps to μ_min and fails. Here, on the
+    # room: every step's target is max((θ tol)² (μ / μ_max)³, 2·10⁻⁶ μ²), and certified.
+    from conftest import ROOM
+
+    text = ROOM.read_text().replace("horizon = 20.0", "horizon = 2.0")
+    text = re.sub(r'(?m)^kind = .*$', 'kind = "clarabel"', text)
+    short = tmp_path / "clarabel.toml"
+    short.write_text(text)
+    out = tmp_path / "clarabel.h5"
+    moreau("run", short, "-o", out, "--quiet", "--tol", "0.01")
+    run = moreau_run.load(out)
+    mu = run.steps["mu"]
+    assert {bytes(s).decode() for s in run.steps["solver"]} == {"clarabel"}
+    expected = np.maximum((0.1 * 0.01) ** 2 * (mu / 0.1) ** 3, 2e-6 * mu ** 2)
+    np.testing.assert_allclose(run.steps["eps_target"], expected, rtol=1e-9)
+    assert np.any(2e-6 * mu ** 2 > (0.1 * 0.01) ** 2 * (mu / 0.1) ** 3), "the floor should bind"
+    assert np.all(run.steps["eps"] <= run.steps["eps_target"] * (1 + 1e-12))
 
 
 def test_an_adaptive_run_writes_frames_on_output_times(tmp_path):

@@ -309,7 +309,7 @@ impl Simulation {
         };
         let correction = LinearizedProjection::new(solver, settings)?;
         let mut scheme = Scheme::new(correction, EpsPolicy::new(scene.solver.eps_kappa, 3.0)?);
-        let stepping = scene.time.stepping()?;
+        let stepping = scene.time.stepping(scene.solver.kind)?;
         if let Stepping::Adaptive(c) = &stepping {
             scheme.set_eps(c.settings().eps_policy());
         }

@@ -58,11 +58,17 @@ pub struct AdaptiveSettings {
     pub theta: f64,
     /// The error estimate.
     pub estimate: ErrorEstimate,
+    /// The smallest `ε/μ²` the projections are asked for (> 0; [`EpsPolicy::floor`]): where
+    /// the solver's certificates stop in double precision. Below it a step the solver cannot
+    /// certify is not helped by a smaller one (the floor scales with `μ²`), so a floor under
+    /// what the solver reaches sends the controller down to `mu_min`.
+    pub eps_floor: f64,
 }
 
 impl AdaptiveSettings {
     /// Defaults for tolerance `tol`: steps in `[1e-6, 0.5]`, first `min(0.01, mu_max)`,
-    /// safety 0.9, growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling.
+    /// safety 0.9, growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling, the floor
+    /// [`EpsPolicy::ADAPTIVE_FLOOR`].
     pub fn new(tol: f64) -> Self {
         Self {
             tol,
@@ -74,6 +80,7 @@ impl AdaptiveSettings {
             shrink: 0.2,
             theta: 0.1,
             estimate: ErrorEstimate::StepDoubling,
+            eps_floor: EpsPolicy::ADAPTIVE_FLOOR,
         }
     }
 
@@ -110,12 +117,19 @@ impl AdaptiveSettings {
         if !(self.theta > 0.0 && self.theta <= 1.0) {
             return bad("theta", self.theta, "must lie in (0, 1]");
         }
+        if !(self.eps_floor > 0.0 && self.eps_floor.is_finite()) {
+            return bad("eps_floor", self.eps_floor, "must be finite and > 0");
+        }
         Ok(())
     }
 
-    /// The projection accuracy policy tied to the tolerance: `ε = θ² tol² (μ / μ_max)³`.
+    /// The projection accuracy policy tied to the tolerance: `ε = θ² tol² (μ / μ_max)³`, at
+    /// least `eps_floor μ²`.
     pub fn eps_policy(&self) -> EpsPolicy {
-        EpsPolicy::tied_to_tolerance(self.theta * self.tol, self.mu_max)
+        EpsPolicy {
+            floor: self.eps_floor,
+            ..EpsPolicy::tied_to_tolerance(self.theta * self.tol, self.mu_max)
+        }
     }
 }
 

@@ -205,6 +205,39 @@ fn bad_settings_name_the_field() {
             ..
         })
     ));
+    s.shrink = 0.2;
+    for floor in [0.0, -1e-7, f64::NAN, f64::INFINITY] {
+        s.eps_floor = floor;
+        assert!(matches!(
+            StepController::new(s),
+            Err(IntegrateError::InvalidSetting {
+                field: "eps_floor",
+                ..
+            })
+        ));
+    }
+}
+
+/// The floor of `ε/μ²` is the settings' own (a solver that certifies less far down gets a
+/// higher one): where the tolerance's term falls below it, `ε = floor μ²`.
+#[test]
+fn the_eps_floor_is_the_settings_own() {
+    let mut settings = AdaptiveSettings::new(0.01);
+    assert_eq!(settings.eps_floor, EpsPolicy::ADAPTIVE_FLOOR);
+    settings.eps_floor = 2e-6;
+    let policy = settings.eps_policy();
+    let budget = settings.theta * settings.tol;
+    for mu in [0.5, 0.1, 1e-2, 1e-3, 1e-6] {
+        let tolerance = budget * budget * (mu / settings.mu_max).powi(3);
+        let expected = tolerance.max(2e-6 * mu * mu);
+        assert!(
+            (policy.eps(mu) / expected - 1.0).abs() < 1e-12,
+            "μ = {mu}: {} against {expected}",
+            policy.eps(mu)
+        );
+    }
+    // At μ = 10⁻³ the tolerance asks 8·10⁻¹⁵, the default floor 2·10⁻¹³, this one 2·10⁻¹².
+    assert!(policy.eps(1e-3) > 5.0 * AdaptiveSettings::new(0.01).eps_policy().eps(1e-3));
 }
 
 /// seeds/000 asks `ε_k/μ_k² → 0` of the steps a run takes: with adaptive steps the tolerance
