@@ -193,7 +193,7 @@ def test_the_plot_script_writes_its_pngs(room_run, tmp_path):
 
 def test_an_adaptive_run_with_clarabel_asks_no_less_than_clarabel_certifies(tmp_path):
     # Clarabel's certificates stop at ε/μ² = 4–7·10⁻⁷ on 10,000 people, above the default
-    # floor 2·10⁻⁷: with kind = "clarabel" the floor is 2·10⁻⁶ (CLARABEL_EPS_FLOOR), so an
+    # floor 2·10⁻⁷: with kind = "clarabel" the floor is 2·10⁻⁶ (SolverKind::certified_floor), so an
     # adaptive run on dense-10k no longer halves its steps to μ_min and fails. Here, on the
     # room: every step's target is max((θ tol)² (μ / μ_max)³, 2·10⁻⁶ μ²), and certified.
     from conftest import ROOM

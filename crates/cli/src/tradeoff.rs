@@ -249,7 +249,8 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
     std::fs::write(args.out.join("tradeoff.md"), md)?;
 
     let mut series: Vec<Series> = Vec::new();
-    for p in points.iter().filter(|p| p.failed.is_none()) {
+    for p in points {
+        // (A failed run has no error: it is left out.)
         let Some(error) = p.error else { continue };
         match series.iter_mut().find(|s| s.name == p.method) {
             Some(s) => s.points.push((p.wall_seconds, error)),

@@ -43,8 +43,8 @@ pub use hall::{Crush, Hall};
 pub use moving::{Drive, MovingBodies, PersonMovingWalls};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{
-    BroadPhaseChoice, CLARABEL_EPS_FLOOR, DesiredVelocityKind, ExitAction, Keyframe, Model,
-    MovingBody, Output, Scene, SolverKind, SolverSettings, limits,
+    BroadPhaseChoice, DesiredVelocityKind, ExitAction, Keyframe, Model, MovingBody, Output, Scene,
+    SolverKind, SolverSettings, limits,
 };
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;

@@ -241,18 +241,10 @@ pub struct Time {
     pub estimate: Option<ErrorEstimate>,
 }
 
-/// The floor of `ε/μ²` of adaptive runs whose projections Clarabel answers alone
-/// (`kind = "clarabel"`): its certificates stop at `ε/μ²` = 4–7·10⁻⁷ on 10,000 people
-/// (`data/scenes/dense-10k.toml`, `tol = 0.03`, past t = 2 s), above the default floor
-/// (`EpsPolicy::ADAPTIVE_FLOOR`, 2·10⁻⁷, which it reaches on small crowds); with that floor
-/// the controller halved its steps to `μ_min` and the run failed. The other solvers certify
-/// far below the default floor and keep it.
-pub const CLARABEL_EPS_FLOOR: f64 = 2e-6;
-
 impl Time {
     /// How the run chooses its steps: fixed steps of `step`, or with `tol` adaptive steps
     /// whose largest is the output interval (frames land on output times), asking `solver`'s
-    /// projections no more than it certifies ([`CLARABEL_EPS_FLOOR`]).
+    /// projections no more than it certifies ([`SolverKind::certified_floor`]).
     pub fn stepping(&self, solver: SolverKind) -> Result<Stepping, CrowdError> {
         let Some(tol) = self.tol else {
             return Ok(Stepping::fixed(self.step)?);
@@ -262,8 +254,8 @@ impl Time {
         settings.mu_first = self.step.min(settings.mu_max);
         settings.mu_min = settings.mu_min.min(settings.mu_first);
         settings.estimate = self.estimate.unwrap_or(ErrorEstimate::VelocityChange);
-        if solver == SolverKind::Clarabel {
-            settings.eps_floor = settings.eps_floor.max(CLARABEL_EPS_FLOOR);
+        if let Some(floor) = solver.certified_floor() {
+            settings.eps_floor = settings.eps_floor.max(floor);
         }
         Stepping::adaptive(settings)
             .map_err(|e| CrowdError::invalid("time.tol", Num(tol), e.to_string()))

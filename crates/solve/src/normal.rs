@@ -27,7 +27,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
-use moreau_core::{ConstraintRows, Parallelism};
+use moreau_core::{ConstraintRows, Helper, Parallelism};
 
 use crate::blocked::{Block, BlockCholesky, BlockColumns, BlockPattern};
 use crate::dissection::{Dissection, FillCount};
@@ -35,7 +35,6 @@ use crate::error::SolveError;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
 use crate::workers::Workers;
-use moreau_core::Helper;
 
 /// What the factorization machinery did over the solver's life (for benchmarks).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
