@@ -389,56 +389,48 @@ impl BlockCholesky {
     pub(crate) fn update(&mut self, w: &mut [f64], first: usize, sigma: f64) -> bool {
         let (l, values) = (&self.l, &mut self.values);
         debug_assert_eq!(w.len(), 2 * l.columns());
-        // One scalar column: its diagonal `d` (returned updated), its entries below and
-        // their rows in `w`, each entry as (block, lane, row).
-        let rotate =
-            |d: f64, wj: f64, below: &mut dyn FnMut(&mut dyn FnMut(&mut f64, &mut f64))| {
-                let r2 = d * d + sigma * wj * wj;
-                if !(r2 > 0.0) {
-                    return None;
-                }
+        // The rotation of a scalar column with diagonal `d` and `w`'s entry `wj`: its new
+        // diagonal, `c` and `s` (`None` when the new pivot is not positive).
+        let rotation = |d: f64, wj: f64| {
+            let r2 = d * d + sigma * wj * wj;
+            (r2 > 0.0).then(|| {
                 let r = r2.sqrt();
-                let (c, s) = (r / d, wj / d);
-                below(&mut |e: &mut f64, wi: &mut f64| {
-                    *e = (*e + sigma * s * *wi) / c;
-                    *wi = c * *wi - s * *e;
-                });
-                Some(r)
-            };
+                (r, r / d, wj / d)
+            })
+        };
         let mut k = first;
         loop {
             let lk = l.col(k);
-            let (diag, rest) = values[lk.clone()]
-                .split_first_mut()
-                .expect("a diagonal block");
             let rows = &l.row[lk.start + 1..lk.end];
+            let column = &mut values[lk];
+            let (diag, below) = column.split_first_mut().expect("a diagonal block");
             // Column 2k: l₁₀ in the diagonal block, then lanes 0 and 1 of the blocks below.
-            let (w0, w1) = (w[2 * k], w[2 * k + 1]);
-            let mut w1n = w1;
-            let l00 = rotate(1.0 / diag[0], w0, &mut |f| {
-                f(&mut diag[1], &mut w1n);
-                for (&r, b) in rows.iter().zip(rest.iter_mut()) {
-                    let r = 2 * r as usize;
-                    let (b0, b1) = b.split_at_mut(1);
-                    let (wr0, wr1) = w[r..r + 2].split_at_mut(1);
-                    f(&mut b0[0], &mut wr0[0]);
-                    f(&mut b1[0], &mut wr1[0]);
-                }
-            });
-            let Some(l00) = l00 else { return false };
+            let Some((l00, c, s)) = rotation(1.0 / diag[0], w[2 * k]) else {
+                return false;
+            };
+            let (ss, ic) = (sigma * s, 1.0 / c);
+            let mut w1 = w[2 * k + 1];
+            diag[1] = (diag[1] + ss * w1) * ic;
+            w1 = c * w1 - s * diag[1];
             diag[0] = 1.0 / l00;
-            // Column 2k + 1: lanes 2 and 3.
-            let l11 = rotate(1.0 / diag[3], w1n, &mut |f| {
-                for (&r, b) in rows.iter().zip(rest.iter_mut()) {
-                    let r = 2 * r as usize;
-                    let (b2, b3) = b[2..].split_at_mut(1);
-                    let (wr0, wr1) = w[r..r + 2].split_at_mut(1);
-                    f(&mut b2[0], &mut wr0[0]);
-                    f(&mut b3[0], &mut wr1[0]);
-                }
-            });
-            let Some(l11) = l11 else { return false };
+            // Column 2k + 1: its rotation is known once column 2k's has reached w₁; then
+            // each block below takes both rotations in one pass (lanes 0 and 1, then 2 and 3,
+            // the second on the `w` the first left).
+            let Some((l11, c1, s1)) = rotation(1.0 / diag[3], w1) else {
+                return false;
+            };
             diag[3] = 1.0 / l11;
+            let (ss1, ic1) = (sigma * s1, 1.0 / c1);
+            for (&r, b) in rows.iter().zip(below.iter_mut()) {
+                let r = 2 * r as usize;
+                let (x0, x1) = (w[r], w[r + 1]);
+                let (e0, e1) = ((b[0] + ss * x0) * ic, (b[1] + ss * x1) * ic);
+                let (x0, x1) = (c * x0 - s * e0, c * x1 - s * e1);
+                let (e2, e3) = ((b[2] + ss1 * x0) * ic1, (b[3] + ss1 * x1) * ic1);
+                *b = [e0, e1, e2, e3];
+                w[r] = c1 * x0 - s1 * e2;
+                w[r + 1] = c1 * x1 - s1 * e3;
+            }
             w[2 * k] = 0.0;
             w[2 * k + 1] = 0.0;
             match rows.first() {
