@@ -379,6 +379,67 @@ impl BlockCholesky {
         Some(Split { part, cols })
     }
 
+    /// The factor of `A + σ w wᵀ` from that of `A` (`σ` = 1: an update, −1: a downdate), in
+    /// place: Gill, Golub, Murray and Saunders' rotations column by column along the
+    /// elimination tree's path from `first` (Davis and Hager's sparse form), which `w`'s
+    /// nonzeros must lie on (a row of `J` whose blocks the analysis saw does: its first
+    /// block column's path passes through the others). `w` is in the factor's order, two
+    /// entries a block column, and is left zero. False when a downdate leaves a pivot that
+    /// is not positive (the factor is then damaged: factorize again).
+    pub(crate) fn update(&mut self, w: &mut [f64], first: usize, sigma: f64) -> bool {
+        let (l, values) = (&self.l, &mut self.values);
+        debug_assert_eq!(w.len(), 2 * l.columns());
+        // The rotation of a scalar column with diagonal `d` and `w`'s entry `wj`: its new
+        // diagonal, `c` and `s` (`None` when the new pivot is not positive).
+        let rotation = |d: f64, wj: f64| {
+            let r2 = d * d + sigma * wj * wj;
+            (r2 > 0.0).then(|| {
+                let r = r2.sqrt();
+                (r, r / d, wj / d)
+            })
+        };
+        let mut k = first;
+        loop {
+            let lk = l.col(k);
+            let rows = &l.row[lk.start + 1..lk.end];
+            let column = &mut values[lk];
+            let (diag, below) = column.split_first_mut().expect("a diagonal block");
+            // Column 2k: l₁₀ in the diagonal block, then lanes 0 and 1 of the blocks below.
+            let Some((l00, c, s)) = rotation(1.0 / diag[0], w[2 * k]) else {
+                return false;
+            };
+            let (ss, ic) = (sigma * s, 1.0 / c);
+            let mut w1 = w[2 * k + 1];
+            diag[1] = (diag[1] + ss * w1) * ic;
+            w1 = c * w1 - s * diag[1];
+            diag[0] = 1.0 / l00;
+            // Column 2k + 1: its rotation is known once column 2k's has reached w₁; then
+            // each block below takes both rotations in one pass (lanes 0 and 1, then 2 and 3,
+            // the second on the `w` the first left).
+            let Some((l11, c1, s1)) = rotation(1.0 / diag[3], w1) else {
+                return false;
+            };
+            diag[3] = 1.0 / l11;
+            let (ss1, ic1) = (sigma * s1, 1.0 / c1);
+            for (&r, b) in rows.iter().zip(below.iter_mut()) {
+                let r = 2 * r as usize;
+                let (x0, x1) = (w[r], w[r + 1]);
+                let (e0, e1) = ((b[0] + ss * x0) * ic, (b[1] + ss * x1) * ic);
+                let (x0, x1) = (c * x0 - s * e0, c * x1 - s * e1);
+                let (e2, e3) = ((b[2] + ss1 * x0) * ic1, (b[3] + ss1 * x1) * ic1);
+                *b = [e0, e1, e2, e3];
+                w[r] = c1 * x0 - s1 * e2;
+                w[r + 1] = c1 * x1 - s1 * e3;
+            }
+            w[2 * k] = 0.0;
+            w[2 * k + 1] = 0.0;
+            match rows.first() {
+                Some(&parent) => k = parent as usize,
+                None => return true,
+            }
+        }
+    }
+
     /// Blocks of `L` (the fill the ordering left), for the reports.
     pub(crate) fn factor_blocks(&self) -> usize {
         self.l.row.len()
@@ -1009,6 +1070,71 @@ mod tests {
             assert_eq!(parts(&reused), parts(&fresh));
             assert_eq!(reused.is_split(), pattern.columns() > 100);
         }
+    }
+
+    /// A rank-one update of the factor with a row of two block columns, one below the
+    /// other in the pattern (a contact), gives the factor of `A + w wᵀ` (to rounding), and
+    /// the downdate with the same row gives back that of `A`; on the two grids' pattern,
+    /// rows starting in either grid or in the separator.
+    #[test]
+    fn a_rank_one_update_and_downdate_give_the_factors_of_the_changed_matrices() {
+        let (pattern, values) = two_grids_and_a_separator();
+        let n = pattern.columns();
+        let mut chol = BlockCholesky::default();
+        chol.analyse(pattern.clone(), false);
+        assert!(chol.factorize(&values));
+        let mut seed = 11u64;
+        for a in [0, 5, 143, 150, 290, n - 2] {
+            let col = pattern.ptr[a] as usize..pattern.ptr[a + 1] as usize;
+            // The last block below the diagonal of column a: a contact between a and b.
+            let p = col.end - 1;
+            let b = pattern.row[p] as usize;
+            assert!(b > a);
+            let wa = [lcg(&mut seed) * 3.0, lcg(&mut seed) - 0.5];
+            let wb = [lcg(&mut seed) - 0.5, lcg(&mut seed) * 2.0];
+            let mut changed = values.clone();
+            let diag = |k: usize| 4 * pattern.ptr[k] as usize;
+            for (k, wk) in [(a, wa), (b, wb)] {
+                let d = diag(k);
+                changed[d] += wk[0] * wk[0];
+                changed[d + 1] += wk[1] * wk[0];
+                changed[d + 3] += wk[1] * wk[1];
+            }
+            changed[4 * p] += wb[0] * wa[0];
+            changed[4 * p + 1] += wb[1] * wa[0];
+            changed[4 * p + 2] += wb[0] * wa[1];
+            changed[4 * p + 3] += wb[1] * wa[1];
+            let mut fresh = BlockCholesky::default();
+            fresh.analyse(pattern.clone(), false);
+            assert!(fresh.factorize(&changed));
+            let row = |w: &mut Vec<f64>| {
+                w.iter_mut().for_each(|x| *x = 0.0);
+                w[2 * a..2 * a + 2].copy_from_slice(&wa);
+                w[2 * b..2 * b + 2].copy_from_slice(&wb);
+            };
+            let mut w = vec![0.0; 2 * n];
+            let before = chol.values.clone();
+            row(&mut w);
+            assert!(chol.update(&mut w, a, 1.0));
+            assert!(w.iter().all(|&x| x == 0.0), "w left zero");
+            let close = |x: &[Block], y: &[Block]| {
+                x.iter()
+                    .flatten()
+                    .zip(y.iter().flatten())
+                    .map(|(p, q)| (p - q).abs() / (1.0 + q.abs()))
+                    .fold(0.0, f64::max)
+            };
+            let err = close(&chol.values, &fresh.values);
+            assert!(err < 1e-12, "update from column {a}: {err:e}");
+            row(&mut w);
+            assert!(chol.update(&mut w, a, -1.0));
+            let err = close(&chol.values, &before);
+            assert!(err < 1e-12, "downdate from column {a}: {err:e}");
+        }
+        // A downdate that would leave the matrix indefinite is refused.
+        let mut w = vec![0.0; 2 * n];
+        w[0] = 100.0;
+        assert!(!chol.update(&mut w, 0, -1.0));
     }
 
     #[test]
