@@ -58,6 +58,8 @@ pub struct FactorizationCounts {
     /// Numeric factorizations in 2×2 blocks split over two threads
     /// ([`InteriorPointSettings::split_factorization`](crate::InteriorPointSettings)).
     pub split_factorizations: usize,
+    /// Rank-one updates and downdates of a factorization in 2×2 blocks.
+    pub updates: usize,
 }
 
 /// Seconds spent per stage of the factorization machinery, accumulated.
@@ -529,6 +531,8 @@ pub(crate) struct NormalEquations {
     amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
+    // The row of an update, in the factor's order (left zero by each update).
+    update_w: Vec<f64>,
     // The second thread of factorizations and solves in 2×2 blocks split in two, whether
     // the split pays here, and whether the last factorization was split.
     helper: Option<std::sync::Arc<Helper>>,
@@ -642,6 +646,7 @@ impl NormalEquations {
             mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
             amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
+            update_w: Vec::new(),
             helper: None,
             split_choice: SplitChoice::default(),
             last_split: false,
@@ -976,6 +981,38 @@ impl NormalEquations {
                 )
                 .is_ok()
         });
+        self.times.factorize += clock.elapsed().as_secs_f64();
+        ok
+    }
+
+    /// The last factorization changed to that of the same matrix with row `i`'s weight
+    /// `d_i` moved by `delta` (a rank-one update, or a downdate when `delta < 0`), in 2×2
+    /// blocks only. False when the factor is not in blocks or a downdate left a pivot that
+    /// is not positive (factorize again then).
+    pub(crate) fn update_row(&mut self, j: &ConstraintRows, i: usize, delta: f64) -> bool {
+        if !self.blocked || delta == 0.0 {
+            return self.blocked;
+        }
+        let clock = Instant::now();
+        let n = self.pattern.n;
+        self.update_w.resize(n, 0.0);
+        let scale = delta.abs().sqrt();
+        let coefs = j.coefficients();
+        let p = &self.pattern;
+        let range = p.row_entry_start[i] as usize..p.row_entry_start[i + 1] as usize;
+        let mut first = usize::MAX;
+        for &[q, p0, p1] in &p.row_entries[range] {
+            let q = q as usize;
+            self.update_w[2 * q] = scale * coefs[p0 as usize];
+            self.update_w[2 * q + 1] = scale * coefs[p1 as usize];
+            first = first.min(q);
+        }
+        self.counts.updates += 1;
+        let ok =
+            first == usize::MAX || self.block.update(&mut self.update_w, first, delta.signum());
+        if !ok {
+            self.update_w.iter_mut().for_each(|x| *x = 0.0);
+        }
         self.times.factorize += clock.elapsed().as_secs_f64();
         ok
     }

@@ -570,6 +570,83 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
     }
 }
 
+/// Newton on disks' contacts, where its factors are in 2×2 blocks: with a few changed rows
+/// updated into the factor in hand (the default) and with every Newton matrix factorized,
+/// cold, warm, pushed harder and across a change of pattern, each answer checked against the
+/// KKT conditions, the exact enumerator and Clarabel's objective; on the small crush too.
+/// The updates must have been taken, and saved factorizations.
+#[test]
+fn newton_with_factor_updates_meets_kkt_on_disk_contacts() {
+    let mut rng = ChaCha8Rng::seed_from_u64(57);
+    let target = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut newtons = [NewtonSettings::default().max_updates, 0]
+        .map(|k| Newton::new(NewtonSettings::builder().max_updates(k).build().unwrap()).unwrap());
+    assert!(NewtonSettings::default().max_updates > 0);
+    let solve = |newton: &mut Newton, inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
+        let p = ProjectionProblem {
+            w: &inst.w,
+            jacobian: &inst.rows,
+            b: &inst.b,
+        };
+        let rep = newton.solve(&p, target, sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        check_kkt(inst, name, sol, rep.gap, rep.violation);
+        check_report(&p, target, name, sol, &rep);
+        assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+    };
+    for case in 0..60 {
+        let mut inst = disk_instance(&mut rng);
+        if case % 2 == 1 {
+            inst = scale_rows(&mut rng, &inst);
+        }
+        let next = perturb(&mut rng, &inst, 0.05, 0.01, false);
+        let mut other = disk_instance(&mut rng);
+        while other.rows.dim() != next.rows.dim() {
+            other = disk_instance(&mut rng);
+        }
+        let harder = Instance {
+            w: next.w.iter().map(|w| 1.01 * w).collect(),
+            ..next.clone()
+        };
+        for (k, newton) in newtons.iter_mut().enumerate() {
+            let name = format!("disks case {case}, newton {k}");
+            let mut sol = ProjectionSolution::default();
+            solve(newton, &inst, &mut sol, &format!("{name} cold"));
+            sol.lambda = matched(&inst, &sol.lambda, &next);
+            solve(newton, &next, &mut sol, &format!("{name} warm"));
+            solve(newton, &harder, &mut sol, &format!("{name} pushed harder"));
+            sol.lambda = matched(&harder, &sol.lambda, &other);
+            solve(newton, &other, &mut sol, &format!("{name} pattern change"));
+        }
+    }
+    // (Too many rows for the enumerator: the report and Clarabel's objective.)
+    let (w, rows, b) = small_crush();
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let reference = clarabel_answer(&p, target);
+    for (k, newton) in newtons.iter_mut().enumerate() {
+        let name = format!("small crush, newton {k}");
+        let mut sol = ProjectionSolution::default();
+        let rep = newton.solve(&p, target, &mut sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        check_report(&p, target, &name, &sol, &rep);
+        assert_clarabel_objective(&p, &name, &sol, rep.gap, &reference);
+    }
+    let (updating, factorizing) = (newtons[0].counts(), newtons[1].counts());
+    assert_eq!(factorizing.updates, 0, "{factorizing:?}");
+    assert!(updating.updates > 50, "{updating:?}");
+    assert!(
+        updating.factorizations < factorizing.factorizations,
+        "{updating:?} against {factorizing:?}"
+    );
+}
+
 #[test]
 fn random_feasible_problems_meet_kkt() {
     run_all(0, 60, 1);
