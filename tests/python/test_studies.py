@@ -73,6 +73,37 @@ def test_converge_reports_the_error_its_runs_have(tmp_path, count):
     assert (out / "converge.svg").read_text().startswith("<svg")
 
 
+def test_a_converge_run_that_fails_is_recorded_and_the_others_still_run(tmp_path):
+    # 0.4 s does not divide the sampling interval T / K = 1 s: that run fails; the others are
+    # measured, fitted and written, the failed one is in the JSON and the table, and the exit
+    # status says a run failed (the whole study was lost before, as tradeoff's was).
+    out = tmp_path / "converge"
+    proc = moreau("converge", SCENE, "--horizon", T, "--samples", K, "--h-min", 0.01,
+                  "--steps", "0.02,0.4,0.05,0.1", "-o", out, "--quiet", check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert "1 of 4 runs failed" in proc.stderr, proc.stderr
+    report = json.loads((out / "converge.json").read_text())
+    rows = report["rows"]
+    assert [r["h"] for r in rows] == [0.02, 0.4, 0.05, 0.1]
+    failed = [r for r in rows if r["failed"]]
+    assert [r["h"] for r in failed] == [0.4]
+    assert "does not divide the sampling interval" in failed[0]["failed"]
+    assert failed[0]["error"] is None
+    done = [r for r in rows if not r["failed"]]
+    assert all(r["error"] > 0 and r["steps"] == round(T / r["h"]) for r in done), done
+    # The fit is over the three measured runs only: the same order as a study of those three.
+    alone = tmp_path / "alone"
+    moreau("converge", SCENE, "--horizon", T, "--samples", K, "--h-min", 0.01,
+           "--steps", "0.02,0.05,0.1", "-o", alone, "--quiet")
+    expected = json.loads((alone / "converge.json").read_text())
+    assert [r["error"] for r in expected["rows"]] == [r["error"] for r in done]
+    assert report["fits"] == expected["fits"]
+    table = (out / "converge.md").read_text()
+    assert "| 0.4 | | failed: step 0.4 does not divide" in table, table
+    assert table.count("\n| ") == 5  # the header and four runs
+    assert (out / "converge.svg").read_text().startswith("<svg")
+
+
 def test_tradeoff_reports_the_error_its_runs_have(tmp_path):
     out = tmp_path / "tradeoff"
     moreau("tradeoff", SCENE, "--horizon", T, "--samples", K, "--reference-step", 0.01,

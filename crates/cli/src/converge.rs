@@ -3,6 +3,7 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use moreau_crowd::Scene;
@@ -61,7 +62,8 @@ pub struct ConvergeArgs {
 struct Row {
     h: f64,
     steps: usize,
-    error: f64,
+    /// Error (24); `None` (`null`) for a run that failed.
+    error: Option<f64>,
     error_per_person_max: f64,
     iterations_per_step: f64,
     max_eps: f64,
@@ -70,6 +72,8 @@ struct Row {
     /// With `--count in-room`: the most people, at one t_i, through an exit in one run and
     /// not in the other (0 with `--count all`).
     passed_mismatch: usize,
+    /// Why the run failed (`None` for a run that reached the horizon).
+    failed: Option<String>,
 }
 
 #[derive(Debug, Serialize)]
@@ -96,8 +100,9 @@ struct Report {
     fits: Vec<Fit>,
 }
 
-/// Runs `moreau converge`.
-pub fn converge(args: &ConvergeArgs) -> Result<()> {
+/// Runs `moreau converge`: success when every run reached the horizon, 1 when one failed
+/// (recorded as failed, the others run).
+pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
     let mut scene = Scene::from_file(&args.scene)?;
     if let Some(t) = args.horizon {
         scene.time.horizon = t;
@@ -130,10 +135,47 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
     say(format!("  {} steps", reference.steps));
     let n = reference.states[0].len() / 2;
-    let mut rows = Vec::new();
+    let mut report = Report {
+        scene: args.scene.display().to_string(),
+        people: n,
+        horizon: scene.time.horizon,
+        h_min: args.h_min,
+        samples: args.samples,
+        eps_kappa: scene.solver.eps_kappa,
+        count: args.count,
+        error_definition: match args.count {
+            Count::All => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over everyone, t_i = i T / samples (Bernicot & Venel (24))",
+            Count::InRoom => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over the people who passed no exit by t_i in either run, t_i = i T / samples ((24) restricted to the room)",
+        }
+        .into(),
+        rows: Vec::new(),
+        fits: Vec::new(),
+    };
+    // Each run's row is written as soon as it is measured; a run that fails is recorded as
+    // failed and the others still run (the exit status says whether every run finished).
     for &h in &args.steps {
-        let run = sample(&scene, &How::Fixed(h), args.samples, leaving)
-            .with_context(|| format!("run with h = {h}"))?;
+        let run = match sample(&scene, &How::Fixed(h), args.samples, leaving) {
+            Ok(run) => run,
+            Err(e) => {
+                let why = format!("{e:#}");
+                say(format!("  h = {h:<7} failed: {why}"));
+                report.rows.push(Row {
+                    h,
+                    steps: 0,
+                    error: None,
+                    error_per_person_max: 0.0,
+                    iterations_per_step: 0.0,
+                    max_eps: 0.0,
+                    max_violation: 0.0,
+                    wall_seconds: 0.0,
+                    passed_mismatch: 0,
+                    failed: Some(why),
+                });
+                report.fits = fits(&report.rows, args.h_min);
+                write(&args.out, &report)?;
+                continue;
+            }
+        };
         // (24): e_h = max_i |q_hmin(t_i) − q_h(t_i)|, Euclidean norm over all coordinates (or
         // over the people still in the room).
         let (error, per_person, passed_mismatch) = match args.count {
@@ -148,54 +190,24 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         say(format!(
             "  h = {h:<7} e_h = {error:.4e}  ({steps} steps, {it:.0} iterations/step, {wall:.1} s)"
         ));
-        rows.push(Row {
+        report.rows.push(Row {
             h,
             steps,
-            error,
+            error: Some(error),
             error_per_person_max: per_person,
             iterations_per_step: it,
             max_eps: run.max_eps,
             max_violation: run.max_violation,
             wall_seconds: wall,
             passed_mismatch,
+            failed: None,
         });
+        report.fits = fits(&report.rows, args.h_min);
+        write(&args.out, &report)?;
     }
-
-    let all: Vec<(f64, f64)> = rows.iter().map(|r| (r.h, r.error)).collect();
-    let far: Vec<(f64, f64)> = all
-        .iter()
-        .copied()
-        .filter(|(h, _)| *h >= 4.0 * args.h_min)
-        .collect();
-    let mut fits = Vec::new();
-    for (label, pts) in [("all steps", &all), ("h ≥ 4 h_min", &far)] {
-        if let Some((order, constant, r2)) = fit_power(pts) {
-            fits.push(Fit {
-                points: label.into(),
-                order,
-                order_95: order_interval(pts),
-                constant,
-                r2,
-            });
-        }
+    if args.steps.is_empty() {
+        write(&args.out, &report)?;
     }
-    let report = Report {
-        scene: args.scene.display().to_string(),
-        people: n,
-        horizon: scene.time.horizon,
-        h_min: args.h_min,
-        samples: args.samples,
-        eps_kappa: scene.solver.eps_kappa,
-        count: args.count,
-        error_definition: match args.count {
-            Count::All => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over everyone, t_i = i T / samples (Bernicot & Venel (24))",
-            Count::InRoom => "e_h = max_{i=1..samples} |q_{h_min}(t_i) - q_h(t_i)|_2 over the people who passed no exit by t_i in either run, t_i = i T / samples ((24) restricted to the room)",
-        }
-        .into(),
-        rows,
-        fits,
-    };
-    write(&args.out, &report)?;
     for f in &report.fits {
         println!(
             "observed order ({}): {:.3}{} (R² = {:.3})",
@@ -210,7 +222,46 @@ pub fn converge(args: &ConvergeArgs) -> Result<()> {
         "wrote {}/converge.json, converge.md, converge.svg",
         args.out.display()
     );
-    Ok(())
+    let failed = report.rows.iter().filter(|r| r.failed.is_some()).count();
+    if failed > 0 {
+        eprintln!(
+            "moreau: {failed} of {} runs failed (recorded as failed in {}/converge.md)",
+            report.rows.len(),
+            args.out.display()
+        );
+        return Ok(ExitCode::from(1));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The measured points `(h, e_h)`: the runs that did not fail.
+fn measured(rows: &[Row]) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter_map(|r| r.error.map(|e| (r.h, e)))
+        .collect()
+}
+
+/// The fitted orders over every measured step and over those ≥ 4 h_min.
+fn fits(rows: &[Row], h_min: f64) -> Vec<Fit> {
+    let all = measured(rows);
+    let far: Vec<(f64, f64)> = all
+        .iter()
+        .copied()
+        .filter(|(h, _)| *h >= 4.0 * h_min)
+        .collect();
+    let mut fits = Vec::new();
+    for (label, pts) in [("all steps", &all), ("h ≥ 4 h_min", &far)] {
+        if let Some((order, constant, r2)) = fit_power(pts) {
+            fits.push(Fit {
+                points: label.into(),
+                order,
+                order_95: order_interval(pts),
+                constant,
+                r2,
+            });
+        }
+    }
+    fits
 }
 
 fn write(dir: &Path, report: &Report) -> Result<()> {
@@ -239,12 +290,17 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
     for r in &report.rows {
+        let (Some(error), None) = (r.error, &r.failed) else {
+            let why = r.failed.as_deref().unwrap_or("no error");
+            let _ = writeln!(md, "| {} | | failed: {} | | | | | | |", r.h, why);
+            continue;
+        };
         let _ = writeln!(
             md,
             "| {} | {} | {:.4e} | {:.4e} | {:.0} | {:.2e} | {:.2e} | {:.2} | {} |",
             r.h,
             r.steps,
-            r.error,
+            error,
             r.error_per_person_max,
             r.iterations_per_step,
             r.max_eps,
@@ -267,7 +323,8 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
     }
     std::fs::write(dir.join("converge.md"), md)?;
 
-    let measured: Vec<(f64, f64)> = report.rows.iter().map(|r| (r.h, r.error)).collect();
+    // (A failed run has no error: it is left out.)
+    let measured = measured(&report.rows);
     let mut series = vec![Series {
         name: "e_h (measured)".into(),
         points: measured.clone(),

@@ -41,6 +41,16 @@ Exit codes:
 
 The three files are rewritten after each run: an interrupted study keeps the runs it measured.";
 
+const CONVERGE_EXIT_CODES: &str = "\
+Exit codes:
+  0    every run reached the horizon; converge.json, .md and .svg written
+  1    a run failed (e.g. a step that does not divide T / samples, or a projection its solver
+       could not certify): it is in converge.json (error null) and converge.md as failed, with
+       why, and left out of the fits and the plot; the others were run
+  2    bad input (command line, scene file, output directory), or the reference run failed
+
+The three files are rewritten after each run: an interrupted study keeps the runs it measured.";
+
 /// moreau: Moreau's catching-up scheme for first-order nonsmooth dynamics, with crowds of
 /// rigid disks that never overlap.
 #[derive(Debug, Parser)]
@@ -60,7 +70,9 @@ enum Command {
     #[command(after_help = EXIT_CODES)]
     Run(run::RunArgs),
     /// The convergence experiment of Bernicot & Venel §5: error (24) of each step size
-    /// against a fine reference, the fitted order, as JSON, Markdown and a log–log SVG.
+    /// against a fine reference, the fitted order, as JSON, Markdown and a log–log SVG. A run
+    /// that fails is recorded as failed and the others still run (exit status 1).
+    #[command(after_help = CONVERGE_EXIT_CODES)]
     Converge(converge::ConvergeArgs),
     /// Work–precision: error against wall time for fixed steps, adaptive steps at several
     /// tolerances and each solver, against a fine reference; JSON, Markdown and SVG. A run
@@ -183,7 +195,7 @@ fn run() -> Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
         Command::Run(args) => run::run(&args),
-        Command::Converge(args) => converge::converge(&args).map(|()| ExitCode::SUCCESS),
+        Command::Converge(args) => converge::converge(&args),
         Command::Bench(args) => bench::bench(&args).map(|()| ExitCode::SUCCESS),
         Command::Tradeoff(args) => tradeoff::tradeoff(&args),
         Command::View(args) => view::view(&args).map(|()| ExitCode::SUCCESS),
