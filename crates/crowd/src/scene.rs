@@ -311,6 +311,40 @@ pub struct SolverSettings {
     /// certified tolerance.
     #[serde(default = "default_threads")]
     pub threads: usize,
+    /// Our interior point's settings (`[solver.interior]`: `kind = "interior"`, and inside
+    /// `auto`; absent: the defaults, and then not written out). Threads: `threads`.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub interior: moreau_solve::InteriorPointSettings,
+    /// The semismooth Newton method's (`[solver.newton]`, `kind = "newton"`).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub newton: moreau_solve::NewtonSettings,
+    /// Projected Gauss–Seidel's (`[solver.gauss_seidel]`: `kind = "gauss-seidel"`, and inside
+    /// `auto`, whose own `first_order_passes` is its budget there).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub gauss_seidel: moreau_solve::GaussSeidelSettings,
+    /// APGD's (`[solver.apgd]`: `kind = "apgd"`, and the fallback of large problems).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub apgd: moreau_solve::ApgdSettings,
+    /// `auto`'s own (`[solver.auto]`).
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub auto: moreau_solve::AutoSettings,
+}
+
+fn is_default<T: Default + PartialEq>(x: &T) -> bool {
+    *x == T::default()
+}
+
+impl SolverSettings {
+    /// Every solver's settings, for [`SolverKind::build_with`].
+    pub fn tuning(&self) -> moreau_solve::SolverTuning {
+        moreau_solve::SolverTuning {
+            interior: self.interior,
+            newton: self.newton,
+            gauss_seidel: self.gauss_seidel,
+            apgd: self.apgd,
+            auto: self.auto,
+        }
+    }
 }
 
 impl Default for SolverSettings {
@@ -322,6 +356,11 @@ impl Default for SolverSettings {
             grid_cell: default_cell(),
             broad_phase: BroadPhaseChoice::Auto,
             threads: default_threads(),
+            interior: Default::default(),
+            newton: Default::default(),
+            gauss_seidel: Default::default(),
+            apgd: Default::default(),
+            auto: Default::default(),
         }
     }
 }
@@ -616,6 +655,16 @@ impl Scene {
                 s.threads,
                 "at most 1024 (0: every core)",
             ));
+        }
+        if let Err((table, e)) = s.tuning().validate() {
+            return Err(match e {
+                moreau_solve::SolveError::InvalidSetting {
+                    field,
+                    value,
+                    reason,
+                } => CrowdError::invalid(format!("solver.{table}.{field}"), value, reason),
+                other => CrowdError::invalid(format!("solver.{table}"), "", other.to_string()),
+            });
         }
         let (lo, hi) = outer.bounds();
         let cells = grid_cells(lo, hi, s.grid_cell);

@@ -298,9 +298,10 @@ impl Simulation {
         let solver = scene
             .solver
             .kind
-            .build(
+            .build_with(
                 Parallelism::threads(scene.solver.threads),
                 2 * (n + events.capacity()),
+                &scene.solver.tuning(),
             )
             .map_err(moreau_integrate::IntegrateError::from)?;
         let settings = LinearizedSettings {

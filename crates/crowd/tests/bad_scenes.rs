@@ -56,6 +56,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
             &["groups[0].destination", "door", "unreachable"],
         ),
         ("unknown-key.toml", &["unknown field", "colour"]),
+        (
+            "solver-interior-step-fraction.toml",
+            &["solver.interior.step_fraction", "2", "must be in (0, 1)"],
+        ),
+        (
+            "solver-unknown-setting.toml",
+            &["unknown field", "max_update", "max_updates"],
+        ),
         ("empty-polygon.toml", &["area.outer", "0 vertices"]),
         ("no-groups.toml", &["groups", "no people"]),
         (

@@ -266,3 +266,38 @@ fn steps_on(scene: &Scene, threads: usize) -> (Vec<u32>, Vec<u64>, Vec<usize>) {
         .collect::<Vec<_>>();
     (sim.frame().ids.to_vec(), bits, rows)
 }
+
+/// A scene's `[solver.interior]` reaches the interior point, alone and inside `auto`, and
+/// round-trips through the scene's TOML (a scene without it writes no such table): with one
+/// iteration allowed, the jam's projections that need the interior point go to the fallback
+/// (Clarabel), which the step reports name; with the defaults none does.
+#[test]
+fn the_scenes_interior_point_settings_reach_the_solver() {
+    let jam = room(0.3, 0.05, 3.0, &spawn(75, "0.25", "1.0"));
+    assert!(!jam.to_toml().contains("[solver.interior]"));
+    for kind in [SolverKind::Interior, SolverKind::Auto] {
+        let answered_by_the_fallback = |max_iterations: Option<usize>| {
+            let mut scene = jam.clone();
+            scene.solver.kind = kind;
+            if let Some(n) = max_iterations {
+                scene.solver.interior.max_iterations = n;
+                let text = scene.to_toml();
+                assert!(text.contains("[solver.interior]"), "{text}");
+                assert!(!text.contains("[solver.newton]"), "{text}");
+                let again = Scene::from_toml(&text, "<round trip>").unwrap();
+                assert_eq!(again, scene);
+            }
+            let mut sim = Simulation::new(scene.clone()).unwrap();
+            let mut fallback = 0;
+            for mu in common::steps(sim.scene()) {
+                let report = sim.step(mu).unwrap();
+                assert_feasible(&scene, &sim, &report);
+                fallback += usize::from(report.solver == "clarabel");
+            }
+            fallback
+        };
+        assert_eq!(answered_by_the_fallback(None), 0, "{kind:?}");
+        let one = answered_by_the_fallback(Some(1));
+        assert!(one >= 3, "{kind:?}: the fallback answered {one} steps");
+    }
+}

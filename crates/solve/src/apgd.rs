@@ -11,7 +11,8 @@ use crate::products::{Transpose, row_dot_sum};
 use crate::workers::Workers;
 
 /// Settings of [`Apgd`]; build them with [`ApgdSettings::builder`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ApgdSettings {
     /// Iteration budget per solve.
     pub max_iterations: usize,
@@ -20,6 +21,7 @@ pub struct ApgdSettings {
     /// Restart the momentum when it points uphill (O'Donoghue–Candès gradient test).
     pub adaptive_restart: bool,
     /// Threads for the products and vector updates (the same bits on any count).
+    #[serde(skip)]
     pub parallelism: Parallelism,
 }
 

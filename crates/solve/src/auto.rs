@@ -34,7 +34,8 @@ const PREDICTED_MARGIN: f64 = 1.0;
 const LARGEST_CHANGE_SHARE: f64 = 0.25;
 
 /// Settings of [`AutoSolver`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct AutoSettings {
     /// Gauss–Seidel's budget of passes over a component (or a group of small ones) before
     /// the interior point takes it. Gauss–Seidel gives a component up before that when its
@@ -71,7 +72,29 @@ pub struct AutoSettings {
     /// point's part runs as two solves at once (the largest component here, the others on the
     /// shared helper thread), the largest one's factorizations split with the helper when it
     /// is free; a large component Gauss–Seidel skips is solved while it sweeps the others.
+    #[serde(skip)]
     pub parallelism: Parallelism,
+}
+
+impl AutoSettings {
+    /// Checks every field; the error names the first one out of its domain.
+    pub fn validate(&self) -> Result<(), SolveError> {
+        if !(self.set_aside_factor >= 1.0) {
+            return Err(SolveError::InvalidSetting {
+                field: "set_aside_factor",
+                value: self.set_aside_factor.to_string(),
+                reason: "must be at least 1 (or infinite: never)",
+            });
+        }
+        if self.first_order_passes == 0 {
+            return Err(SolveError::InvalidSetting {
+                field: "first_order_passes",
+                value: "0".into(),
+                reason: "must be at least 1",
+            });
+        }
+        Ok(())
+    }
 }
 
 impl Default for AutoSettings {
@@ -282,30 +305,36 @@ impl GroupSweeper {
 }
 
 impl AutoSolver {
-    /// Both solvers, with validated settings.
+    /// Both solvers, with validated settings (and the default settings of each).
     pub fn new(settings: AutoSettings) -> Result<Self, SolveError> {
-        if !(settings.set_aside_factor >= 1.0) {
-            return Err(SolveError::InvalidSetting {
-                field: "set_aside_factor",
-                value: settings.set_aside_factor.to_string(),
-                reason: "must be at least 1 (or infinite: never)",
-            });
-        }
-        if settings.first_order_passes == 0 {
-            return Err(SolveError::InvalidSetting {
-                field: "first_order_passes",
-                value: "0".into(),
-                reason: "must be at least 1",
-            });
-        }
+        Self::with_solvers(
+            settings,
+            InteriorPointSettings::default(),
+            GaussSeidelSettings::default(),
+        )
+    }
+
+    /// Both solvers, with validated settings: the interior point's from `interior` but for
+    /// its threads and its split factorization (chosen here, below), Gauss–Seidel's from
+    /// `gauss_seidel` but for its threads, its budget (`first_order_passes`) and giving
+    /// up when slow (always, here).
+    pub fn with_solvers(
+        settings: AutoSettings,
+        interior: InteriorPointSettings,
+        gauss_seidel: GaussSeidelSettings,
+    ) -> Result<Self, SolveError> {
+        settings.validate()?;
         // Gauss–Seidel's certificate loops on a thread pool lost on cromosim's scene (9.2
         // against 11.7 ms a step on two threads): its parts are small; it runs on one thread.
-        let gauss_seidel = GaussSeidelSettings::builder()
-            .max_passes(settings.first_order_passes)
-            .abandon_when_slow(true)
-            .build()?;
+        let gauss_seidel = GaussSeidelSettings {
+            max_passes: settings.first_order_passes,
+            abandon_when_slow: true,
+            parallelism: Parallelism::SEQUENTIAL,
+            ..gauss_seidel
+        };
+        gauss_seidel.validate()?;
         let sweepers = (0..settings.parallelism.get())
-            .map(|_| GroupSweeper::new(gauss_seidel.clone()))
+            .map(|_| GroupSweeper::new(gauss_seidel))
             .collect::<Result<_, _>>()?;
         let gauss_seidel = GaussSeidelGroups {
             sweepers,
@@ -319,12 +348,11 @@ impl AutoSolver {
         // same cores would only contend), and the largest one's factorizations split in two
         // (measured: benches/README.md, session 16).
         let interior = |split: bool| {
-            InteriorPoint::new(
-                InteriorPointSettings::builder()
-                    .parallelism(Parallelism::SEQUENTIAL)
-                    .split_factorization(split)
-                    .build()?,
-            )
+            InteriorPoint::new(InteriorPointSettings {
+                parallelism: Parallelism::SEQUENTIAL,
+                split_factorization: split,
+                ..interior
+            })
         };
         let threads = !settings.parallelism.is_sequential();
         Ok(Self {

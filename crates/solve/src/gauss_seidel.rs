@@ -16,7 +16,8 @@ use crate::workers::Workers;
 const ABANDON_AFTER: usize = 16;
 
 /// The order in which a forward pass visits the rows (a backward pass reverses it).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum RowOrder {
     /// The order the rows are stored in (a crowd's: the broad phase's pairs, then walls).
     Storage,
@@ -26,7 +27,8 @@ pub enum RowOrder {
 }
 
 /// Settings of [`GaussSeidel`]; build them with [`GaussSeidelSettings::builder`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct GaussSeidelSettings {
     /// Budget of passes over the rows per solve (a symmetric sweep is two passes).
     pub max_passes: usize,
@@ -58,6 +60,7 @@ pub struct GaussSeidelSettings {
     pub abandon_when_slow: bool,
     /// Threads for the certificate's passes and the dual objective's sums (the sweeps
     /// themselves are sequential); the same bits on any count.
+    #[serde(skip)]
     pub parallelism: Parallelism,
 }
 
@@ -417,7 +420,7 @@ impl ProjectionSolver for GaussSeidel {
         p.validate()?;
         let (m, n) = (p.rows(), p.dim());
         sol.resize_for(p);
-        let settings = self.settings.clone();
+        let settings = self.settings;
         self.rows.build(p, settings.order, settings.relaxation)?;
         // The warm start in sweep order, clamped to λ ≥ 0; a row without gradient gets 0
         // (its slack is the constant b_k: a multiplier there would only add to the gap).

@@ -27,7 +27,8 @@ use crate::products::row_dot;
 use crate::workers::Workers;
 
 /// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct InteriorPointSettings {
     /// Iteration (factorization) budget per solve.
     pub max_iterations: usize,
@@ -95,6 +96,7 @@ pub struct InteriorPointSettings {
     /// Threads for the loops over rows and unknowns and for faer's factorizations and
     /// triangular solves (the 2×2-block factorization of crowds is sequential unless
     /// `split_factorization`).
+    #[serde(skip)]
     pub parallelism: Parallelism,
 }
 
@@ -329,7 +331,7 @@ impl InteriorPoint {
             normal.split_over_two_threads();
         }
         Ok(Self {
-            settings: settings.clone(),
+            settings,
             normal,
             s: Vec::new(),
             d: Vec::new(),

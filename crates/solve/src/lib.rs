@@ -41,6 +41,38 @@ pub use problem::{ProjectionProblem, ProjectionSolution, ProjectionSolver, Solve
 use moreau_core::Parallelism;
 use serde::{Deserialize, Serialize};
 
+/// The settings of each of our solvers, as a scene gives them (`[solver.interior]`, …; each
+/// absent: its defaults), for [`SolverKind::build_with`]: a kind uses its own, and `auto`
+/// its own with the interior point's and Gauss–Seidel's (but for what `auto` chooses itself:
+/// [`AutoSolver::with_solvers`]). Threads are not among them: they come with the build.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SolverTuning {
+    /// Our interior point's (`interior`, and inside `auto`).
+    pub interior: InteriorPointSettings,
+    /// The semismooth Newton method's (`newton`).
+    pub newton: NewtonSettings,
+    /// Projected Gauss–Seidel's (`gauss-seidel`, and inside `auto`).
+    pub gauss_seidel: GaussSeidelSettings,
+    /// APGD's (`apgd`, and the fallback of large problems).
+    pub apgd: ApgdSettings,
+    /// `auto`'s own.
+    pub auto: AutoSettings,
+}
+
+impl SolverTuning {
+    /// Checks every solver's settings: the error names the solver (as scene files do:
+    /// `interior`, `newton`, `gauss_seidel`, `apgd`, `auto`) and the field.
+    pub fn validate(&self) -> Result<(), (&'static str, SolveError)> {
+        self.interior.validate().map_err(|e| ("interior", e))?;
+        self.newton.validate().map_err(|e| ("newton", e))?;
+        self.gauss_seidel
+            .validate()
+            .map_err(|e| ("gauss_seidel", e))?;
+        self.apgd.validate().map_err(|e| ("apgd", e))?;
+        self.auto.validate().map_err(|e| ("auto", e))
+    }
+}
+
 /// Which projection solver; the serde names are the ones scene files use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -119,15 +151,29 @@ impl SolverKind {
         }
     }
 
-    /// The solver of this kind, with its fallback, for problems of about `unknowns` unknowns.
+    /// The solver of this kind, with its fallback, for problems of about `unknowns` unknowns,
+    /// with every solver's default settings.
     pub fn build(
         self,
         parallelism: Parallelism,
         unknowns: usize,
     ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
+        self.build_with(parallelism, unknowns, &SolverTuning::default())
+    }
+
+    /// The solver of this kind, with its fallback, for problems of about `unknowns` unknowns,
+    /// each with its settings in `tuning` (and `parallelism`'s threads).
+    pub fn build_with(
+        self,
+        parallelism: Parallelism,
+        unknowns: usize,
+        tuning: &SolverTuning,
+    ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
         let apgd = || -> Result<Box<dyn ProjectionSolver>, SolveError> {
-            let settings = ApgdSettings::builder().parallelism(parallelism).build()?;
-            Ok(Box::new(Apgd::new(settings)?))
+            Ok(Box::new(Apgd::new(ApgdSettings {
+                parallelism,
+                ..tuning.apgd
+            })?))
         };
         let clarabel = || -> Box<dyn ProjectionSolver> {
             Box::new(ClarabelReference::new(ClarabelSettings::default()))
@@ -136,36 +182,11 @@ impl SolverKind {
         let (primary, fallback): (Box<dyn ProjectionSolver>, _) = match self {
             SolverKind::Clarabel => return Ok(clarabel()),
             SolverKind::Apgd => (apgd()?, clarabel()),
-            SolverKind::Interior => {
-                let settings = InteriorPointSettings::builder()
-                    .parallelism(parallelism)
-                    .build()?;
-                (
-                    Box::new(InteriorPoint::new(settings)?),
-                    if large { apgd()? } else { clarabel() },
-                )
-            }
-            SolverKind::Newton => {
-                let settings = NewtonSettings::builder().parallelism(parallelism).build()?;
-                (
-                    Box::new(Newton::new(settings)?),
-                    if large { apgd()? } else { clarabel() },
-                )
-            }
-            SolverKind::GaussSeidel => {
-                let settings = GaussSeidelSettings::builder()
-                    .parallelism(parallelism)
-                    .build()?;
-                (
-                    Box::new(GaussSeidel::new(settings)?),
-                    if large { apgd()? } else { clarabel() },
-                )
-            }
-            SolverKind::Auto => (
-                Box::new(AutoSolver::new(AutoSettings {
-                    parallelism,
-                    ..AutoSettings::default()
-                })?),
+            SolverKind::Interior
+            | SolverKind::Newton
+            | SolverKind::GaussSeidel
+            | SolverKind::Auto => (
+                self.build_alone_with(parallelism, tuning)?,
                 if large { apgd()? } else { clarabel() },
             ),
         };
@@ -178,28 +199,41 @@ impl SolverKind {
         self,
         parallelism: Parallelism,
     ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
+        self.build_alone_with(parallelism, &SolverTuning::default())
+    }
+
+    /// [`build_alone`](Self::build_alone) with each solver's settings in `tuning`.
+    pub fn build_alone_with(
+        self,
+        parallelism: Parallelism,
+        tuning: &SolverTuning,
+    ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
         Ok(match self {
             SolverKind::Clarabel => Box::new(ClarabelReference::new(ClarabelSettings::default())),
-            SolverKind::Apgd => Box::new(Apgd::new(
-                ApgdSettings::builder().parallelism(parallelism).build()?,
-            )?),
-            SolverKind::Interior => Box::new(InteriorPoint::new(
-                InteriorPointSettings::builder()
-                    .parallelism(parallelism)
-                    .build()?,
-            )?),
-            SolverKind::Newton => Box::new(Newton::new(
-                NewtonSettings::builder().parallelism(parallelism).build()?,
-            )?),
-            SolverKind::GaussSeidel => Box::new(GaussSeidel::new(
-                GaussSeidelSettings::builder()
-                    .parallelism(parallelism)
-                    .build()?,
-            )?),
-            SolverKind::Auto => Box::new(AutoSolver::new(AutoSettings {
+            SolverKind::Apgd => Box::new(Apgd::new(ApgdSettings {
                 parallelism,
-                ..AutoSettings::default()
+                ..tuning.apgd
             })?),
+            SolverKind::Interior => Box::new(InteriorPoint::new(InteriorPointSettings {
+                parallelism,
+                ..tuning.interior
+            })?),
+            SolverKind::Newton => Box::new(Newton::new(NewtonSettings {
+                parallelism,
+                ..tuning.newton
+            })?),
+            SolverKind::GaussSeidel => Box::new(GaussSeidel::new(GaussSeidelSettings {
+                parallelism,
+                ..tuning.gauss_seidel
+            })?),
+            SolverKind::Auto => Box::new(AutoSolver::with_solvers(
+                AutoSettings {
+                    parallelism,
+                    ..tuning.auto
+                },
+                tuning.interior,
+                tuning.gauss_seidel,
+            )?),
         })
     }
 

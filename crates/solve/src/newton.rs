@@ -43,7 +43,8 @@ use crate::problem::{
 use crate::products::row_dot;
 
 /// Settings of [`Newton`]; build them with [`NewtonSettings::builder`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct NewtonSettings {
     /// Numeric factorizations allowed per solve (the report's iterations).
     pub max_iterations: usize,
@@ -66,6 +67,7 @@ pub struct NewtonSettings {
     /// instead of factorized again; 0: always factorize.
     pub max_updates: usize,
     /// Threads for the factorization, the solves and the loops over rows and unknowns.
+    #[serde(skip)]
     pub parallelism: Parallelism,
 }
 
@@ -612,7 +614,7 @@ impl ProjectionSolver for Newton {
         self.normal.analyse(j)?;
         self.lam.copy_from_slice(&sol.lambda);
         self.v.copy_from_slice(&sol.v);
-        let st = self.settings.clone();
+        let st = self.settings;
         for i in 0..m {
             let q = self.norm_sq[i];
             self.rho[i] = if q > 0.0 { st.rho / q } else { 0.0 };
