@@ -6,15 +6,19 @@
 //! therefore bounds the error *per step* in the state's own unit (`tol`, metres for crowds):
 //! an error per unit step would ask `|Δv| ≤ tol` at a jump, which no step size gives. Steps
 //! grow by at most `grow`, shrink by at least `shrink` on a rejection, and stay in
-//! `[mu_min, mu_max]`; a step that the solver cannot certify is rejected like one that errs.
+//! `[mu_min, mu_max]`; a step that the solver cannot certify is rejected like one that errs,
+//! except at the floor of `ε/μ²` (below): there a smaller step asks the same relative
+//! accuracy of the same solver, so the third trial in a row that cannot be certified there
+//! ends the step with the error instead of halving on to `mu_min` (a solver that stalls
+//! above the floor would crawl through ~20 failing trials a step first).
 //! On smooth stretches steps settle at `μ ~ √(tol/C)`, so the global error scales like `√tol`;
 //! at equal error this costs what error-per-unit-step control costs there, without its
 //! collapse to `mu_min` at every contact.
 //!
-//! `ε_k = θ² tol² μ_k / μ_max`: the projection error `√ε_k ≤ θ tol` stays a fraction of the
-//! step's error budget, and `ε_k / μ_k² = θ² tol² / (μ_k μ_max) → 0` as `tol → 0` whether steps
-//! shrink like `tol` (jumps) or like `√tol` (smooth parts): Definition 4.3 of `seeds/002` with
-//! `tol` as the parameter that goes to zero.
+//! `ε_k = max(θ² tol² (μ_k / μ_max)³, floor · μ_k²)`: the projection error `√ε_k ≤ θ tol` stays
+//! a fraction of the step's error budget, and `ε_k / μ_k²` falls with `μ_k` and with `tol`,
+//! down to the `floor` double precision certifies ([`AdaptiveSettings::eps_policy`]):
+//! Definition 4.3 of `seeds/002` with `tol` as the parameter that goes to zero.
 
 use moreau_core::{Field, StepReport};
 use serde::{Deserialize, Serialize};
@@ -175,6 +179,10 @@ pub struct StepController {
 }
 
 impl StepController {
+    /// Trials in a row of one step that cannot be certified at the floor of `ε/μ²` (the
+    /// step, its half and its quarter) before the step ends with the error.
+    pub const UNCERTIFIED_AT_FLOOR: usize = 3;
+
     /// A controller with validated settings.
     pub fn new(settings: AdaptiveSettings) -> Result<Self, IntegrateError> {
         settings.validate()?;
@@ -251,7 +259,8 @@ impl StepController {
                 reason: "must be after the current time",
             });
         }
-        scheme.set_eps(s.eps_policy());
+        let policy = s.eps_policy();
+        scheme.set_eps(policy);
         let n = q.len();
         if self.v_prev.len() != n {
             self.v_prev.clear();
@@ -259,6 +268,7 @@ impl StepController {
         self.saved.clear();
         self.saved.extend_from_slice(q);
         let (mut rejected, mut iterations, mut redone) = (0usize, 0usize, 0usize);
+        let mut uncertified_at_floor = 0usize;
         let mut factorizations = 0usize;
         loop {
             // Land on t_end rather than leave a sliver after it.
@@ -310,9 +320,17 @@ impl StepController {
                     q.copy_from_slice(&self.saved);
                     return Err(e);
                 }
-                Err(
-                    IntegrateError::NotCertified { .. } | IntegrateError::CrossedOutside { .. },
-                ) => {
+                Err(e @ IntegrateError::NotCertified { .. }) => {
+                    if policy.at_floor(mu) {
+                        uncertified_at_floor += 1;
+                        if uncertified_at_floor == Self::UNCERTIFIED_AT_FLOOR {
+                            q.copy_from_slice(&self.saved);
+                            return Err(e);
+                        }
+                    }
+                    self.mu = mu * 0.5;
+                }
+                Err(IntegrateError::CrossedOutside { .. }) => {
                     self.mu = mu * 0.5;
                 }
                 Err(e) => {

@@ -88,6 +88,12 @@ impl EpsPolicy {
     pub fn eps(&self, mu: f64) -> f64 {
         (self.kappa * mu.powf(self.power)).max(self.floor * mu * mu)
     }
+
+    /// Whether `ε` is the floor's at step `mu` (then, and at every smaller step, `ε/μ²` is the
+    /// floor: a smaller step asks the same relative accuracy).
+    pub fn at_floor(&self, mu: f64) -> bool {
+        self.floor > 0.0 && self.floor * mu * mu >= self.kappa * mu.powf(self.power)
+    }
 }
 
 /// The steps `μ_k` of a run.

@@ -3,10 +3,10 @@
 //! grow after it, the `ε_k` policy follows the step, and it costs fewer steps than fixed steps
 //! at the same error.
 
-use moreau_core::{FnField, HalfSpace};
+use moreau_core::{FnField, HalfSpace, SolveStatus, StepReport};
 use moreau_integrate::{
-    AdaptiveSettings, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError, Scheme,
-    StepController, StepSequence,
+    AdaptiveSettings, Correction, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError,
+    Scheme, StepController, StepSequence,
 };
 
 const A: f64 = 1.0;
@@ -274,4 +274,99 @@ fn adaptive_eps_over_mu_squared_vanishes_as_the_steps_shrink() {
         "{last:e}"
     );
     assert!(policy.eps(settings.mu_max) / settings.mu_max.powi(2) > 10.0 * last);
+}
+
+/// A projection whose certificates stop at `reach · μ²` (a solver that stalls above the
+/// floor) at steps larger than `easy`, and certify anything at smaller ones; it counts its
+/// calls. Nothing to project onto: `q + μ w`.
+struct Stalling {
+    reach: f64,
+    easy: f64,
+    calls: usize,
+}
+
+impl Correction for Stalling {
+    type Set<'a> = ();
+
+    fn correct(
+        &mut self,
+        _set: &mut (),
+        q: &[f64],
+        w: &[f64],
+        eps_target: f64,
+        q_next: &mut [f64],
+        report: &mut StepReport,
+    ) -> Result<(), IntegrateError> {
+        self.calls += 1;
+        let mu = report.mu;
+        for i in 0..q.len() {
+            q_next[i] = q[i] + mu * w[i];
+        }
+        let eps = self.reach * mu * mu;
+        if mu > self.easy && eps > eps_target {
+            return Err(IntegrateError::NotCertified {
+                step: report.step,
+                t: report.t,
+                status: SolveStatus::MaxIterations,
+                eps,
+                eps_target,
+                violation: 0.0,
+                max_violation: 0.0,
+            });
+        }
+        report.eps = eps.min(eps_target);
+        report.eps_target = eps_target;
+        report.solver = "stalling";
+        Ok(())
+    }
+}
+
+/// One adaptive step from x = 1 with a first trial of `mu_first`, on a projection that
+/// stalls at `reach μ²` above `easy`: the step, and how many trials the projection saw.
+fn stalling_step(mu_first: f64, reach: f64, easy: f64) -> (Result<f64, IntegrateError>, usize) {
+    let mut settings = AdaptiveSettings::new(0.01);
+    settings.estimate = ErrorEstimate::VelocityChange;
+    settings.mu_first = mu_first;
+    let field: ExampleField = FnField::new(1, f as fn(f64, &[f64], &mut [f64]));
+    let mut scheme = Scheme::new(
+        Stalling {
+            reach,
+            easy,
+            calls: 0,
+        },
+        Default::default(),
+    );
+    let mut c = StepController::new(settings).unwrap();
+    let mut x = [X0];
+    let step = c.step(&mut scheme, &field, &mut (), 0, 0.0, &mut x, T);
+    let calls = scheme.correction().calls;
+    (step.map(|s| s.report.mu), calls)
+}
+
+/// At the floor of `ε/μ²` a smaller step asks the same relative accuracy: a projection that
+/// stalls above the floor ends the step after three trials (μ, μ/2, μ/4) with its error,
+/// instead of halving on to `mu_min` (fifteen trials from here) first.
+#[test]
+fn a_solver_that_stalls_above_the_floor_ends_the_step_at_once() {
+    let policy = AdaptiveSettings::new(0.01).eps_policy();
+    // The largest step at the floor: floor μ² = κ μ³.
+    let floor_mu = policy.floor / policy.kappa;
+    let mu = floor_mu / 2.0;
+    assert!(policy.at_floor(mu) && !policy.at_floor(2.0 * floor_mu));
+    let (step, calls) = stalling_step(mu, 10.0 * policy.floor, 0.0);
+    assert!(
+        matches!(step, Err(IntegrateError::NotCertified { .. })),
+        "{step:?}"
+    );
+    assert_eq!(calls, StepController::UNCERTIFIED_AT_FLOOR);
+    // A step that a smaller one does let the solver certify is still halved until it can.
+    let (step, calls) = stalling_step(mu, 10.0 * policy.floor, mu / 3.0);
+    assert_eq!(step.unwrap(), mu / 4.0);
+    assert_eq!(calls, 3);
+    // Above the floor (ε/μ² still falls as μ does) the trials go on past three.
+    let mu = 16.0 * floor_mu;
+    assert!(mu <= AdaptiveSettings::new(0.01).mu_max && !policy.at_floor(mu / 8.0));
+    let (step, calls) = stalling_step(mu, 1e9, mu / 10.0);
+    assert_eq!(step.unwrap(), mu / 16.0);
+    assert_eq!(calls, 5);
 }
