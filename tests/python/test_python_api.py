@@ -200,6 +200,34 @@ def test_bad_scenes_raise_scene_error_naming_the_field(tmp_path):
         moreau.Scene.from_file(tmp_path / "missing.toml")
 
 
+def test_solver_settings_from_a_dict_are_written_whole_and_bad_ones_are_named(tmp_path):
+    # Each solver's settings are a table of the scene's solver: absent, the defaults (and not
+    # written); given, written whole into the run file's scene, so the file says what ran.
+    d = moreau.Scene.from_file(ROOM).to_dict()
+    assert "interior" not in d["solver"] and "newton" not in d["solver"]
+    d["solver"]["interior"] = {"max_iterations": 60}
+    d["time"]["horizon"] = 0.5
+    scene = moreau.Scene.from_dict(d)
+    interior = scene.to_dict()["solver"]["interior"]
+    assert interior["max_iterations"] == 60 and 0 < interior["step_fraction"] < 1, interior
+    assert "newton" not in scene.to_dict()["solver"]
+    out = tmp_path / "tuned.h5"
+    assert moreau.run(scene, out)["status"] == "complete"
+    with h5py.File(out) as f:
+        written = f.attrs["scene"]
+    written = written.decode() if isinstance(written, bytes) else written
+    assert moreau.Scene.from_toml(written) == scene
+    assert "[solver.interior]" in written and "max_iterations = 60" in written, written
+
+    d["solver"]["interior"] = {"step_fraction": 2.0}
+    with pytest.raises(moreau.SceneError) as e:
+        moreau.Scene.from_dict(d)
+    assert e.value.field == "solver.interior.step_fraction" and e.value.value == "2", e.value
+    d["solver"]["interior"] = {"max_iteration": 60}
+    with pytest.raises(moreau.SceneError, match="max_iteration"):
+        moreau.Scene.from_dict(d)
+
+
 def test_areas_from_shapely_and_wkt_and_dicts_round_trip():
     import shapely
 
