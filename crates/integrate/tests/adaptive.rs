@@ -6,7 +6,7 @@
 use moreau_core::{FnField, HalfSpace, SolveStatus, StepReport};
 use moreau_integrate::{
     AdaptiveSettings, Correction, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError,
-    Scheme, StepController, StepSequence,
+    Scheme, StepController, StepSequence, Unconstrained,
 };
 
 const A: f64 = 1.0;
@@ -298,10 +298,8 @@ impl Correction for Stalling {
         report: &mut StepReport,
     ) -> Result<(), IntegrateError> {
         self.calls += 1;
+        Unconstrained.correct(&mut (), q, w, eps_target, q_next, report)?;
         let mu = report.mu;
-        for i in 0..q.len() {
-            q_next[i] = q[i] + mu * w[i];
-        }
         let eps = self.reach * mu * mu;
         if mu > self.easy && eps > eps_target {
             return Err(IntegrateError::NotCertified {

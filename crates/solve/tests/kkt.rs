@@ -377,6 +377,29 @@ fn matched(old: &Instance, lambda: &[f64], new: &Instance) -> Vec<f64> {
         .collect()
 }
 
+/// `solver`'s answer to `inst`, converged and checked against the KKT conditions, the exact
+/// enumerator, its own report and Clarabel's objective.
+fn solve_and_check(
+    solver: &mut dyn ProjectionSolver,
+    inst: &Instance,
+    target: Target,
+    sol: &mut ProjectionSolution,
+    name: &str,
+) -> SolveReport {
+    let p = ProjectionProblem {
+        w: &inst.w,
+        jacobian: &inst.rows,
+        b: &inst.b,
+    };
+    let rep = solver.solve(&p, target, sol).unwrap();
+    assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+    check_kkt(inst, name, sol, rep.gap, rep.violation);
+    check_report(&p, target, name, sol, &rep);
+    // Clarabel, an independent interior point, reaches the same objective.
+    assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+    rep
+}
+
 /// Newton cold, then warm from its answer on the next (perturbed) problem, both checked
 /// against the KKT conditions, the exact enumerator and Clarabel's objective.
 fn run_newton(kind: u32, cases: usize, seed: u64, scaled: bool, churn: bool) {
@@ -401,17 +424,7 @@ fn run_cold_and_warm(
     };
     let solver_name = solver.name();
     let mut solve = |inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
-        let p = ProjectionProblem {
-            w: &inst.w,
-            jacobian: &inst.rows,
-            b: &inst.b,
-        };
-        let rep = solver.solve(&p, target, sol).unwrap();
-        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
-        check_kkt(inst, name, sol, rep.gap, rep.violation);
-        check_report(&p, target, name, sol, &rep);
-        // Clarabel, an independent interior point, reaches the same objective.
-        assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+        solve_and_check(solver, inst, target, sol, name);
     };
     for case in 0..cases {
         let mut inst = random_instance(&mut rng, kind);
@@ -586,16 +599,7 @@ fn newton_with_factor_updates_meets_kkt_on_disk_contacts() {
         .map(|k| Newton::new(NewtonSettings::builder().max_updates(k).build().unwrap()).unwrap());
     assert!(NewtonSettings::default().max_updates > 0);
     let solve = |newton: &mut Newton, inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
-        let p = ProjectionProblem {
-            w: &inst.w,
-            jacobian: &inst.rows,
-            b: &inst.b,
-        };
-        let rep = newton.solve(&p, target, sol).unwrap();
-        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
-        check_kkt(inst, name, sol, rep.gap, rep.violation);
-        check_report(&p, target, name, sol, &rep);
-        assert_clarabel_objective(&p, name, sol, rep.gap, &clarabel_answer(&p, target));
+        solve_and_check(newton, inst, target, sol, name);
     };
     for case in 0..60 {
         let mut inst = disk_instance(&mut rng);
