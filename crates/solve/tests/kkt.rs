@@ -471,6 +471,43 @@ fn disk_instance(rng: &mut ChaCha8Rng) -> Instance {
     feasible(rng, n, &dense)
 }
 
+/// A crowd's problem (rows scaled 1 to 100 in odd cases), the next step's, the same with
+/// everyone pushing 1 % harder (the active set holds), and another crowd of the same size
+/// (the pattern changes under the warm start).
+fn disk_case(rng: &mut ChaCha8Rng, case: usize) -> [Instance; 4] {
+    let mut inst = disk_instance(rng);
+    if case % 2 == 1 {
+        inst = scale_rows(rng, &inst);
+    }
+    let next = perturb(rng, &inst, 0.05, 0.01, false);
+    let mut other = disk_instance(rng);
+    while other.rows.dim() != next.rows.dim() {
+        other = disk_instance(rng);
+    }
+    let harder = Instance {
+        w: next.w.iter().map(|w| 1.01 * w).collect(),
+        ..next.clone()
+    };
+    [inst, next, harder, other]
+}
+
+/// `solve` on a [`disk_case`]'s four problems in turn, each from the last answer's
+/// multipliers matched by key: cold, warm, pushed harder, after a pattern change.
+fn run_disk_case(
+    [inst, next, harder, other]: &[Instance; 4],
+    name: &str,
+    mut solve: impl FnMut(&Instance, &mut ProjectionSolution, &str) -> SolveReport,
+) -> [SolveReport; 4] {
+    let mut sol = ProjectionSolution::default();
+    let cold = solve(inst, &mut sol, &format!("{name} cold"));
+    sol.lambda = matched(inst, &sol.lambda, next);
+    let warm = solve(next, &mut sol, &format!("{name} warm"));
+    let held = solve(harder, &mut sol, &format!("{name} pushed harder"));
+    sol.lambda = matched(harder, &sol.lambda, other);
+    let changed = solve(other, &mut sol, &format!("{name} pattern change"));
+    [cold, warm, held, changed]
+}
+
 /// The interior point on disks' contacts factorizes in 2×2 blocks: cold, warm on the next
 /// step's problem, and after a change of pattern (another crowd of the same size), with
 /// rows scaled 1 to 100 in every other case, checked against the KKT conditions, the exact
@@ -529,40 +566,12 @@ fn the_interior_point_in_two_by_two_blocks_meets_kkt_on_disk_contacts() {
     // after it: its report says 1 and 1), for the last variant.
     let mut polished = 0;
     for case in 0..80 {
-        let mut inst = disk_instance(&mut rng);
-        if case % 2 == 1 {
-            inst = scale_rows(&mut rng, &inst);
-        }
-        let next = perturb(&mut rng, &inst, 0.05, 0.01, false);
-        // Another crowd of the same size: the pattern changes under the warm start.
-        let mut other = disk_instance(&mut rng);
-        while other.rows.dim() != next.rows.dim() {
-            other = disk_instance(&mut rng);
-        }
+        let problems = disk_case(&mut rng, case);
         for (k, interior) in interiors.iter_mut().enumerate() {
             let name = format!("disks case {case}, interior point {k}");
-            let mut sol = ProjectionSolution::default();
-            solve(interior, &inst, &mut sol, &format!("{name} cold"));
-            sol.lambda = matched(&inst, &sol.lambda, &next);
-            let warm = solve(interior, &next, &mut sol, &format!("{name} warm"));
-            // The same contacts, everyone pushing 1 % harder: the active set holds.
-            let harder = Instance {
-                w: next.w.iter().map(|w| 1.01 * w).collect(),
-                ..next.clone()
-            };
-            let held = solve(
-                interior,
-                &harder,
-                &mut sol,
-                &format!("{name} pushed harder"),
-            );
-            sol.lambda = matched(&harder, &sol.lambda, &other);
-            let changed = solve(
-                interior,
-                &other,
-                &mut sol,
-                &format!("{name} pattern change"),
-            );
+            let [_, warm, held, changed] = run_disk_case(&problems, &name, |inst, sol, name| {
+                solve(interior, inst, sol, name)
+            });
             if k == 2 {
                 polished += [warm, held, changed]
                     .iter()
@@ -598,32 +607,13 @@ fn newton_with_factor_updates_meets_kkt_on_disk_contacts() {
     let mut newtons = [NewtonSettings::default().max_updates, 0]
         .map(|k| Newton::new(NewtonSettings::builder().max_updates(k).build().unwrap()).unwrap());
     assert!(NewtonSettings::default().max_updates > 0);
-    let solve = |newton: &mut Newton, inst: &Instance, sol: &mut ProjectionSolution, name: &str| {
-        solve_and_check(newton, inst, target, sol, name);
-    };
     for case in 0..60 {
-        let mut inst = disk_instance(&mut rng);
-        if case % 2 == 1 {
-            inst = scale_rows(&mut rng, &inst);
-        }
-        let next = perturb(&mut rng, &inst, 0.05, 0.01, false);
-        let mut other = disk_instance(&mut rng);
-        while other.rows.dim() != next.rows.dim() {
-            other = disk_instance(&mut rng);
-        }
-        let harder = Instance {
-            w: next.w.iter().map(|w| 1.01 * w).collect(),
-            ..next.clone()
-        };
+        let problems = disk_case(&mut rng, case);
         for (k, newton) in newtons.iter_mut().enumerate() {
             let name = format!("disks case {case}, newton {k}");
-            let mut sol = ProjectionSolution::default();
-            solve(newton, &inst, &mut sol, &format!("{name} cold"));
-            sol.lambda = matched(&inst, &sol.lambda, &next);
-            solve(newton, &next, &mut sol, &format!("{name} warm"));
-            solve(newton, &harder, &mut sol, &format!("{name} pushed harder"));
-            sol.lambda = matched(&harder, &sol.lambda, &other);
-            solve(newton, &other, &mut sol, &format!("{name} pattern change"));
+            run_disk_case(&problems, &name, |inst, sol, name| {
+                solve_and_check(newton, inst, target, sol, name)
+            });
         }
     }
     // (Too many rows for the enumerator: the report and Clarabel's objective.)
