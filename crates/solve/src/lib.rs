@@ -169,12 +169,7 @@ impl SolverKind {
         unknowns: usize,
         tuning: &SolverTuning,
     ) -> Result<Box<dyn ProjectionSolver>, SolveError> {
-        let apgd = || -> Result<Box<dyn ProjectionSolver>, SolveError> {
-            Ok(Box::new(Apgd::new(ApgdSettings {
-                parallelism,
-                ..tuning.apgd
-            })?))
-        };
+        let apgd = || SolverKind::Apgd.build_alone_with(parallelism, tuning);
         let clarabel = || -> Box<dyn ProjectionSolver> {
             Box::new(ClarabelReference::new(ClarabelSettings::default()))
         };

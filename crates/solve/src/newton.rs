@@ -671,16 +671,17 @@ impl ProjectionSolver for Newton {
                 exact = false;
                 continue;
             }
-            if self.d != self.d_factored {
+            // The rows whose weight is not the factor's (a NaN in `d_factored`: no factor of
+            // any weights in hand).
+            let changed = {
+                let (d, df) = (&self.d, &self.d_factored);
+                (0..m).filter(|&i| d[i] != df[i]).count()
+            };
+            if changed > 0 {
                 // A few changed rows: rank-one updates and downdates of the factor in hand
                 // (each a small part of a factorization on a crowd's thin factors).
-                let changed = if self.d_factored.iter().any(|d| d.is_nan()) {
-                    usize::MAX
-                } else {
-                    let (d, df) = (&self.d, &self.d_factored);
-                    (0..m).filter(|&i| d[i] != df[i]).count()
-                };
-                let mut updated = changed <= st.max_updates;
+                let in_hand = !self.d_factored.iter().any(|d| d.is_nan());
+                let mut updated = in_hand && changed <= st.max_updates;
                 if updated {
                     for i in 0..m {
                         let delta = self.d[i] - self.d_factored[i];
