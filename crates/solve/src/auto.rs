@@ -33,6 +33,45 @@ const PREDICTED_MARGIN: f64 = 1.0;
 /// ... and at least this share of the previous answer's largest change of any slack.
 const LARGEST_CHANGE_SHARE: f64 = 0.25;
 
+/// With each row set aside by its own reach ([`Reach::Own`]), the rows needed join the
+/// others with every row this many hops around them (rows sharing an unknown), twice as
+/// many each round, for at most [`OWN_REACH_ROUNDS`] rounds; then every row. A crush's
+/// pressure travels outward from person to person, a ring a round without the hops
+/// (benches/README.md, session 21: the crush of 10⁵'s third step needed 4 rounds and 129
+/// factorizations with 2 hops, 2 rounds and 78 with 8).
+const OWN_REACH_HOPS: usize = 8;
+/// See [`OWN_REACH_HOPS`].
+const OWN_REACH_ROUNDS: usize = 6;
+
+/// How [`AutoSolver`] set rows aside in its last solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Reach {
+    /// No row was set aside (the first solve, where the shared floor keeps every row; or
+    /// screening off).
+    #[default]
+    None,
+    /// Rows beyond the shared floor (the worst violation at `w`, a quarter of the previous
+    /// answer's largest change) and their own predicted change were set aside; rows needed
+    /// after all joined once, then every row.
+    Shared,
+    /// Rows beyond their own predicted change alone were set aside, because the shared
+    /// floor kept [`AutoSettings::own_reach_ratio`] times as many; rows needed after all
+    /// joined with the rows around them, in rounds.
+    Own,
+}
+
+/// What [`AutoSolver`]'s last solve kept and set aside.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ScreenReport {
+    /// How rows were set aside.
+    pub reach: Reach,
+    /// The solves again after the first, with rows that had been set aside (0: the first
+    /// answer certified).
+    pub rounds: usize,
+    /// The rows the last solve kept (every row when none was set aside).
+    pub rows_kept: usize,
+}
+
 /// Settings of [`AutoSolver`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -67,6 +106,16 @@ pub struct AutoSettings {
     /// prediction pay: cromosim's scene 2.37 → 2.24 ms, the jammed 2,000 7.5 → 6.6, whole
     /// evacuations (mean) 6.9 → 6.4 and 18.3 → 16.9.
     pub set_aside_factor: f64,
+    /// Rows are set aside by their own predicted change alone ([`Reach::Own`]) when the
+    /// shared floor (the worst violation at `w`, a quarter of the previous answer's largest
+    /// change) would keep more than this many times as many rows: in a crush the floor,
+    /// set by its centre, keeps every row of a crowd whose pressure is local. The rows
+    /// needed after all then join in rounds with the rows around them. `f64::INFINITY`:
+    /// never. Measured (benches/README.md, session 21): the crush of 10⁵'s first three
+    /// steps 6.5, 9.3 and 9.6 s → 0.17, 1.4 and 3.7 s; in halls the floor keeps 1.0–1.8
+    /// times as many rows (cromosim's scene, median 1.06), so they keep the shared floor
+    /// after their first, cold, solve.
+    pub own_reach_ratio: f64,
     /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
     /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
     /// point's part runs as two solves at once (the largest component here, the others on the
@@ -83,6 +132,13 @@ impl AutoSettings {
             return Err(SolveError::InvalidSetting {
                 field: "set_aside_factor",
                 value: self.set_aside_factor.to_string(),
+                reason: "must be at least 1 (or infinite: never)",
+            });
+        }
+        if !(self.own_reach_ratio >= 1.0) {
+            return Err(SolveError::InvalidSetting {
+                field: "own_reach_ratio",
+                value: self.own_reach_ratio.to_string(),
                 reason: "must be at least 1 (or infinite: never)",
             });
         }
@@ -103,6 +159,7 @@ impl Default for AutoSettings {
             first_order_passes: 100,
             retry_after: 16,
             set_aside_factor: 1.0,
+            own_reach_ratio: 4.0,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -174,6 +231,16 @@ pub struct AutoSolver {
     set_aside: Vec<bool>,
     // the previous answer's largest |J_i (v − w)| (infinite before the first)
     last_change: f64,
+    // the rows of each unknown (`rows_of_unknown[start[c]..start[c + 1]]`), built in a
+    // solve the first time rows join with the rows around them; the unknowns reached and
+    // the rows joined in the last hop and the next, while they join
+    unknown_start: Vec<u32>,
+    rows_of_unknown: Vec<u32>,
+    indexed: bool,
+    reached: Vec<bool>,
+    front: Vec<u32>,
+    next_front: Vec<u32>,
+    screen: ScreenReport,
     scratch_m: Vec<f64>,
     scratch_n: Vec<f64>,
 }
@@ -371,9 +438,21 @@ impl AutoSolver {
             jw: Vec::new(),
             set_aside: Vec::new(),
             last_change: f64::INFINITY,
+            unknown_start: Vec::new(),
+            rows_of_unknown: Vec::new(),
+            indexed: false,
+            reached: Vec::new(),
+            front: Vec::new(),
+            next_front: Vec::new(),
+            screen: ScreenReport::default(),
             scratch_m: Vec::new(),
             scratch_n: Vec::new(),
         })
+    }
+
+    /// What the last solve kept and set aside.
+    pub fn screen(&self) -> ScreenReport {
+        self.screen
     }
 
     /// Solves the sub-problem gathered in `part` (`rows` of the whole problem's
@@ -421,32 +500,49 @@ impl ProjectionSolver for AutoSolver {
         self.jw.resize(m, 0.0);
         p.jacobian.mul(p.w, &mut self.jw);
         let worst_at_w = (self.jw.iter().zip(p.b)).fold(0.0f64, |a, (jw, b)| a.max(-(jw + b)));
-        let screened = self.settings.set_aside_factor.is_finite() && self.last_change.is_finite();
-        if screened {
-            self.set_aside_rows(p, worst_at_w);
-        }
+        let reach = if self.settings.set_aside_factor.is_finite() {
+            self.set_aside_rows(p, worst_at_w)
+        } else {
+            Reach::None
+        };
+        let screened = reach != Reach::None;
+        self.indexed = false;
         let mut report = self.solve_split(p, target, sol, screened)?;
-        if screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
-            // Rows set aside were needed after all: those the answer violates join the
-            // others, and the projection is solved again from that answer (the components
-            // they do not touch certify at once); if one set aside is needed still, with
-            // every row.
-            let first = report;
-            for i in 0..m {
-                if self.needed_set_aside(p, target, i) {
-                    self.set_aside[i] = false;
-                }
+        // Rows set aside were needed after all: those the answer violates join the others
+        // (by their own reach, with the rows around them), and the projection is solved again
+        // from that answer (the components they do not touch certify at once); when rows set
+        // aside are needed still after the last round, with every row.
+        let joins = if reach == Reach::Own {
+            OWN_REACH_ROUNDS
+        } else {
+            1
+        };
+        let mut rounds = 0;
+        while screened && !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
+            let earlier = report;
+            rounds += 1;
+            let last = rounds > joins;
+            if !last {
+                let hops = if reach == Reach::Own {
+                    OWN_REACH_HOPS << (rounds - 1)
+                } else {
+                    0
+                };
+                self.join_needed(p, target, hops);
+                self.warm.clear();
+                self.warm.extend_from_slice(&sol.lambda);
             }
-            self.warm.clear();
-            self.warm.extend_from_slice(&sol.lambda);
-            report = self.solve_split(p, target, sol, true)?;
-            report.add_work(&first);
-            if !report.status.is_converged() && self.needed_a_row_set_aside(p, target) {
-                let second = report;
-                report = self.solve_split(p, target, sol, false)?;
-                report.add_work(&second);
+            report = self.solve_split(p, target, sol, !last)?;
+            report.add_work(&earlier);
+            if last {
+                break;
             }
         }
+        self.screen = ScreenReport {
+            reach,
+            rounds,
+            rows_kept: self.set_aside.iter().filter(|&&a| !a).count(),
+        };
         self.next_given_up.sort_unstable_by_key(|&(key, _)| key);
         std::mem::swap(&mut self.given_up, &mut self.next_given_up);
         // How far the correction moved any row's slack, s(v) − s(w) (`scratch_m` holds J v):
@@ -690,10 +786,11 @@ impl AutoSolver {
     }
 
     /// Marks in `set_aside` the rows whose slack at `w` exceeds the factor times their reach
-    /// (see [`AutoSettings::set_aside_factor`]); the caller's multipliers (those that are
-    /// positive and finite) go through `scratch_m`, their correction `Jᵀλ` through
-    /// `scratch_n`.
-    fn set_aside_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) {
+    /// (see [`AutoSettings::set_aside_factor`]), shared or their own (see
+    /// [`AutoSettings::own_reach_ratio`]), and says which; the caller's multipliers (those
+    /// that are positive and finite) go through `scratch_m`, their correction `Jᵀλ`
+    /// through `scratch_n`, and each row's own reach is left in `scratch_m`.
+    fn set_aside_rows(&mut self, p: &ProjectionProblem<'_>, worst_at_w: f64) -> Reach {
         let j = p.jacobian;
         self.scratch_m.clear();
         self.scratch_m.extend(
@@ -704,8 +801,11 @@ impl AutoSolver {
         self.scratch_n.clear();
         self.scratch_n.resize(p.dim(), 0.0);
         j.mul_transpose_add(&self.scratch_m, &mut self.scratch_n);
+        // (Infinite before the first solve: every row is kept by the shared floor.)
         let floor = worst_at_w.max(LARGEST_CHANGE_SHARE * self.last_change);
-        let (factor, correction, jw) = (self.settings.set_aside_factor, &self.scratch_n, &self.jw);
+        let factor = self.settings.set_aside_factor;
+        let (correction, jw, own) = (&self.scratch_n, &self.jw, &mut self.scratch_m);
+        let (mut kept_shared, mut kept_own) = (0usize, 0usize);
         self.set_aside.clear();
         self.set_aside.extend((0..p.rows()).map(|i| {
             let (c, a) = j.row(i);
@@ -714,8 +814,105 @@ impl AutoSolver {
                 .zip(a)
                 .map(|(&c, &a)| (a * correction[c]).abs())
                 .sum();
-            jw[i] + p.b[i] > factor * floor.max(PREDICTED_MARGIN * predicted)
+            let slack = jw[i] + p.b[i];
+            own[i] = factor * PREDICTED_MARGIN * predicted;
+            let aside = slack > factor * floor.max(PREDICTED_MARGIN * predicted);
+            kept_shared += usize::from(!aside);
+            kept_own += usize::from(!(slack > own[i]));
+            aside
         }));
+        if kept_shared as f64 > self.settings.own_reach_ratio * kept_own as f64 {
+            for ((aside, &own), (jw, b)) in self
+                .set_aside
+                .iter_mut()
+                .zip(&self.scratch_m)
+                .zip(self.jw.iter().zip(p.b))
+            {
+                *aside = jw + b > own;
+            }
+            Reach::Own
+        } else if kept_shared < p.rows() {
+            Reach::Shared
+        } else {
+            Reach::None
+        }
+    }
+
+    /// Makes the rows set aside that the last answer violates join the others, and with
+    /// them every row set aside within `hops` rows of them (rows sharing an unknown).
+    fn join_needed(&mut self, p: &ProjectionProblem<'_>, target: Target, hops: usize) {
+        let j = p.jacobian;
+        self.front.clear();
+        for i in 0..p.rows() {
+            if self.needed_set_aside(p, target, i) {
+                self.set_aside[i] = false;
+                self.front.push(i as u32);
+            }
+        }
+        if hops == 0 || self.front.is_empty() {
+            return;
+        }
+        if !self.indexed {
+            self.index_rows_by_unknown(p);
+        }
+        let Self {
+            unknown_start: start,
+            rows_of_unknown,
+            reached,
+            front,
+            next_front: next,
+            set_aside,
+            ..
+        } = self;
+        reached.clear();
+        reached.resize(p.dim(), false);
+        for _ in 0..hops {
+            next.clear();
+            for &i in front.iter() {
+                for &c in j.row(i as usize).0 {
+                    if std::mem::replace(&mut reached[c], true) {
+                        continue;
+                    }
+                    for &r in &rows_of_unknown[start[c] as usize..start[c + 1] as usize] {
+                        if std::mem::replace(&mut set_aside[r as usize], false) {
+                            next.push(r);
+                        }
+                    }
+                }
+            }
+            std::mem::swap(front, next);
+            if front.is_empty() {
+                break;
+            }
+        }
+    }
+
+    /// The rows of each unknown, for [`join_needed`](Self::join_needed).
+    fn index_rows_by_unknown(&mut self, p: &ProjectionProblem<'_>) {
+        let j = p.jacobian;
+        let start = &mut self.unknown_start;
+        start.clear();
+        start.resize(p.dim() + 1, 0);
+        for &c in j.columns() {
+            start[c + 1] += 1;
+        }
+        for c in 0..p.dim() {
+            start[c + 1] += start[c];
+        }
+        self.rows_of_unknown.clear();
+        self.rows_of_unknown.resize(j.nnz(), 0);
+        // Filled from each unknown's start, which then moves to its end; shifted back after.
+        for i in 0..p.rows() {
+            for &c in j.row(i).0 {
+                self.rows_of_unknown[start[c] as usize] = i as u32;
+                start[c] += 1;
+            }
+        }
+        for c in (0..p.dim()).rev() {
+            start[c + 1] = start[c];
+        }
+        start[0] = 0;
+        self.indexed = true;
     }
 
     /// One solve, with the rows marked in `set_aside` set aside when `screened` (else none):

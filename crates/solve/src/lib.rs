@@ -27,7 +27,7 @@ mod products;
 mod workers;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
-pub use auto::{AutoSettings, AutoSolver};
+pub use auto::{AutoSettings, AutoSolver, Reach, ScreenReport};
 pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings, infeasibility_certificate};

@@ -4,7 +4,7 @@ use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
     Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings, GaussSeidel,
     GaussSeidelSettings, InteriorPoint, InteriorPointSettings, Newton, NewtonSettings,
-    ProjectionProblem, ProjectionSolution, ProjectionSolver, RowOrder, SolveReport, Target,
+    ProjectionProblem, ProjectionSolution, ProjectionSolver, Reach, RowOrder, SolveReport, Target,
     certify,
 };
 use rand::{Rng, SeedableRng};
@@ -1118,8 +1118,17 @@ fn an_infeasible_problem_is_never_converged_by_gauss_seidel() {
 /// A hexagonal packing of 15 × 15 disks 2.4 mm apart, everyone pushing at 1 m/s towards the
 /// centre (the bench's crush in miniature: every row a contact of 4 nonzeros): `(w, J, b)`.
 fn small_crush() -> (Vec<f64>, ConstraintRows, Vec<f64>) {
-    let (d, radius, mu) = (0.48, 0.995 * 0.24, 0.05);
-    let (per_row, rows_of_people) = (15, 15);
+    crush(15, 0.995)
+}
+
+/// A hexagonal packing of `side × side` disks 0.48 m apart, of radius `fill` × 0.24 m,
+/// everyone pushing at 1 m/s towards the centre over a step of 0.05 s: `(w, J, b)`. Two
+/// neighbours at a distance `r` from the centre close at about `d/r` m/s, so only the
+/// contacts within `0.05 d / gap` of the centre are violated at `w`.
+fn crush(side: usize, fill: f64) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
+    let (d, mu) = (0.48, 0.05);
+    let radius = fill * d / 2.0;
+    let (per_row, rows_of_people) = (side, side);
     let mut q = Vec::new();
     for r in 0..rows_of_people {
         for c in 0..per_row {
@@ -1236,6 +1245,81 @@ fn a_small_crush_matches_clarabel() {
     assert!(
         rep.factorizations < plain.factorizations,
         "with correctors {rep:?}, without {plain:?}"
+    );
+}
+
+/// A crush whose pressure is local: 60 × 60 disks 4.8 mm apart, so that only the contacts
+/// within ~5 m of the centre are violated at `w` (453 of 10,561). `auto`'s first, cold, solve sets aside
+/// every row beyond its own predicted reach (the shared floor, infinite before a first
+/// answer, would keep them all); the centre's pressure pushes its neighbours outward, so
+/// rows set aside are needed and join, with the rows around them, in rounds; the answer is
+/// Clarabel's, as with every row kept, and the same on two threads.
+#[test]
+fn a_crush_with_local_pressure_sets_rows_aside_by_their_own_reach() {
+    let (w, rows, b) = crush(60, 0.99);
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let t = Target {
+        gap: 1e-6,
+        violation: 1e-9,
+    };
+    let violated = (0..rows.len())
+        .filter(|&i| {
+            let (c, a) = rows.row(i);
+            b[i] + c.iter().zip(a).map(|(&c, a)| a * w[c]).sum::<f64>() < 0.0
+        })
+        .count();
+    assert!(
+        violated > 0 && violated < rows.len() / 8,
+        "{violated} of {} rows violated at w",
+        rows.len()
+    );
+    let reference = clarabel_answer(&p, t);
+    let solve = |settings: AutoSettings| {
+        let mut auto = AutoSolver::new(settings).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = auto.solve(&p, t, &mut sol).unwrap();
+        let name = format!("{:?}", auto.screen());
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        check_report(&p, t, &name, &sol, &rep);
+        assert_clarabel_objective(&p, &name, &sol, rep.gap, &reference);
+        (auto.screen(), sol, rep)
+    };
+    let (screen, sol, rep) = solve(AutoSettings::default());
+    assert_eq!(screen.reach, Reach::Own, "{screen:?}");
+    // More rows are needed than those violated at w (the pressure travels), far fewer than
+    // all: one or two rounds (the rows needed joined with the rows around them; without
+    // those, 5 rounds, a ring each: checked), not every row.
+    assert!(
+        rep.active > 2 * violated,
+        "{rep:?}, {violated} violated at w"
+    );
+    assert!(
+        (1..=2).contains(&screen.rounds) && screen.rows_kept < rows.len() / 2,
+        "{screen:?} of {} rows",
+        rows.len()
+    );
+    let (every, _, _) = solve(AutoSettings {
+        own_reach_ratio: f64::INFINITY,
+        ..AutoSettings::default()
+    });
+    assert_eq!(
+        (every.reach, every.rows_kept),
+        (Reach::None, rows.len()),
+        "{every:?}"
+    );
+    let (on_two, two, _) = solve(AutoSettings {
+        parallelism: Parallelism::threads(2),
+        ..AutoSettings::default()
+    });
+    assert_eq!(on_two, screen);
+    assert_eq!(
+        (&sol.v, &sol.lambda),
+        (&two.v, &two.lambda),
+        "one thread and two"
     );
 }
 
@@ -1497,6 +1581,14 @@ fn settings_are_validated() {
         assert!(e.to_string().contains("relaxation"), "{e}");
     }
     assert!(gs().relaxation(1.99).build().is_ok());
+    for ratio in [0.5, f64::NAN] {
+        let e = AutoSolver::new(AutoSettings {
+            own_reach_ratio: ratio,
+            ..AutoSettings::default()
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("own_reach_ratio"), "{e}");
+    }
     let e = gs().max_passes(0).build().unwrap_err();
     assert!(e.to_string().contains("max_passes"), "{e}");
     let e = gs().certify_every(0).build().unwrap_err();
