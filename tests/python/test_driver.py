@@ -190,6 +190,38 @@ def test_bench_measures_the_same_steps_from_a_saved_state(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["jam-1000.state"]
 
 
+def test_bench_measures_a_solver_setting_against_its_default(tmp_path):
+    """`moreau bench --solver-tables FILE` gives the measured solver a scene's `[solver.*]`
+    tables: on the crush of 10,000's first step `auto` sets rows aside by their own reach
+    (its pressure is local), and with `own_reach_ratio = inf` it keeps every row, so the
+    same step takes other factorizations, both certified; a bad value or an unknown table is
+    refused by name before anything is measured."""
+    import json
+
+    def row(tables=None, check=True):
+        args = ["--solver-tables", tables] if tables else []
+        proc = moreau("bench", "--one", "10000", "--scene", "crush", "--warmup", "0",
+                      "--steps", "1", "--compare-at", "0", "--kind", "auto", *args,
+                      timeout=300, check=check)
+        return proc if not check else json.loads(proc.stdout.strip().splitlines()[-1])
+
+    own = row()
+    every_row = tmp_path / "every-row.toml"
+    every_row.write_text("[auto]\nown_reach_ratio = inf\n")
+    shared = row(every_row)
+    assert own["rows_per_step"] == shared["rows_per_step"] == 29593, (own, shared)
+    assert own["factorizations"] != shared["factorizations"], (own, shared)
+    bad = tmp_path / "bad.toml"
+    for text, needles in [("[auto]\nown_reach_ratio = 0.5\n", ["own_reach_ratio", "0.5"]),
+                          ("[autoo]\n", ["autoo"])]:
+        bad.write_text(text)
+        proc = moreau("bench", "--sizes", "1000", "--solver-tables", bad, check=False,
+                      timeout=120)
+        assert proc.returncode != 0, proc.stdout
+        assert all(n in proc.stderr for n in needles), proc.stderr
+        assert "people" not in proc.stdout, proc.stdout
+
+
 def test_bench_names_its_slowest_steps():
     """`moreau bench` says which steps make a mean above the median: three distinct steps,
     slowest first, none faster than the median, the first not faster than the mean."""

@@ -76,6 +76,11 @@ pub struct BenchArgs {
     /// then measure the same steps, not states a few steps apart.
     #[arg(long, conflicts_with = "save_state")]
     from_state: Option<PathBuf>,
+    /// Settings of the measured solver from a TOML file of tables as a scene's `[solver.*]`
+    /// (`[auto]`, `[interior]`, `[newton]`, `[gauss_seidel]`, `[apgd]`; e.g. `[auto]` then
+    /// `own_reach_ratio = inf`), so that one build measures a setting against its default.
+    #[arg(long)]
+    solver_tables: Option<PathBuf>,
     /// Internal: measure one size in this process and print its JSON row.
     #[arg(long, hide = true)]
     one: Option<usize>,
@@ -144,6 +149,41 @@ struct Cold {
     iterations: usize,
 }
 
+/// The tables of `--solver-tables`: a scene's `[solver.*]` tables.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct SolverTables {
+    interior: moreau_solve::InteriorPointSettings,
+    newton: moreau_solve::NewtonSettings,
+    gauss_seidel: moreau_solve::GaussSeidelSettings,
+    apgd: moreau_solve::ApgdSettings,
+    auto: moreau_solve::AutoSettings,
+}
+
+impl SolverTables {
+    /// The tables of `path` (none: the defaults), each checked.
+    fn read(path: Option<&Path>) -> Result<Self> {
+        let Some(path) = path else {
+            return Ok(Self::default());
+        };
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading --solver-tables {}", path.display()))?;
+        let tables: Self =
+            toml::from_str(&text).with_context(|| format!("--solver-tables {}", path.display()))?;
+        let tuning = moreau_solve::SolverTuning {
+            interior: tables.interior,
+            newton: tables.newton,
+            gauss_seidel: tables.gauss_seidel,
+            apgd: tables.apgd,
+            auto: tables.auto,
+        };
+        if let Err((table, e)) = tuning.validate() {
+            bail!("--solver-tables {}: [{table}] {e}", path.display());
+        }
+        Ok(tables)
+    }
+}
+
 /// The scene of `n` people at the table's accuracy: `√ε ≤ 1e-3 r_min` at μ = 0.05, i.e.
 /// `κ μ³ = (1e-3 r_min)²`, and violation ≤ 1e-4 r_min, with r_min = 0.18 m.
 fn scene(args: &BenchArgs, n: usize) -> Result<Scene> {
@@ -153,9 +193,15 @@ fn scene(args: &BenchArgs, n: usize) -> Result<Scene> {
     // restored to measure any number of steps. (Measured steps do not depend on it: the
     // rows, iterations and certified ε of the scale table's rows are unchanged.)
     let horizon = 1000.0;
+    let tables = SolverTables::read(args.solver_tables.as_deref())?;
     let solver = |side: f64| SolverSettings {
         kind: args.kind,
         threads: args.threads,
+        interior: tables.interior,
+        newton: tables.newton,
+        gauss_seidel: tables.gauss_seidel,
+        apgd: tables.apgd,
+        auto: tables.auto,
         eps_kappa: (1e-3 * r_min).powi(2) / 0.05f64.powi(3),
         max_violation: 1e-4 * r_min,
         grid_cell: (side / 400.0).max(0.25),
@@ -371,6 +417,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&row)?);
         return Ok(());
     }
+    // Read here too, so that a bad file fails before any measurement.
+    SolverTables::read(args.solver_tables.as_deref())?;
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(
@@ -434,6 +482,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         if let Some(path) = &args.from_state {
             cmd.arg("--from-state").arg(path);
+        }
+        if let Some(path) = &args.solver_tables {
+            cmd.arg("--solver-tables").arg(path);
         }
         let out = cmd
             .output()

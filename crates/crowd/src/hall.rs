@@ -54,7 +54,7 @@ impl Hall {
         let side = self.side();
         let (lo, hi) = (side / 2.0 - self.door / 2.0, side / 2.0 + self.door / 2.0);
         let (x0, x1) = (side + 0.5, side + 1.0);
-        let solver = toml::to_string(&self.solver).expect("solver settings serialize");
+        let solver = solver_section(&self.solver);
         let text = format!(
             r#"
 name = "hall-{n}"
@@ -76,7 +76,6 @@ destination = "door"
 horizon = {horizon}
 step = {step}
 output_interval = {output_interval}
-[solver]
 {solver}"#,
             n = self.people,
             seed = self.seed,
@@ -151,7 +150,7 @@ impl Crush {
             .filter(|&(x, y)| !((c0..=c1).contains(&x) && (c0..=c1).contains(&y)))
             .map(|(x, y)| format!("[{x}, {y}]"))
             .collect();
-        let solver = toml::to_string(&self.solver).expect("solver settings serialize");
+        let solver = solver_section(&self.solver);
         let text = format!(
             r#"
 name = "crush-{n}"
@@ -173,7 +172,6 @@ destination = "centre"
 horizon = {horizon}
 step = {step}
 output_interval = {step}
-[solver]
 {solver}"#,
             n = self.people,
             positions = positions.join(", "),
@@ -183,4 +181,14 @@ output_interval = {step}
         );
         Scene::from_toml(&text, &format!("crush of {} people", self.people))
     }
+}
+
+/// `[solver]` and its tables (`[solver.auto]`, …): the settings serialized under their key,
+/// so that a table is not written at the top level.
+fn solver_section(solver: &SolverSettings) -> String {
+    #[derive(serde::Serialize)]
+    struct Section<'a> {
+        solver: &'a SolverSettings,
+    }
+    toml::to_string(&Section { solver }).expect("solver settings serialize")
 }

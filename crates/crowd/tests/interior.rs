@@ -301,3 +301,23 @@ fn the_scenes_interior_point_settings_reach_the_solver() {
         assert!(one >= 3, "{kind:?}: the fallback answered {one} steps");
     }
 }
+
+/// The bench's hall and crush wrote their solver's tables at the top level of the scene
+/// (`[auto]` after `[solver]`'s keys, read back as an unknown top-level table), so a hall or
+/// crush with any solver setting of its own failed to build.
+#[test]
+fn a_hall_or_crush_with_solver_tables_wrote_them_at_the_top_level() {
+    let mut solver = SolverSettings {
+        kind: SolverKind::Auto,
+        ..SolverSettings::default()
+    };
+    solver.auto.own_reach_ratio = 2.0;
+    solver.interior.max_iterations = 7;
+    let mut hall = Hall::new(200, 2.6);
+    hall.solver = solver;
+    let mut crush = moreau_crowd::Crush::new(200);
+    crush.solver = solver;
+    for scene in [hall.scene().unwrap(), crush.scene().unwrap()] {
+        assert_eq!(scene.solver, solver, "{}", scene.name);
+    }
+}
