@@ -1,6 +1,7 @@
 //! The automatic choice of solver: each connected component of a projection (rows far from
-//! binding set aside) goes to Gauss–Seidel, which gives it up when its own progress shows
-//! the budget will not finish it, and then to the interior point.
+//! binding set aside, and taken back in rounds where the answer needs them) goes to
+//! Gauss–Seidel, which gives it up when its own progress shows the budget will not finish
+//! it, and then to the interior point.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
