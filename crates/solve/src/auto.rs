@@ -113,9 +113,9 @@ pub struct AutoSettings {
     /// set by its centre, keeps every row of a crowd whose pressure is local. The rows
     /// needed after all then join in rounds with the rows around them. `f64::INFINITY`:
     /// never. Measured (benches/README.md, session 21): the crush of 10⁵'s first three
-    /// steps 6.5, 9.3 and 9.6 s → 0.17, 1.4 and 3.7 s; in halls the floor keeps 1.0–1.8
-    /// times as many rows (cromosim's scene, median 1.06), so they keep the shared floor
-    /// after their first, cold, solve.
+    /// steps 6.27, 9.14 and 9.37 s → 0.14, 1.39 and 3.78 s; in halls the floor keeps
+    /// 1.0–1.8 times as many rows (cromosim's scene, median 1.06), so they keep the shared
+    /// floor after their first, cold, solve.
     pub own_reach_ratio: f64,
     /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
     /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
@@ -487,11 +487,12 @@ impl ProjectionSolver for AutoSolver {
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
         let m = p.rows();
-        if m >= u32::MAX as usize || p.dim() >= u32::MAX as usize {
+        let nnz = p.jacobian.nnz();
+        if m >= u32::MAX as usize || p.dim() >= u32::MAX as usize || nnz >= u32::MAX as usize {
             return Err(SolveError::InvalidSetting {
                 field: "problem size",
-                value: format!("{m} rows, {} unknowns", p.dim()),
-                reason: "auto numbers rows, unknowns and components with 32 bits",
+                value: format!("{m} rows, {} unknowns, {nnz} nonzeros", p.dim()),
+                reason: "auto numbers rows, unknowns, nonzeros and components with 32 bits",
             });
         }
         sol.resize_for(p);
