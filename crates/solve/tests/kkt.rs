@@ -781,6 +781,58 @@ fn auto_cold_and_warm_meet_kkt_on_every_family() {
     }
 }
 
+/// `auto` setting rows aside by their own reach whenever that keeps fewer rows than the
+/// shared floor (`own_reach_ratio = 1`), and its interior point answering (one Gauss–Seidel
+/// pass): the same families, cold and warm, meet KKT at the exact projection; the own reach
+/// is taken in most solves, and rows it set aside are needed (rounds) in some.
+#[test]
+fn auto_setting_rows_aside_by_their_own_reach_meets_kkt_on_every_family() {
+    let mut auto = AutoSolver::new(AutoSettings {
+        first_order_passes: 1,
+        own_reach_ratio: 1.0,
+        ..AutoSettings::default()
+    })
+    .unwrap();
+    let target = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let (mut solves, mut own, mut rounds) = (0, 0, 0);
+    // The instances of `auto_cold_and_warm_meet_kkt_on_every_family`, as `run_cold_and_warm`
+    // draws them.
+    for (kind, family) in (0..5).flat_map(|k| (0..3).map(move |f| (k, f))) {
+        let (seed, cases, scaled, churn) = [
+            (100, 40, false, false),
+            (200, 20, true, false),
+            (300, 20, kind % 2 == 1, true),
+        ][family];
+        let mut rng = ChaCha8Rng::seed_from_u64(seed + kind as u64);
+        for case in 0..cases {
+            let mut inst = random_instance(&mut rng, kind);
+            if scaled {
+                inst = scale_rows(&mut rng, &inst);
+            }
+            let next = perturb(&mut rng, &inst, 0.05, 0.01, churn);
+            let name = format!("own reach kind {kind} family {family} case {case}");
+            let mut sol = ProjectionSolution::default();
+            for (inst, when) in [(&inst, "cold"), (&next, "warm")] {
+                if when == "warm" {
+                    sol.lambda = matched(&inst, &sol.lambda, &next);
+                }
+                solve_and_check(&mut auto, inst, target, &mut sol, &format!("{name} {when}"));
+                let screen = auto.screen();
+                solves += 1;
+                own += usize::from(screen.reach == Reach::Own);
+                rounds += usize::from(screen.rounds > 0);
+            }
+        }
+    }
+    assert!(
+        2 * own > solves && rounds > 0,
+        "{own} own, {rounds} with rounds of {solves}"
+    );
+}
+
 /// `blocks` side by side: one problem whose components are (at least) the blocks.
 fn side_by_side(blocks: &[(Vec<f64>, ConstraintRows, Vec<f64>)]) -> Instance {
     let n: usize = blocks.iter().map(|(w, _, _)| w.len()).sum();
