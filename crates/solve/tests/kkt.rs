@@ -815,11 +815,12 @@ fn auto_setting_rows_aside_by_their_own_reach_meets_kkt_on_every_family() {
             let next = perturb(&mut rng, &inst, 0.05, 0.01, churn);
             let name = format!("own reach kind {kind} family {family} case {case}");
             let mut sol = ProjectionSolution::default();
-            for (inst, when) in [(&inst, "cold"), (&next, "warm")] {
+            for (problem, when) in [(&inst, "cold"), (&next, "warm")] {
                 if when == "warm" {
                     sol.lambda = matched(&inst, &sol.lambda, &next);
                 }
-                solve_and_check(&mut auto, inst, target, &mut sol, &format!("{name} {when}"));
+                let name = format!("{name} {when}");
+                solve_and_check(&mut auto, problem, target, &mut sol, &name);
                 let screen = auto.screen();
                 solves += 1;
                 own += usize::from(screen.reach == Reach::Own);
