@@ -105,15 +105,16 @@ impl PersonPairs {
     }
 }
 
-/// The threads a source assembles its rows on, and the rows of the bands after the first:
-/// with threads and many items (pairs, people: two bands from a thousand, one a thread from
-/// ten thousand), each band by one thread into rows of its own, appended in order after (the
-/// same rows as one thread's).
+/// The threads a source assembles its rows on, and the rows and scratch of the bands after the
+/// first: with threads and many items (pairs, people: two bands from a thousand, one a
+/// thread from ten thousand), each band by one thread into rows of its own, appended in order
+/// after (the same rows as one thread's).
 #[derive(Debug, Default)]
 struct Bands {
     threads: usize,
     helper: Option<std::sync::Arc<moreau_core::Helper>>,
     rows: Vec<ConstraintRows>,
+    near: Vec<Vec<u32>>,
 }
 
 impl Bands {
@@ -122,37 +123,41 @@ impl Bands {
             threads: parallelism.get(),
             helper: crate::bands::helper_for(parallelism),
             rows: Vec::new(),
+            near: Vec::new(),
         }
     }
 
-    /// `assemble(items, rows, scratch)` for the items `0..count` in order, appending to
-    /// `rows`: in bands on threads when there are many (the caller's band with `scratch`, the
-    /// others with scratch of their own).
-    fn assemble<S: Default>(
+    /// `assemble(items, rows, near)` for the items `0..count` in order, appending to `rows`:
+    /// in bands on threads when there are many (the caller's band with `near`, the others
+    /// with scratch of their own, kept from call to call).
+    fn assemble(
         &mut self,
         count: usize,
         rows: &mut ConstraintRows,
-        scratch: &mut S,
-        assemble: impl Fn(std::ops::Range<usize>, &mut ConstraintRows, &mut S) + Sync,
+        near: &mut Vec<u32>,
+        assemble: impl Fn(std::ops::Range<usize>, &mut ConstraintRows, &mut Vec<u32>) + Sync,
     ) {
         let threads = crate::bands::count(self.threads, count);
         if threads <= 1 {
-            assemble(0..count, rows, scratch);
+            assemble(0..count, rows, near);
             return;
         }
         let band = |k: usize| k * count / threads..(k + 1) * count / threads;
         let dim = rows.dim();
         self.rows.resize_with(threads - 1, ConstraintRows::default);
+        self.near.resize_with(threads - 1, Vec::new);
         let assemble = &assemble;
         crate::bands::run(
             self.helper.as_deref(),
-            || assemble(band(0), rows, scratch),
-            self.rows.iter_mut().enumerate().map(|(k, own)| {
-                move || {
-                    own.clear(dim);
-                    assemble(band(k + 1), own, &mut S::default());
-                }
-            }),
+            || assemble(band(0), rows, near),
+            (self.rows.iter_mut().zip(&mut self.near))
+                .enumerate()
+                .map(|(k, (own, near))| {
+                    move || {
+                        own.clear(dim);
+                        assemble(band(k + 1), own, near);
+                    }
+                }),
         );
         for own in &self.rows {
             rows.append(own);
@@ -170,7 +175,8 @@ impl ContactSource for PersonPairs {
         self.broad.pairs(q, radius, at.margin, &mut self.pairs);
         let pairs = &self.pairs;
         self.bands
-            .assemble(pairs.len(), rows, &mut (), |band, rows, _| {
+            // (Pairs need no scratch: an empty vector, never filled.)
+            .assemble(pairs.len(), rows, &mut Vec::new(), |band, rows, _| {
                 push_pair_rows(at, &pairs[band], rows);
             });
     }

@@ -288,8 +288,9 @@ pub struct DesiredVelocity<'a> {
     pub speed_factor: f64,
     /// Classic (jumps at the wall slide and on arrival) or Lipschitz.
     pub kind: DesiredVelocityKind,
-    /// Scratch for the walls near a person (the caller's thread's; other threads use their own).
-    pub near: &'a Mutex<Vec<u32>>,
+    /// Scratch for the walls near a person: the caller's thread's first, then one for each
+    /// other band (grown to the bands' count, kept from step to step).
+    pub near: &'a Mutex<Vec<Vec<u32>>>,
     /// Threads: from a thousand people on, two bands of them, the second on `helper`; from
     /// ten thousand on, one band a thread (each with scratch of its own); every person's
     /// velocity is the same whoever computes it.
@@ -362,8 +363,12 @@ impl Field for DesiredVelocity<'_> {
         let out = &mut out[..2 * n];
         let threads = crate::bands::count(self.parallelism.get(), n);
         let mut near = self.near.lock().unwrap_or_else(|e| e.into_inner());
+        if near.len() < threads.max(1) {
+            near.resize_with(threads.max(1), Vec::new);
+        }
+        let (mine, theirs) = near.split_first_mut().expect("one scratch at least");
         if threads <= 1 {
-            self.eval_people(t, q, 0, out, &mut near);
+            self.eval_people(t, q, 0, out, mine);
             return;
         }
         // Bands of people, the first on the caller; the others with scratch of their own.
@@ -371,10 +376,10 @@ impl Field for DesiredVelocity<'_> {
         let (first, others) = out.split_at_mut((2 * per).min(out.len()));
         crate::bands::run(
             self.helper,
-            || self.eval_people(t, q, 0, first, &mut near),
-            others.chunks_mut(2 * per).enumerate().map(|(k, band)| {
-                move || self.eval_people(t, q, (k + 1) * per, band, &mut Vec::new())
-            }),
+            || self.eval_people(t, q, 0, first, mine),
+            (others.chunks_mut(2 * per).zip(theirs))
+                .enumerate()
+                .map(|(k, (band, near))| move || self.eval_people(t, q, (k + 1) * per, band, near)),
         );
     }
 }

@@ -205,7 +205,7 @@ pub struct Simulation {
     // the helper thread of the loops over people with threads (shared with the solver's)
     helper: Option<std::sync::Arc<moreau_core::Helper>>,
     // scratch
-    near: std::sync::Mutex<Vec<u32>>,
+    near: std::sync::Mutex<Vec<Vec<u32>>>,
     keep: Vec<bool>,
     gap_rows: ConstraintRows,
 }
