@@ -16,7 +16,7 @@ use moreau_core::{Parallelism, StepReport};
 use moreau_crowd::{
     Crush, Hall, Observer, ObserverError, Scene, SimState, Simulation, SolverKind, SolverSettings,
 };
-use moreau_solve::{ProjectionSolution, Target};
+use moreau_solve::{ProjectionSolution, SolverTuning, Target};
 use serde::{Deserialize, Serialize};
 
 use crate::svg::fit_power;
@@ -149,39 +149,19 @@ struct Cold {
     iterations: usize,
 }
 
-/// The tables of `--solver-tables`: a scene's `[solver.*]` tables.
-#[derive(Debug, Default, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-struct SolverTables {
-    interior: moreau_solve::InteriorPointSettings,
-    newton: moreau_solve::NewtonSettings,
-    gauss_seidel: moreau_solve::GaussSeidelSettings,
-    apgd: moreau_solve::ApgdSettings,
-    auto: moreau_solve::AutoSettings,
-}
-
-impl SolverTables {
-    /// The tables of `path` (none: the defaults), each checked.
-    fn read(path: Option<&Path>) -> Result<Self> {
-        let Some(path) = path else {
-            return Ok(Self::default());
-        };
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading --solver-tables {}", path.display()))?;
-        let tables: Self =
-            toml::from_str(&text).with_context(|| format!("--solver-tables {}", path.display()))?;
-        let tuning = moreau_solve::SolverTuning {
-            interior: tables.interior,
-            newton: tables.newton,
-            gauss_seidel: tables.gauss_seidel,
-            apgd: tables.apgd,
-            auto: tables.auto,
-        };
-        if let Err((table, e)) = tuning.validate() {
-            bail!("--solver-tables {}: [{table}] {e}", path.display());
-        }
-        Ok(tables)
+/// The tables of `--solver-tables` (none: the defaults), each checked.
+fn solver_tables(path: Option<&Path>) -> Result<SolverTuning> {
+    let Some(path) = path else {
+        return Ok(SolverTuning::default());
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading --solver-tables {}", path.display()))?;
+    let tuning: SolverTuning =
+        toml::from_str(&text).with_context(|| format!("--solver-tables {}", path.display()))?;
+    if let Err((table, e)) = tuning.validate() {
+        bail!("--solver-tables {}: [{table}] {e}", path.display());
     }
+    Ok(tuning)
 }
 
 /// The scene of `n` people at the table's accuracy: `√ε ≤ 1e-3 r_min` at μ = 0.05, i.e.
@@ -193,7 +173,7 @@ fn scene(args: &BenchArgs, n: usize) -> Result<Scene> {
     // restored to measure any number of steps. (Measured steps do not depend on it: the
     // rows, iterations and certified ε of the scale table's rows are unchanged.)
     let horizon = 1000.0;
-    let tables = SolverTables::read(args.solver_tables.as_deref())?;
+    let tables = solver_tables(args.solver_tables.as_deref())?;
     let solver = |side: f64| SolverSettings {
         kind: args.kind,
         threads: args.threads,
@@ -418,7 +398,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         return Ok(());
     }
     // Read here too, so that a bad file fails before any measurement.
-    SolverTables::read(args.solver_tables.as_deref())?;
+    solver_tables(args.solver_tables.as_deref())?;
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(

@@ -44,8 +44,11 @@ use serde::{Deserialize, Serialize};
 /// The settings of each of our solvers, as a scene gives them (`[solver.interior]`, …; each
 /// absent: its defaults), for [`SolverKind::build_with`]: a kind uses its own, and `auto`
 /// its own with the interior point's and Gauss–Seidel's (but for what `auto` chooses itself:
-/// [`AutoSolver::with_solvers`]). Threads are not among them: they come with the build.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// [`AutoSolver::with_solvers`]). Threads are not among them: they come with the build. In
+/// TOML, the tables `[interior]`, `[newton]`, `[gauss_seidel]`, `[apgd]`, `[auto]` (each
+/// absent: its defaults).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct SolverTuning {
     /// Our interior point's (`interior`, and inside `auto`).
     pub interior: InteriorPointSettings,

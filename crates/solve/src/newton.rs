@@ -671,16 +671,20 @@ impl ProjectionSolver for Newton {
                 exact = false;
                 continue;
             }
-            // The rows whose weight is not the factor's (a NaN in `d_factored`: no factor of
-            // any weights in hand).
-            let changed = {
+            // The rows whose weight is not the factor's, and whether a factor is in hand (a
+            // NaN in `d_factored`: no factor of any weights), in one pass.
+            let (changed, in_hand) = {
                 let (d, df) = (&self.d, &self.d_factored);
-                (0..m).filter(|&i| d[i] != df[i]).count()
+                (0..m).fold((0usize, true), |(changed, in_hand), i| {
+                    (
+                        changed + usize::from(d[i] != df[i]),
+                        in_hand && !df[i].is_nan(),
+                    )
+                })
             };
             if changed > 0 {
                 // A few changed rows: rank-one updates and downdates of the factor in hand
                 // (each a small part of a factorization on a crowd's thin factors).
-                let in_hand = !self.d_factored.iter().any(|d| d.is_nan());
                 let mut updated = in_hand && changed <= st.max_updates;
                 if updated {
                     for i in 0..m {
