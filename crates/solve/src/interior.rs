@@ -17,9 +17,10 @@
 
 use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, SolveStatus};
 
+use crate::augmented::AugmentedSystem;
 use crate::certificate::{Certificate, certify};
 use crate::error::SolveError;
-use crate::normal::{FactorizationCounts, NormalEquations};
+use crate::normal::{FactorizationCounts, NormalEquations, StageTimes};
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
@@ -294,6 +295,12 @@ pub struct InteriorPoint {
     kept_iterate: Vec<(ConstraintKey, f64, f64)>,
     cold_iterations: Option<usize>,
     kept_backoff: BackOff,
+    // The Newton system's augmented form, and whether this solve has taken it (the normal
+    // equations broke down).
+    augmented: AugmentedSystem,
+    augmented_on: bool,
+    // Every solve by the augmented form (tests).
+    augmented_only: bool,
 }
 
 /// An attempt that may lose (the polish, the kept iterate's start): after `k` losses in a
@@ -354,12 +361,26 @@ impl InteriorPoint {
             kept_iterate: Vec::new(),
             cold_iterations: None,
             kept_backoff: BackOff::default(),
+            augmented: AugmentedSystem::default(),
+            augmented_on: false,
+            augmented_only: false,
         })
+    }
+
+    /// Every Newton system by the augmented form, as if the normal equations always broke
+    /// down (to test that form on every kind of problem).
+    #[cfg(test)]
+    fn augmented_only(mut self) -> Self {
+        self.augmented_only = true;
+        self
     }
 
     /// Patterns, analyses and factorizations done so far.
     pub fn counts(&self) -> FactorizationCounts {
-        self.normal.counts()
+        FactorizationCounts {
+            augmented_factorizations: self.augmented.times().factorizations,
+            ..self.normal.counts()
+        }
     }
 
     fn size(&mut self, m: usize, n: usize) {
@@ -393,11 +414,44 @@ impl InteriorPoint {
         }
     }
 
+    /// Factorizes the Newton matrix for the weights `self.d`: the normal equations, or, once
+    /// they broke down in this solve, the augmented form ([`AugmentedSystem`]) for the rest of
+    /// it. False when that fails too.
+    fn factorize_newton(&mut self, j: &ConstraintRows) -> bool {
+        if !self.augmented_on {
+            if self.normal.factorize(j, 1.0, &self.d) {
+                return true;
+            }
+            // `D` spans more decades than the normal equations hold (a long chain pushed
+            // together at a tight target): not a failure of the method.
+            self.augmented_on = true;
+        }
+        matches!(self.augmented.factorize(j, &self.d), Ok(true))
+    }
+
+    /// Both factorizations' times.
+    fn times(&self) -> StageTimes {
+        self.normal.times().plus(self.augmented.times())
+    }
+
     /// One Newton direction for the complementarity right-hand side in `self.rc`:
-    /// `(I + JᵀDJ) Δv = −r_d + Jᵀ(r_c/s + D r_p)`, `Δs = JΔv − r_p`, `Δλ = (r_c − λΔs)/s`.
+    /// `(I + JᵀDJ) Δv = −r_d + Jᵀ(r_c/s + D r_p)`, `Δs = JΔv − r_p`, `Δλ = (r_c − λΔs)/s`; once
+    /// the normal equations broke down, from the augmented form (nothing multiplied by `D`):
+    /// `[I, Jᵀ; J, −D⁻¹] [Δv; −Δλ] = [−r_d; r_c/λ + r_p]`.
     fn direction(&mut self, j: &ConstraintRows, lam: &[f64]) {
         let w = self.normal.workers();
         let (s, d, rp, rc) = (&self.s, &self.d, &self.rp, &self.rc);
+        if self.augmented_on {
+            w.map(&mut self.scratch_m, |i, _| rc[i] / lam[i] + rp[i]);
+            let rd = &self.rd;
+            w.map(&mut self.dv, |c, _| -rd[c]);
+            self.augmented
+                .solve_in_place(&mut self.dv, &mut self.scratch_m);
+            let (w, dv, y) = (self.normal.workers(), &self.dv, &self.scratch_m);
+            w.map(&mut self.ds, |i, _| row_dot(j, dv, i) - rp[i]);
+            w.map(&mut self.dl, |i, _| -y[i]);
+            return;
+        }
         w.map(&mut self.scratch_m, |i, _| rc[i] / s[i] + d[i] * rp[i]);
         // Δv's right-hand side −r_d + Jᵀ(r_c/s + D r_p) in natural order.
         let (y, rd, jt) = (&self.scratch_m, &self.rd, self.normal.transpose());
@@ -597,7 +651,7 @@ impl InteriorPoint {
                     .workers()
                     .map(&mut self.rc, |i, _| -s[i] * lam[i]);
             }
-            if !self.normal.factorize(j, 1.0, &self.d) {
+            if !self.factorize_newton(j) {
                 break SolveStatus::NumericalError;
             }
             self.direction(j, lam);
@@ -820,8 +874,10 @@ impl ProjectionSolver for InteriorPoint {
         // ~μ/s: the caller's active rows are those above a millionth of the mean.
         self.warm_floor = 1e-6 * warm_mean;
 
-        let times = self.normal.times();
+        let times = self.times();
         self.normal.analyse(j)?;
+        self.augmented_on = self.augmented_only;
+        self.augmented.forget();
         let settled = self
             .last_changes
             .is_some_and(|c| c <= self.settings.polish_changes);
@@ -842,7 +898,7 @@ impl ProjectionSolver for InteriorPoint {
                     active: cert.active,
                     ..SolveReport::default()
                 };
-                self.normal.times().since(times).report_into(&mut report);
+                self.times().since(times).report_into(&mut report);
                 return Ok(report);
             }
         }
@@ -894,7 +950,7 @@ impl ProjectionSolver for InteriorPoint {
             active,
             ..SolveReport::default()
         };
-        self.normal.times().since(times).report_into(&mut report);
+        self.times().since(times).report_into(&mut report);
         Ok(report)
     }
 
@@ -963,6 +1019,8 @@ const MEMORY_HEAD: usize = 6;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     fn solve(rows: &ConstraintRows, w: &[f64], b: &[f64]) -> (SolveReport, ProjectionSolution) {
         let p = ProjectionProblem {
@@ -1055,6 +1113,162 @@ mod tests {
         other.push(0, 0.0, [(0, 1.0), (2, -1.0)]);
         other.push(1, 0.0, [(1, 1.0), (2, -1.0)]);
         assert_eq!(solve(&other, &[0.0, 0.0]).analyses, 2);
+    }
+
+    /// A chain of `n` unknowns on a line pushed together: rows `v_{k+1} − v_k ≥ 0.05`, the
+    /// unconstrained velocities `w_k = −k/n` with a ±0.01 wobble, so that every row is active
+    /// and the pressure adds up along the chain (multipliers up to ~n²/160).
+    fn pushed_chain(n: usize) -> (ConstraintRows, Vec<f64>, Vec<f64>) {
+        let mut rows = ConstraintRows::new(n);
+        for k in 0..n - 1 {
+            rows.push(k as u64, 0.0, [(k + 1, 1.0), (k, -1.0)]);
+        }
+        let wobble = |k: usize| 0.01 * ((k * 7919 % 13) as f64 / 6.0 - 1.0);
+        let w = (0..n).map(|k| -(k as f64) / n as f64 + wobble(k)).collect();
+        (rows, w, vec![-0.05; n - 1])
+    }
+
+    /// Regression: on a chain of 1,000 pushed together `D = λ/s` reaches 10¹⁷ and more below
+    /// a gap of ~10⁻⁷, the Cholesky factorization of `I + JᵀDJ` broke down and the solve
+    /// ended with `NumericalError`. The augmented form takes over and the answer is the
+    /// closed form: every gap exactly 0.05 (`v_k = c + 0.05 k`, `c` the mean of `w_k − 0.05
+    /// k`) and `λ_k = Σ_{i ≤ k} (w_i − v_i)`.
+    #[test]
+    fn a_long_chain_pushed_together_is_certified_after_the_normal_equations_break_down() {
+        let n = 1000;
+        let (rows, w, b) = pushed_chain(n);
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
+        let c = (0..n).map(|k| w[k] - 0.05 * k as f64).sum::<f64>() / n as f64;
+        let exact: Vec<f64> = (0..n).map(|k| c + 0.05 * k as f64).collect();
+        let exact_lambda: Vec<f64> = (0..n - 1)
+            .scan(0.0, |sum, k| {
+                *sum += w[k] - exact[k];
+                Some(*sum)
+            })
+            .collect();
+        for gap in [1e-8, 1e-9] {
+            let target = Target {
+                gap,
+                violation: 1e-9,
+            };
+            let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+            let mut sol = ProjectionSolution::default();
+            let rep = ip.solve(&p, target, &mut sol).unwrap();
+            assert!(
+                rep.status.is_converged() && rep.gap <= gap && rep.violation <= 1e-9,
+                "{rep:?}"
+            );
+            let counts = ip.counts();
+            assert!(counts.augmented_factorizations > 0, "{counts:?}");
+            assert_eq!(
+                rep.factorizations,
+                counts.factorizations + counts.augmented_factorizations
+            );
+            // A certified gap bounds the distance to the projection: ½|v − v*|² ≤ gap.
+            let err = (0..n).map(|k| (sol.v[k] - exact[k]).powi(2)).sum::<f64>();
+            assert!(0.5 * err <= rep.gap, "velocity off by {err:e}");
+            let err = (0..n - 1).fold(0.0f64, |e, k| {
+                e.max((sol.lambda[k] - exact_lambda[k]).abs() / exact_lambda[k])
+            });
+            assert!(err < 1e-6, "multipliers off by {err:e} (relative)");
+        }
+    }
+
+    /// The augmented form alone (as if the normal equations always broke down) answers what
+    /// they answer: the chain of four in closed form, and random problems with repeated rows
+    /// (`J Jᵀ` singular: a self-stress the regularization decides), each certified, within the
+    /// two certified gaps of each other.
+    #[test]
+    fn the_augmented_form_answers_every_problem_the_normal_equations_answer() {
+        let target = Target {
+            gap: 1e-10,
+            violation: 1e-10,
+        };
+        let exercised = std::cell::Cell::new(0);
+        let solve_both = |rows: &ConstraintRows, w: &[f64], b: &[f64]| {
+            let p = ProjectionProblem {
+                w,
+                jacobian: rows,
+                b,
+            };
+            let mut out = Vec::new();
+            for augmented in [false, true] {
+                let ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+                let mut ip = if augmented { ip.augmented_only() } else { ip };
+                let mut sol = ProjectionSolution::default();
+                let rep = ip.solve(&p, target, &mut sol).unwrap();
+                assert!(rep.status.is_converged(), "augmented {augmented}: {rep:?}");
+                let counts = ip.counts();
+                let by_normal = counts.factorizations;
+                assert!(!augmented || by_normal == 0, "{counts:?}");
+                assert!(
+                    augmented || counts.augmented_factorizations == 0,
+                    "{counts:?}"
+                );
+                exercised.set(exercised.get() + counts.augmented_factorizations.min(1));
+                out.push((sol, rep.gap));
+            }
+            let ((normal, gap_n), (aug, gap_a)) = (out.remove(0), out.remove(0));
+            // ½|v − v*|² ≤ gap for each.
+            let dist = (0..w.len())
+                .map(|c| (aug.v[c] - normal.v[c]).powi(2))
+                .sum::<f64>();
+            assert!(
+                dist.sqrt() <= (2.0 * gap_n).sqrt() + (2.0 * gap_a).sqrt(),
+                "{:?} {:?}",
+                aug.v,
+                normal.v
+            );
+            aug
+        };
+        // The chain of four against a wall: v = 0, λ = (4, 3, 2, 1).
+        let (rows, w, b) = chain();
+        let aug = solve_both(&rows, &w, &b);
+        for (k, want) in [4.0, 3.0, 2.0, 1.0].into_iter().enumerate() {
+            assert!((aug.lambda[k] - want).abs() < 1e-8, "{:?}", aug.lambda);
+            assert!(aug.v[k].abs() < 1e-9, "{:?}", aug.v);
+        }
+        // Random feasible problems (each row holds at a random `v₀`, a third of them tight
+        // there), a third of their rows repeated (J Jᵀ singular).
+        let mut rng = ChaCha8Rng::seed_from_u64(22);
+        for _ in 0..20 {
+            let (n, m) = (rng.random_range(2..12), rng.random_range(1..16));
+            let v0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut rows = ConstraintRows::new(n);
+            let mut b = Vec::new();
+            for i in 0..m {
+                if i > 0 && rng.random_bool(0.3) {
+                    let (c, a) = rows.row(i - 1);
+                    let entries: Vec<(usize, f64)> =
+                        c.iter().copied().zip(a.iter().copied()).collect();
+                    rows.push(i as u64, 0.0, entries);
+                    b.push(b[i - 1]);
+                    continue;
+                }
+                let k = rng.random_range(1..=n.min(4));
+                let entries: Vec<(usize, f64)> = (0..k)
+                    .map(|_| (rng.random_range(0..n), rng.random_range(-1.0..1.0)))
+                    .collect();
+                rows.push(i as u64, 0.0, entries);
+                let slack = if rng.random_bool(0.3) {
+                    0.0
+                } else {
+                    rng.random_range(0.0..0.3)
+                };
+                b.push(slack - row_dot(&rows, &v0, i));
+            }
+            let w: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+            solve_both(&rows, &w, &b);
+        }
+        assert!(
+            exercised.get() >= 15,
+            "{} of 21 solved by the augmented form",
+            exercised.get()
+        );
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! `auto`. A new solver is one file and one line in the factory below.
 
 mod apgd;
+mod augmented;
 mod auto;
 mod blocked;
 mod certificate;

@@ -60,6 +60,10 @@ pub struct FactorizationCounts {
     pub split_factorizations: usize,
     /// Rank-one updates and downdates of a factorization in 2×2 blocks.
     pub updates: usize,
+    /// Numeric factorizations of the Newton system's augmented form, which the interior point
+    /// takes once the normal equations broke down (not in `factorizations`; a solve's report
+    /// counts both).
+    pub augmented_factorizations: usize,
 }
 
 /// Seconds spent per stage of the factorization machinery, accumulated.
@@ -80,6 +84,15 @@ impl StageTimes {
             analyse: self.analyse - earlier.analyse,
             factorize: self.factorize - earlier.factorize,
             factorizations: self.factorizations - earlier.factorizations,
+        }
+    }
+
+    /// Both accumulators added up.
+    pub(crate) fn plus(self, other: StageTimes) -> StageTimes {
+        StageTimes {
+            analyse: self.analyse + other.analyse,
+            factorize: self.factorize + other.factorize,
+            factorizations: self.factorizations + other.factorizations,
         }
     }
 

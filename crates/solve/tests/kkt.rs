@@ -1906,3 +1906,44 @@ fn a_restored_interior_point_polishes_as_the_original() {
         assert_eq!(sol, restored_sol, "push {k}");
     }
 }
+
+/// Regression: a crush of 900 disks asked a gap of 10⁻¹² drives `D = λ/s` past what the
+/// Cholesky factorization of `I + JᵀDJ` holds, and the interior point ended with
+/// `NumericalError`. It finishes with the Newton system's augmented form, certified, within
+/// the certified distance of its own answer at 10⁻¹⁰.
+#[test]
+fn a_crush_asked_a_tight_gap_is_certified_after_the_normal_equations_break_down() {
+    let (w, rows, b) = crush(30, 0.999);
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let mut answers = Vec::new();
+    for gap in [1e-10, 1e-12] {
+        let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let target = Target {
+            gap,
+            violation: 1e-10,
+        };
+        let rep = ip.solve(&p, target, &mut sol).unwrap();
+        assert!(
+            rep.status.is_converged() && rep.gap <= gap && rep.violation <= 1e-10,
+            "{rep:?}"
+        );
+        let augmented = ip.counts().augmented_factorizations;
+        assert_eq!(
+            augmented > 0,
+            gap < 1e-11,
+            "{augmented} augmented at {gap:e}"
+        );
+        answers.push((sol.v, rep.gap));
+    }
+    let dist = (0..w.len())
+        .map(|c| (answers[0].0[c] - answers[1].0[c]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let bound = (2.0 * answers[0].1).sqrt() + (2.0 * answers[1].1).sqrt();
+    assert!(dist <= bound, "{dist:e} > {bound:e}");
+}
