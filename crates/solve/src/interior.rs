@@ -261,6 +261,14 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
+/// The interior point stops (`MaxIterations`) after this many iterations in a row with `sᵀλ`
+/// below the target gap whose certificate did not halve the best one: the target is below
+/// what double precision can certify of this answer. The gap holds `Σ λ_i s_i` with each slack
+/// rounded to ~10⁻¹⁶ of the velocities (benches/README.md, session 20): on a chain of 3,000
+/// pushed together (multipliers up to 56,000) it stays at ~9·10⁻⁸ while `sᵀλ` falls, and
+/// the solve used to spend its whole budget there.
+const STALLED_CHECKS: usize = 5;
+
 /// Mehrotra's predictor–corrector interior point on the velocity-form projection, with
 /// sparse Cholesky normal equations. Its answers are certified by [`certify`].
 #[derive(Debug)]
@@ -608,6 +616,9 @@ impl InteriorPoint {
         let level = self.settings.warm_iterate * target.gap;
         let mut kept = false;
         let mut iterations = 0;
+        // The best certified gap since `sᵀλ` went below the target, and the checks since it
+        // last halved (see [`STALLED_CHECKS`]).
+        let (mut best, mut stalled) = (f64::INFINITY, 0);
         let status = loop {
             let wk = self.normal.workers();
             // Once the residuals vanish the certificate is sᵀλ: below the target gap is
@@ -633,7 +644,12 @@ impl InteriorPoint {
                 if c.gap <= target.gap && c.violation <= target.violation {
                     break SolveStatus::Converged;
                 }
-                if last {
+                if c.gap < 0.5 * best {
+                    (best, stalled) = (c.gap, 0);
+                } else {
+                    stalled += 1;
+                }
+                if last || stalled == STALLED_CHECKS {
                     break SolveStatus::MaxIterations;
                 }
             }
@@ -1176,6 +1192,37 @@ mod tests {
             });
             assert!(err < 1e-6, "multipliers off by {err:e} (relative)");
         }
+    }
+
+    /// Regression: on a chain of 3,000 pushed together (multipliers up to 56,000) a gap of
+    /// 10⁻⁸ is below what double precision certifies (the slacks' rounding times `Σ λ`:
+    /// ~9·10⁻⁸), and the solve spent its whole budget of 100 iterations at that floor. It
+    /// stops after [`STALLED_CHECKS`] checks that do not halve the gap, the answer the
+    /// certified one at the floor.
+    #[test]
+    fn a_target_below_what_double_precision_certifies_stops_at_the_floor() {
+        let n = 3000;
+        let (rows, w, b) = pushed_chain(n);
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
+        let mut ip = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let target = Target {
+            gap: 1e-8,
+            violation: 1e-9,
+        };
+        let rep = ip.solve(&p, target, &mut sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::MaxIterations, "{rep:?}");
+        assert!(rep.iterations <= 30, "{rep:?}");
+        assert!(rep.gap < 1e-6 && rep.violation <= 1e-9, "{rep:?}");
+        let c = (0..n).map(|k| w[k] - 0.05 * k as f64).sum::<f64>() / n as f64;
+        let err = (0..n)
+            .map(|k| (sol.v[k] - c - 0.05 * k as f64).powi(2))
+            .sum::<f64>();
+        assert!(0.5 * err <= rep.gap, "velocity off by {err:e}");
     }
 
     /// The augmented form alone (as if the normal equations always broke down) answers what
