@@ -1947,3 +1947,47 @@ fn a_crush_asked_a_tight_gap_is_certified_after_the_normal_equations_break_down(
     let bound = (2.0 * answers[0].1).sqrt() + (2.0 * answers[1].1).sqrt();
     assert!(dist <= bound, "{dist:e} > {bound:e}");
 }
+
+/// Regression: `gauss-seidel` (or `apgd`, `newton`) that ran out of passes on a crush handed
+/// the projection to Clarabel, which stops above the target there, and the run failed
+/// (`NumericalError` on the crush of 40,000, benches/README.md, session 22). Our interior
+/// point now comes first among the fallbacks and certifies.
+#[test]
+fn a_solver_that_misses_on_a_crush_hands_it_to_our_interior_point() {
+    let (w, rows, b) = crush(30, 0.999);
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let target = Target {
+        gap: 1e-9,
+        violation: 1e-10,
+    };
+    let mut tuning = moreau_solve::SolverTuning::default();
+    tuning.gauss_seidel.max_passes = 3;
+    tuning.apgd.max_iterations = 3;
+    tuning.newton.max_iterations = 1;
+    for kind in [
+        moreau_solve::SolverKind::GaussSeidel,
+        moreau_solve::SolverKind::Apgd,
+        moreau_solve::SolverKind::Newton,
+    ] {
+        let mut solver = kind
+            .build_with(Parallelism::SEQUENTIAL, w.len(), &tuning)
+            .unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = solver.solve(&p, target, &mut sol).unwrap();
+        assert!(
+            rep.status.is_converged() && rep.gap <= target.gap && rep.solver == "interior",
+            "{kind:?}: {rep:?}"
+        );
+        // The answer is certified from the data, whoever gave it.
+        let (mut sm, mut sn) = (vec![0.0; b.len()], vec![0.0; w.len()]);
+        let c = certify(&p, &sol.v, &sol.lambda, &mut sm, &mut sn);
+        assert!(
+            c.gap <= target.gap && c.violation <= target.violation,
+            "{c:?}"
+        );
+    }
+}
