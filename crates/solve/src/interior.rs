@@ -261,13 +261,19 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
-/// The interior point stops (`MaxIterations`) after this many iterations in a row with `sᵀλ`
-/// below the target gap whose certificate did not halve the best one: the target is below
-/// what double precision can certify of this answer. The gap holds `Σ λ_i s_i` with each slack
-/// rounded to ~10⁻¹⁶ of the velocities (benches/README.md, session 20): on a chain of 3,000
-/// pushed together (multipliers up to 56,000) it stays at ~9·10⁻⁸ while `sᵀλ` falls, and
-/// the solve used to spend its whole budget there.
-const STALLED_CHECKS: usize = 5;
+/// The interior point stops (`MaxIterations`) after this many iterations in a row near the
+/// end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring the measure of
+/// progress 10 % below its best: `sᵀλ` while it is above the target, then the certified gap.
+/// The target is then below what double precision can certify of this problem: each slack
+/// is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps then blocked by
+/// slacks at their rounding) nor the certified gap (which holds `Σ λ_i s_i`) go below about
+/// `10⁻¹⁶ Σ λ_i` (benches/README.md, sessions 20 and 22). On a chain of 3,000 pushed
+/// together (multipliers up to 56,000) the certified gap stays at 8.8·10⁻⁸ while `sᵀλ`
+/// falls; on a crush of 3,600 `sᵀλ` stays at 2.0·10⁻¹¹ (`Σ λ` = 59,000); the solves used to
+/// spend their whole budget of 100 iterations there.
+const STALLED_ITERATIONS: usize = 10;
+/// See [`STALLED_ITERATIONS`].
+const STALL_ZONE: f64 = 1e3;
 
 /// Mehrotra's predictor–corrector interior point on the velocity-form projection, with
 /// sparse Cholesky normal equations. Its answers are certified by [`certify`].
@@ -616,9 +622,9 @@ impl InteriorPoint {
         let level = self.settings.warm_iterate * target.gap;
         let mut kept = false;
         let mut iterations = 0;
-        // The best certified gap since `sᵀλ` went below the target, and the checks since it
-        // last halved (see [`STALLED_CHECKS`]).
-        let (mut best, mut stalled) = (f64::INFINITY, 0);
+        // The best `sᵀλ` above the target and certified gap below it, and the iterations since
+        // either last improved (see [`STALLED_ITERATIONS`]).
+        let (mut best_sl, mut best_gap, mut stalled) = (f64::INFINITY, f64::INFINITY, 0);
         let status = loop {
             let wk = self.normal.workers();
             // Once the residuals vanish the certificate is sᵀλ: below the target gap is
@@ -639,18 +645,30 @@ impl InteriorPoint {
                 let s = &self.s;
                 wk.map(&mut self.rp, |i, _| s[i] - p.b[i] - row_dot(j, v, i));
             }
+            let mut cert_gap = f64::INFINITY;
             if check {
                 let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+                cert_gap = c.gap;
                 if c.gap <= target.gap && c.violation <= target.violation {
                     break SolveStatus::Converged;
                 }
-                if c.gap < 0.5 * best {
-                    (best, stalled) = (c.gap, 0);
+                if last {
+                    break SolveStatus::MaxIterations;
+                }
+            }
+            if sl <= STALL_ZONE * target.gap {
+                let (measure, best) = if check {
+                    (cert_gap, &mut best_gap)
+                } else {
+                    (sl, &mut best_sl)
+                };
+                if measure < 0.9 * *best {
+                    (*best, stalled) = (measure, 0);
                 } else {
                     stalled += 1;
-                }
-                if last || stalled == STALLED_CHECKS {
-                    break SolveStatus::MaxIterations;
+                    if stalled == STALLED_ITERATIONS {
+                        break SolveStatus::MaxIterations;
+                    }
                 }
             }
             if !kept && iterations > 0 && sl <= level {
@@ -1197,8 +1215,8 @@ mod tests {
     /// Regression: on a chain of 3,000 pushed together (multipliers up to 56,000) a gap of
     /// 10⁻⁸ is below what double precision certifies (the slacks' rounding times `Σ λ`:
     /// ~9·10⁻⁸), and the solve spent its whole budget of 100 iterations at that floor. It
-    /// stops after [`STALLED_CHECKS`] checks that do not halve the gap, the answer the
-    /// certified one at the floor.
+    /// stops after [`STALLED_ITERATIONS`] iterations that do not improve the gap, the answer
+    /// the certified one at the floor.
     #[test]
     fn a_target_below_what_double_precision_certifies_stops_at_the_floor() {
         let n = 3000;
