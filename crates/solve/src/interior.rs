@@ -1166,7 +1166,7 @@ mod tests {
     /// a gap of ~10⁻⁷, the Cholesky factorization of `I + JᵀDJ` broke down and the solve
     /// ended with `NumericalError`. The augmented form takes over and the answer is the
     /// closed form: every gap exactly 0.05 (`v_k = c + 0.05 k`, `c` the mean of `w_k − 0.05
-    /// k`) and `λ_k = Σ_{i ≤ k} (w_i − v_i)`.
+    /// k`) and `λ_k = Σ_{i ≤ k} (w_i − v_i)`; the same bits on two threads.
     #[test]
     fn a_long_chain_pushed_together_is_certified_after_the_normal_equations_break_down() {
         let n = 1000;
@@ -1209,6 +1209,17 @@ mod tests {
                 e.max((sol.lambda[k] - exact_lambda[k]).abs() / exact_lambda[k])
             });
             assert!(err < 1e-6, "multipliers off by {err:e} (relative)");
+            // The same bits on two threads.
+            let mut two = InteriorPoint::new(InteriorPointSettings {
+                parallelism: Parallelism::threads(2),
+                ..InteriorPointSettings::default()
+            })
+            .unwrap();
+            let mut other = ProjectionSolution::default();
+            let rep2 = two.solve(&p, target, &mut other).unwrap();
+            assert_eq!(rep2.iterations, rep.iterations);
+            let bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert!(bits(&other.v) == bits(&sol.v) && bits(&other.lambda) == bits(&sol.lambda));
         }
     }
 
