@@ -12,6 +12,11 @@ pub enum SolveStatus {
     Infeasible,
     /// The solver reported a numerical failure.
     NumericalError,
+    /// The target is below what double precision certifies for this problem: the progress
+    /// stalled at the certificate's rounding floor, about `10⁻¹⁶ Σ λ_i` (each slack
+    /// `b_i + J_i v` is rounded to ~10⁻¹⁶ of the velocities). No solver's answer certifies
+    /// lower; a larger target does.
+    RoundingFloor,
 }
 
 impl SolveStatus {
@@ -27,6 +32,7 @@ impl SolveStatus {
             SolveStatus::MaxIterations => "max_iterations",
             SolveStatus::Infeasible => "infeasible",
             SolveStatus::NumericalError => "numerical_error",
+            SolveStatus::RoundingFloor => "rounding_floor",
         }
     }
 }

@@ -205,7 +205,10 @@ fn long_horizons_at_the_extremes() {
 }
 
 /// An accuracy no solver reaches in floating point (ε_k = 10⁻²⁰ μ³) is a clear error naming
-/// the step and the certificate, not a silently accepted step.
+/// the step and the certificate, not a silently accepted step; it says the target is below
+/// what double precision certifies (the interior point stopped at the rounding floor, and
+/// no fallback was asked: before, Clarabel's NumericalError after the interior point's whole
+/// budget).
 #[test]
 fn an_unreachable_accuracy_is_a_clear_error() {
     let mut scene = room(0.3, 0.05, 2.0, &spawn(60, "0.25", "1.0"));
@@ -218,6 +221,10 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     let text = err.to_string();
     assert!(
         text.contains("not certified") && text.contains("step"),
+        "{text}"
+    );
+    assert!(
+        text.contains("RoundingFloor") && text.contains("below what double precision"),
         "{text}"
     );
 }

@@ -17,7 +17,8 @@ pub enum IntegrateError {
     },
     /// The projection could not be certified to its target, even by the fallback.
     #[error(
-        "step {step} at t = {t}: projection not certified ({status:?}): ε = {eps:e} for target {eps_target:e}, violation {violation:e} for target {max_violation:e}"
+        "step {step} at t = {t}: projection not certified ({status:?}): ε = {eps:e} for target {eps_target:e}, violation {violation:e} for target {max_violation:e}{}",
+        below_floor(*status)
     )]
     NotCertified {
         /// Step index.
@@ -64,4 +65,14 @@ pub enum IntegrateError {
     /// A solver refused the problem.
     #[error(transparent)]
     Solve(#[from] moreau_solve::SolveError),
+}
+
+/// What [`IntegrateError::NotCertified`]'s message adds when the target was below the
+/// certificate's rounding floor.
+fn below_floor(status: SolveStatus) -> &'static str {
+    if status == SolveStatus::RoundingFloor {
+        " (the target is below what double precision can certify for this problem: ask a larger ε)"
+    } else {
+        ""
+    }
 }

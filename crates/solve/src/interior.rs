@@ -261,16 +261,16 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
-/// The interior point stops (`MaxIterations`) after this many iterations in a row near the
-/// end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring the measure of
-/// progress 10 % below its best: `sᵀλ` while it is above the target, then the certified gap.
-/// The target is then below what double precision can certify of this problem: each slack
-/// is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps then blocked by
-/// slacks at their rounding) nor the certified gap (which holds `Σ λ_i s_i`) go below about
-/// `10⁻¹⁶ Σ λ_i` (benches/README.md, sessions 20 and 22). On a chain of 3,000 pushed
-/// together (multipliers up to 56,000) the certified gap stays at 8.8·10⁻⁸ while `sᵀλ`
-/// falls; on a crush of 3,600 `sᵀλ` stays at 2.0·10⁻¹¹ (`Σ λ` = 59,000); the solves used to
-/// spend their whole budget of 100 iterations there.
+/// The interior point stops ([`SolveStatus::RoundingFloor`]) after this many iterations in a
+/// row near the end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring
+/// the measure of progress 10 % below its best: `sᵀλ` while it is above the target, then the
+/// certified gap. The target is then below what double precision can certify of this
+/// problem: each slack is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps
+/// then blocked by slacks at their rounding) nor the certified gap (which holds `Σ λ_i s_i`)
+/// go below about `10⁻¹⁶ Σ λ_i` (benches/README.md, sessions 20 and 22). On a chain of 3,000
+/// pushed together (multipliers up to 56,000) the certified gap stays at 8.8·10⁻⁸ while
+/// `sᵀλ` falls; on a crush of 3,600 `sᵀλ` stays at 2.0·10⁻¹¹ (`Σ λ` = 59,000); the solves
+/// used to spend their whole budget of 100 iterations there.
 const STALLED_ITERATIONS: usize = 10;
 /// See [`STALLED_ITERATIONS`].
 const STALL_ZONE: f64 = 1e3;
@@ -667,7 +667,7 @@ impl InteriorPoint {
                 } else {
                     stalled += 1;
                     if stalled == STALLED_ITERATIONS {
-                        break SolveStatus::MaxIterations;
+                        break SolveStatus::RoundingFloor;
                     }
                 }
             }
@@ -1244,7 +1244,7 @@ mod tests {
             violation: 1e-9,
         };
         let rep = ip.solve(&p, target, &mut sol).unwrap();
-        assert_eq!(rep.status, SolveStatus::MaxIterations, "{rep:?}");
+        assert_eq!(rep.status, SolveStatus::RoundingFloor, "{rep:?}");
         assert!(rep.iterations <= 30, "{rep:?}");
         assert!(rep.gap < 1e-6 && rep.violation <= 1e-9, "{rep:?}");
         let c = (0..n).map(|k| w[k] - 0.05 * k as f64).sum::<f64>() / n as f64;

@@ -1995,7 +1995,7 @@ fn a_solver_that_misses_on_a_crush_hands_it_to_our_interior_point() {
 /// Regression: a crush of 3,600 (multipliers summing to 59,000) asked a gap of 10⁻¹² is
 /// below what double precision certifies (`sᵀλ` stops at 2·10⁻¹¹, its slacks at their
 /// rounding), and the interior point spent its whole budget of 100 iterations there (1.9 s).
-/// It stops after ten iterations without progress, with the answer it reached.
+/// It stops after ten iterations without progress, with the answer it reached, and says why.
 #[test]
 fn a_crush_asked_below_its_rounding_floor_stops_there() {
     let (w, rows, b) = crush(60, 0.999);
@@ -2011,7 +2011,7 @@ fn a_crush_asked_below_its_rounding_floor_stops_there() {
         violation: 1e-10,
     };
     let rep = ip.solve(&p, target, &mut sol).unwrap();
-    assert_eq!(rep.status, SolveStatus::MaxIterations, "{rep:?}");
+    assert_eq!(rep.status, SolveStatus::RoundingFloor, "{rep:?}");
     assert!(rep.iterations < 40, "{rep:?}");
     assert!(rep.gap < 1e-10 && rep.violation <= 1e-10, "{rep:?}");
 }
