@@ -12,8 +12,11 @@
 //! is dense (a crush's) Gondzio's centrality correctors up to two more.
 //!
 //! The normal equations (ordering, pattern, symbolic analysis reused while the columns of
-//! `J`'s rows hold, a numeric factorization every iteration) are [`NormalEquations`]'s; this
-//! module is the interior-point loop.
+//! `J`'s rows hold, a numeric factorization every iteration) are [`NormalEquations`]'s; where
+//! their factorization breaks down (`D` past ~10¹⁷: a long chain pushed together, a crush at a
+//! tight gap) the rest of the solve takes the augmented form of [`AugmentedSystem`]. This
+//! module is the interior-point loop, which also stops at the certificate's rounding floor
+//! ([`SolveStatus::RoundingFloor`]).
 
 use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, SolveStatus};
 
