@@ -68,6 +68,11 @@ pub(crate) struct AugmentedSystem {
     signs: Vec<i8>,
     largest_row: f64,
     symbolic: Option<SymbolicCholesky<Index>>,
+    /// The pattern (`col_ptr`, `row_idx`) `symbolic` analysed.
+    analysed: (Vec<Index>, Vec<Index>),
+    /// Whether the matrix holds the rows of this solve.
+    current: bool,
+    analyses: usize,
     l: Vec<f64>,
     mem: Option<MemBuffer>,
     /// A row's entries while the pattern is built.
@@ -98,12 +103,20 @@ impl AugmentedSystem {
         self.times
     }
 
-    /// Forgets the analysis: the next [`Self::factorize`] analyses its rows again.
+    /// Marks the rows as new (another solve): the next [`Self::factorize`] reads them again,
+    /// and analyses them again only if their pattern changed.
     pub(crate) fn forget(&mut self) {
-        self.symbolic = None;
+        self.current = false;
     }
 
-    /// The pattern and symbolic analysis (AMD on the whole augmented matrix) of `j`.
+    /// Symbolic analyses done so far.
+    #[cfg(test)]
+    pub(crate) fn analyses(&self) -> usize {
+        self.analyses
+    }
+
+    /// The matrix of `j` (pattern and values) and, when its pattern differs from the last
+    /// one analysed, its symbolic analysis (AMD on the whole augmented matrix).
     fn analyse(&mut self, j: &ConstraintRows) -> Result<(), SolveError> {
         let clock = Instant::now();
         let (n, m) = (j.dim(), j.len());
@@ -144,7 +157,19 @@ impl AugmentedSystem {
             self.values.push(-1.0);
             self.col_ptr.push(self.row_idx.len() as Index);
         }
+        self.current = true;
         let size = n + m;
+        let same = self.symbolic.is_some()
+            && self.col_ptr == self.analysed.0
+            && self.row_idx == self.analysed.1;
+        if same {
+            self.times.analyse += clock.elapsed().as_secs_f64();
+            return Ok(());
+        }
+        self.symbolic = None;
+        self.analysed.0.clone_from(&self.col_ptr);
+        self.analysed.1.clone_from(&self.row_idx);
+        self.analyses += 1;
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &self.col_ptr, None, &self.row_idx);
         let symbolic = factorize_symbolic_cholesky(
@@ -179,10 +204,10 @@ impl AugmentedSystem {
     }
 
     /// Factorizes `[I, Jᵀ; J, −D⁻¹]` (rows with `d_i = 0` count as very far from binding), the
-    /// pattern analysed when [`Self::forget`] was called since the last factorization; false
+    /// rows read again when [`Self::forget`] was called since the last factorization; false
     /// when the factorization fails.
     pub(crate) fn factorize(&mut self, j: &ConstraintRows, d: &[f64]) -> Result<bool, SolveError> {
-        if self.symbolic.is_none() {
+        if !self.current {
             self.analyse(j)?;
         }
         let clock = Instant::now();
@@ -306,7 +331,8 @@ mod tests {
     /// without multiplying by `D`), on a chain of 1,000 with `D` from 1 to 10²⁰ (the normal
     /// equations' factorization breaks down from ~10¹⁷ on), with a row repeated: the pair's
     /// split of its total is as ill-conditioned as `D` is large (a self-stress, which moves
-    /// neither `x` nor `Jᵀy`), every other entry exact to ten digits.
+    /// neither `x` nor `Jᵀy`), every other entry exact to ten digits. The rows' values change
+    /// from solve to solve (doubled every other one), their pattern does not: one analysis.
     #[test]
     fn the_augmented_solve_is_accurate_whatever_the_weights() {
         let n = 1000;
@@ -319,7 +345,14 @@ mod tests {
         let x_true: Vec<f64> = (0..n).map(|k| ((k * 31 % 17) as f64) - 8.0).collect();
         let mut y_true: Vec<f64> = (0..m).map(|k| ((k * 37 % 23) as f64) * 100.0).collect();
         let mut aug = AugmentedSystem::default();
-        for decades in [0, 4, 8, 12, 16, 20] {
+        let mut rows_scaled = ConstraintRows::new(n);
+        for i in 0..m {
+            let (c, a) = rows.row(i);
+            rows_scaled.push(i as u64, 0.0, c.iter().zip(a).map(|(&c, &a)| (c, 2.0 * a)));
+        }
+        for (k, decades) in [0, 4, 8, 12, 16, 20].into_iter().enumerate() {
+            // Every other solve with the rows doubled: the same pattern, other values.
+            let rows = if k % 2 == 1 { &rows_scaled } else { &rows };
             let d: Vec<f64> = (0..m)
                 .map(|k| 10f64.powi(decades) * (1.0 + (k % 7) as f64))
                 .collect();
@@ -329,7 +362,8 @@ mod tests {
             y_true[0] = pair * d[0] / (d[0] + d[m - 1]);
             y_true[m - 1] = pair * d[m - 1] / (d[0] + d[m - 1]);
             aug.forget();
-            assert!(aug.factorize(&rows, &d).unwrap());
+            assert!(aug.factorize(rows, &d).unwrap());
+            assert_eq!(aug.analyses(), 1, "the pattern held: analysed once");
             let mut top = x_true.clone();
             rows.mul_transpose_add(&y_true, &mut top);
             let mut bottom = vec![0.0; m];
@@ -352,5 +386,23 @@ mod tests {
                 "D ~ 1e{decades}: pair off by {err_pair:e}"
             );
         }
+        // Without the repeated row: another pattern, analysed again.
+        let mut chain = ConstraintRows::new(n);
+        for i in 0..n - 1 {
+            let (c, a) = rows.row(i);
+            chain.push(i as u64, 0.0, c.iter().copied().zip(a.iter().copied()));
+        }
+        aug.forget();
+        assert!(aug.factorize(&chain, &vec![1e12; n - 1]).unwrap());
+        assert_eq!(aug.analyses(), 2);
+        // y = 0: the right-hand side is [x; J x].
+        let mut top = x_true.clone();
+        let mut bottom = vec![0.0; n - 1];
+        chain.mul(&x_true, &mut bottom);
+        aug.solve_in_place(&mut top, &mut bottom);
+        let err_x = (0..n).fold(0.0f64, |e, k| e.max((top[k] - x_true[k]).abs()));
+        assert!(err_x < 1e-10 * 8.0, "x off by {err_x:e}");
+        let err_y = bottom.iter().fold(0.0f64, |e, y| e.max(y.abs()));
+        assert!(err_y < 1e-10 * 8.0 * 1e12, "y off by {err_y:e} (D = 10¹²)");
     }
 }
