@@ -157,12 +157,12 @@ impl AugmentedSystem {
             self.values.push(-1.0);
             self.col_ptr.push(self.row_idx.len() as Index);
         }
-        self.current = true;
         let size = n + m;
         let same = self.symbolic.is_some()
             && self.col_ptr == self.analysed.0
             && self.row_idx == self.analysed.1;
         if same {
+            self.current = true;
             self.times.analyse += clock.elapsed().as_secs_f64();
             return Ok(());
         }
@@ -199,6 +199,8 @@ impl AugmentedSystem {
             v.clear();
             v.resize(size, 0.0);
         }
+        // (Only now: an analysis that failed is tried again, not taken for done.)
+        self.current = true;
         self.times.analyse += clock.elapsed().as_secs_f64();
         Ok(())
     }
