@@ -68,8 +68,10 @@ pub(crate) struct AugmentedSystem {
     signs: Vec<i8>,
     largest_row: f64,
     symbolic: Option<SymbolicCholesky<Index>>,
-    /// The pattern (`col_ptr`, `row_idx`) `symbolic` analysed.
+    /// The pattern (`col_ptr`, `row_idx`) `symbolic` analysed, and its unknowns (the
+    /// pattern alone does not tell an unknown from an empty row).
     analysed: (Vec<Index>, Vec<Index>),
+    analysed_n: usize,
     /// Whether the matrix holds the rows of this solve.
     current: bool,
     analyses: usize,
@@ -159,6 +161,7 @@ impl AugmentedSystem {
         }
         let size = n + m;
         let same = self.symbolic.is_some()
+            && self.analysed_n == n
             && self.col_ptr == self.analysed.0
             && self.row_idx == self.analysed.1;
         if same {
@@ -169,6 +172,7 @@ impl AugmentedSystem {
         self.symbolic = None;
         self.analysed.0.clone_from(&self.col_ptr);
         self.analysed.1.clone_from(&self.row_idx);
+        self.analysed_n = n;
         self.analyses += 1;
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &self.col_ptr, None, &self.row_idx);
