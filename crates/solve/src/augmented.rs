@@ -84,8 +84,6 @@ pub(crate) struct AugmentedSystem {
     residual: Vec<f64>,
     correction: Vec<f64>,
     times: StageTimes,
-    /// Corrections of the last solve (for tests and traces).
-    pub(crate) refinements: usize,
 }
 
 impl std::fmt::Debug for AugmentedSystem {
@@ -302,7 +300,6 @@ impl AugmentedSystem {
         self.solve_factor(&mut x);
         let scale = b.iter().fold(0.0f64, |a, e| a.max(e.abs()));
         let mut last = f64::INFINITY;
-        self.refinements = 0;
         for _ in 0..REFINE_MAX {
             self.apply(&x, &mut r);
             r.iter_mut().zip(&b).for_each(|(r, b)| *r = b - *r);
@@ -310,7 +307,6 @@ impl AugmentedSystem {
             if norm > last {
                 // The last correction made it worse: undone.
                 x.iter_mut().zip(&z).for_each(|(x, z)| *x -= z);
-                self.refinements -= 1;
                 break;
             }
             if !(norm > REFINE_TOLERANCE * scale) || !(norm < REFINE_STALL * last) {
@@ -320,7 +316,6 @@ impl AugmentedSystem {
             z.copy_from_slice(&r);
             self.solve_factor(&mut z);
             x.iter_mut().zip(&z).for_each(|(x, z)| *x += z);
-            self.refinements += 1;
         }
         top.copy_from_slice(&x[..n]);
         bottom.copy_from_slice(&x[n..size]);

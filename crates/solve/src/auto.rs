@@ -16,6 +16,7 @@ use crate::interior::{InteriorPoint, InteriorPointSettings};
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
+use crate::products::Transpose;
 
 /// Gauss–Seidel takes components of this many rows or more one at a time, and the smaller
 /// ones in groups of about this many rows.
@@ -232,11 +233,10 @@ pub struct AutoSolver {
     set_aside: Vec<bool>,
     // the previous answer's largest |J_i (v − w)| (infinite before the first)
     last_change: f64,
-    // the rows of each unknown (`rows_of_unknown[start[c]..start[c + 1]]`), built in a
-    // solve the first time rows join with the rows around them; the unknowns reached and
-    // the rows joined in the last hop and the next, while they join
-    unknown_start: Vec<u32>,
-    rows_of_unknown: Vec<u32>,
+    // the rows of each unknown, built in a solve the first time rows join with the rows
+    // around them; the unknowns reached and the rows joined in the last hop and the next,
+    // while they join
+    jt: Transpose,
     indexed: bool,
     reached: Vec<bool>,
     front: Vec<u32>,
@@ -439,8 +439,7 @@ impl AutoSolver {
             jw: Vec::new(),
             set_aside: Vec::new(),
             last_change: f64::INFINITY,
-            unknown_start: Vec::new(),
-            rows_of_unknown: Vec::new(),
+            jt: Transpose::default(),
             indexed: false,
             reached: Vec::new(),
             front: Vec::new(),
@@ -855,11 +854,11 @@ impl AutoSolver {
             return;
         }
         if !self.indexed {
-            self.index_rows_by_unknown(p);
+            self.jt.build(j);
+            self.indexed = true;
         }
         let Self {
-            unknown_start: start,
-            rows_of_unknown,
+            jt,
             reached,
             front,
             next_front: next,
@@ -875,7 +874,7 @@ impl AutoSolver {
                     if std::mem::replace(&mut reached[c], true) {
                         continue;
                     }
-                    for &r in &rows_of_unknown[start[c] as usize..start[c + 1] as usize] {
+                    for &r in jt.rows_of(c) {
                         if std::mem::replace(&mut set_aside[r as usize], false) {
                             next.push(r);
                         }
@@ -887,34 +886,6 @@ impl AutoSolver {
                 break;
             }
         }
-    }
-
-    /// The rows of each unknown, for [`join_needed`](Self::join_needed).
-    fn index_rows_by_unknown(&mut self, p: &ProjectionProblem<'_>) {
-        let j = p.jacobian;
-        let start = &mut self.unknown_start;
-        start.clear();
-        start.resize(p.dim() + 1, 0);
-        for &c in j.columns() {
-            start[c + 1] += 1;
-        }
-        for c in 0..p.dim() {
-            start[c + 1] += start[c];
-        }
-        self.rows_of_unknown.clear();
-        self.rows_of_unknown.resize(j.nnz(), 0);
-        // Filled from each unknown's start, which then moves to its end; shifted back after.
-        for i in 0..p.rows() {
-            for &c in j.row(i).0 {
-                self.rows_of_unknown[start[c] as usize] = i as u32;
-                start[c] += 1;
-            }
-        }
-        for c in (0..p.dim()).rev() {
-            start[c + 1] = start[c];
-        }
-        start[0] = 0;
-        self.indexed = true;
     }
 
     /// One solve, with the rows marked in `set_aside` set aside when `screened` (else none):
