@@ -1,5 +1,6 @@
 //! `Walls`: the wall segments of a scene and a grid index over them, built once, that finds
-//! the walls within reach of a point without looking at the others.
+//! the walls within reach of a point without looking at the others (and, from a cell's
+//! clearance, answers "none" for most points in one look).
 
 use crate::geometry::Segment;
 
@@ -14,6 +15,9 @@ pub struct Walls {
     ny: usize,
     cell_start: Vec<u32>,
     entries: Vec<u32>,
+    /// Per cell, how many rings of cells around it list no wall (at most `u8::MAX`): every
+    /// wall is then at least that many cell sides away from any point of the cell.
+    clear_rings: Vec<u8>,
 }
 
 impl Walls {
@@ -81,6 +85,7 @@ impl Walls {
             walls.entries.extend_from_slice(l);
             walls.cell_start.push(walls.entries.len() as u32);
         }
+        walls.clear_rings = clear_rings(nx, ny, |c| !lists[c].is_empty());
         walls
     }
 
@@ -132,6 +137,13 @@ impl Walls {
             return;
         }
         let (lo, hi) = ([p[0] - reach, p[1] - reach], [p[0] + reach, p[1] + reach]);
+        // Far from every wall (most people in a room): the cell of `p` says so. A point
+        // outside the grid is taken by its nearest cell, which is no farther from the walls.
+        let (cx, _) = self.cell_range(p[0], p[0], 0);
+        let (cy, _) = self.cell_range(p[1], p[1], 1);
+        if f64::from(self.clear_rings[cy * self.nx + cx]) * self.cell > reach {
+            return;
+        }
         let top = [
             self.origin[0] + self.nx as f64 * self.cell,
             self.origin[1] + self.ny as f64 * self.cell,
@@ -157,6 +169,50 @@ impl Walls {
         out.sort_unstable();
         out.dedup();
     }
+}
+
+/// For each cell of an `nx × ny` grid, the number of rings of cells around it in which no
+/// cell is `listed` (Chebyshev distance to the nearest listed cell, minus one; cells past
+/// the grid's edge list nothing), at most `u8::MAX`: two sweeps of the chessboard distance
+/// transform.
+fn clear_rings(nx: usize, ny: usize, listed: impl Fn(usize) -> bool) -> Vec<u8> {
+    const FAR: u32 = u8::MAX as u32 + 1;
+    let mut d: Vec<u32> = (0..nx * ny)
+        .map(|c| if listed(c) { 0 } else { FAR })
+        .collect();
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let mut best = d[iy * nx + ix];
+            if ix > 0 {
+                best = best.min(d[iy * nx + ix - 1] + 1);
+            }
+            if iy > 0 {
+                for jx in ix.saturating_sub(1)..=(ix + 1).min(nx - 1) {
+                    best = best.min(d[(iy - 1) * nx + jx] + 1);
+                }
+            }
+            d[iy * nx + ix] = best;
+        }
+    }
+    for iy in (0..ny).rev() {
+        for ix in (0..nx).rev() {
+            let mut best = d[iy * nx + ix];
+            if ix + 1 < nx {
+                best = best.min(d[iy * nx + ix + 1] + 1);
+            }
+            if iy + 1 < ny {
+                for jx in ix.saturating_sub(1)..=(ix + 1).min(nx - 1) {
+                    best = best.min(d[(iy + 1) * nx + jx] + 1);
+                }
+            }
+            d[iy * nx + ix] = best;
+        }
+    }
+    // A cell at distance k has k − 1 clear rings around it; none listed at all: as far as
+    // can be told.
+    d.iter()
+        .map(|&k| (k.saturating_sub(1)).min(u8::MAX as u32) as u8)
+        .collect()
 }
 
 #[cfg(test)]
@@ -202,6 +258,32 @@ mod tests {
             fine.cell
         );
         check_near(&fine, &hall, [-10.0, 610.0], [-10.0, 410.0], &mut rng);
+    }
+
+    /// The rings are the chessboard distance to the nearest listed cell less one, as counted
+    /// cell by cell, on random grids (sparse and dense lists, one row, one column).
+    #[test]
+    fn clear_rings_count_the_empty_rings_around_each_cell() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for (nx, ny, share) in [
+            (17, 11, 0.05),
+            (9, 23, 0.3),
+            (1, 30, 0.1),
+            (40, 1, 0.1),
+            (5, 5, 0.0),
+        ] {
+            let listed: Vec<bool> = (0..nx * ny).map(|_| rng.random_bool(share)).collect();
+            let rings = clear_rings(nx, ny, |c| listed[c]);
+            for c in 0..nx * ny {
+                let (x, y) = ((c % nx) as i64, (c / nx) as i64);
+                let nearest = (0..nx * ny)
+                    .filter(|&o| listed[o])
+                    .map(|o| ((o % nx) as i64 - x).abs().max(((o / nx) as i64 - y).abs()))
+                    .min();
+                let expected = nearest.map_or(u8::MAX, |k| (k.max(1) - 1).min(255) as u8);
+                assert_eq!(rings[c], expected, "{nx}×{ny}, cell {c}");
+            }
+        }
     }
 
     fn check_near(
