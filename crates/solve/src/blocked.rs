@@ -29,6 +29,10 @@ const SPLIT_MIN_PRODUCTS: u64 = 5_000;
 /// fraction of one thread's, counted in block products (see `split_columns`).
 const SPLIT_MAX_SHARE: f64 = 0.85;
 
+/// The most columns of a supernode whose updates of a row's block the factorization gathers
+/// in one pass (see `row_group`).
+const MAX_GROUP: usize = 8;
+
 /// A 2×2 block in column order `[a₀₀, a₁₀, a₀₁, a₁₁]`.
 pub(crate) type Block = [f64; 4];
 
@@ -103,6 +107,10 @@ pub(crate) struct BlockCholesky {
     row_pos: Vec<Index>,
     row_end: Vec<Index>,
     row_col: Vec<Index>,
+    // Per entry of the row lists: how many entries from it on (at most `MAX_GROUP`) are
+    // columns of one supernode, whose rest from that row on is the same rows (0 inside such
+    // a run: read only at its start).
+    row_group: Vec<u8>,
     values: Vec<Block>,
     work: Vec<Block>,
     // scratch of the analysis, kept from analysis to analysis
@@ -133,6 +141,7 @@ struct AnalysisScratch {
     next: Vec<Index>,
     col: Vec<Index>,
     fill: Vec<Index>,
+    entry_col: Vec<Index>,
     weight: Vec<u64>,
     frontier: Vec<usize>,
     split: Split,
@@ -217,21 +226,47 @@ impl BlockCholesky {
         self.row_end.resize(self.row_ptr[n] as usize, 0);
         // (The columns of the row lists' blocks only for a split's forward solve.)
         self.row_col.clear();
-        if split {
-            self.row_col.resize(self.row_ptr[n] as usize, 0);
-        }
-        let fill = &mut self.scratch.fill;
+        let AnalysisScratch {
+            fill, entry_col, ..
+        } = &mut self.scratch;
         fill.clear();
         fill.extend_from_slice(&self.row_ptr[..n]);
+        entry_col.clear();
+        entry_col.resize(self.row_ptr[n] as usize, 0);
         for k in 0..n {
             for p in l.ptr[k] as usize + 1..l.ptr[k + 1] as usize {
                 let r = l.row[p] as usize;
                 self.row_pos[fill[r] as usize] = p as Index;
                 self.row_end[fill[r] as usize] = l.ptr[k + 1];
-                if split {
-                    self.row_col[fill[r] as usize] = k as Index;
-                }
+                entry_col[fill[r] as usize] = k as Index;
                 fill[r] += 1;
+            }
+        }
+        if split {
+            self.row_col.extend_from_slice(entry_col);
+        }
+        // Column j and j + 1 are one supernode's when L(:, j) is j, then L(:, j + 1)'s rows:
+        // in a row list they are neighbours, and their rest from that row on is the same rows.
+        let joins_next = |j: usize| {
+            let c = l.col(j);
+            j + 1 < n && c.len() == l.col(j + 1).len() + 1 && l.row[c.start + 1] as usize == j + 1
+        };
+        self.row_group.clear();
+        self.row_group.resize(self.row_ptr[n] as usize, 0);
+        for k in 0..n {
+            let entries = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
+            let mut e = entries.start;
+            while e < entries.end {
+                let mut w = 1;
+                while w < MAX_GROUP
+                    && e + w < entries.end
+                    && entry_col[e + w] == entry_col[e + w - 1] + 1
+                    && joins_next(entry_col[e + w - 1] as usize)
+                {
+                    w += 1;
+                }
+                self.row_group[e] = w as u8;
+                e += w;
             }
         }
         self.values.clear();
@@ -488,6 +523,7 @@ impl BlockCholesky {
             row_ptr: &self.row_ptr,
             row_pos: &self.row_pos,
             row_end: &self.row_end,
+            row_group: &self.row_group,
         };
         let values = SharedValues::new(&mut self.values);
         let work = &mut self.work[..];
@@ -529,6 +565,7 @@ impl BlockCholesky {
             row_ptr: &self.row_ptr,
             row_pos: &self.row_pos,
             row_end: &self.row_end,
+            row_group: &self.row_group,
         };
         let (work, work2) = (&mut self.work, Mutex::new(&mut self.work2));
         let values = SharedValues::new(&mut self.values);
@@ -684,6 +721,7 @@ struct RowLists<'a> {
     row_ptr: &'a [Index],
     row_pos: &'a [Index],
     row_end: &'a [Index],
+    row_group: &'a [u8],
 }
 
 /// An array shared by the threads of a split factorization or solve (the factor's values, the
@@ -781,16 +819,40 @@ fn factor_shared_columns(
         let lk = l.col(k);
         columns.add_column(k, work);
         // A(:, k) − Σ_j L(:, j) L(k, j)ᵀ over the columns j < k with a block in row k.
-        let row = rows.row_ptr[k] as usize..rows.row_ptr[k + 1] as usize;
-        for (&p, &end) in rows.row_pos[row.clone()].iter().zip(&rows.row_end[row]) {
-            let (p, end) = (p as usize, end as usize);
-            // The rest of column j from row k on (its rows increase).
-            let column = values.read(p..end);
-            let b = column[0];
-            let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
-            for (&r, v) in l.row[p..end].iter().zip(column) {
-                sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
+        let (mut e, last) = (rows.row_ptr[k] as usize, rows.row_ptr[k + 1] as usize);
+        while e < last {
+            let w = rows.row_group[e] as usize;
+            let (p, end) = (rows.row_pos[e] as usize, rows.row_end[e] as usize);
+            if w == 1 {
+                // The rest of column j from row k on (its rows increase).
+                let column = values.read(p..end);
+                let b = column[0];
+                let (bx, by) = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
+                for (&r, v) in l.row[p..end].iter().zip(column) {
+                    sub_mul_transpose(&mut work[r as usize], v, &bx, &by);
+                }
+            } else {
+                // Columns j, j + 1, …, j + w − 1 of one supernode: the same rows from row k
+                // on, so each row's block gathers their updates in turn (in the same order as
+                // one column after the other: the same bits) and is read and written once.
+                let len = end - p;
+                let mut columns: [&[Block]; MAX_GROUP] = [&[]; MAX_GROUP];
+                let mut spread = [([0.0; 4], [0.0; 4]); MAX_GROUP];
+                for i in 0..w {
+                    let q = rows.row_pos[e + i] as usize;
+                    columns[i] = values.read(q..q + len);
+                    let b = columns[i][0];
+                    spread[i] = ([b[0], b[0], b[1], b[1]], [b[2], b[2], b[3], b[3]]);
+                }
+                for (t, &r) in l.row[p..end].iter().enumerate() {
+                    let mut acc = work[r as usize];
+                    for i in 0..w {
+                        sub_mul_transpose(&mut acc, &columns[i][t], &spread[i].0, &spread[i].1);
+                    }
+                    work[r as usize] = acc;
+                }
             }
+            e += w;
         }
         if !finish_column(l, k, work, values.write(lk)) {
             return false;
@@ -981,6 +1043,40 @@ mod tests {
         fresh.analyse(pattern, false);
         assert!(fresh.factorize(&definite));
         assert_eq!(chol.values, fresh.values);
+    }
+
+    /// The updates of a supernode's columns gathered row by row (`row_group`) give the
+    /// factor one column after the other gives, bit for bit, on a pattern with supernodes
+    /// of every width up to `MAX_GROUP` and more (the grids' separator and their last rows).
+    #[test]
+    fn a_supernodes_columns_gathered_at_once_give_the_same_bits() {
+        let (pattern, values) = two_grids_and_a_separator();
+        let mut grouped = BlockCholesky::default();
+        grouped.analyse(pattern.clone(), false);
+        let widths: Vec<u8> = grouped
+            .row_group
+            .iter()
+            .copied()
+            .filter(|&w| w > 1)
+            .collect();
+        assert!(
+            widths.contains(&2) && widths.contains(&(MAX_GROUP as u8)),
+            "{widths:?}"
+        );
+        let mut one_by_one = grouped.clone();
+        for w in one_by_one.row_group.iter_mut() {
+            *w = 1;
+        }
+        assert!(grouped.factorize(&values) && one_by_one.factorize(&values));
+        assert_eq!(grouped.values, one_by_one.values);
+        assert!(grouped.factorize_with(
+            &StoredColumns {
+                pattern: &pattern,
+                values: &values
+            },
+            true
+        ));
+        assert_eq!(grouped.values, one_by_one.values);
     }
 
     /// Two 12×12 grids of blocks (each block coupled to its right and upper neighbours) and
