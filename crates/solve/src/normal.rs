@@ -488,11 +488,11 @@ impl std::fmt::Debug for Scratch {
 }
 
 /// Multiply–adds per factor entry above which faer's supernodal factorization is used
-/// instead of the 2×2-block one: faer's own threshold between its simplicial and supernodal
-/// factorizations, and where the 2×2 blocks and faer's supernodes cross on crushes
-/// (benches/README.md: the blocks 2.3× faster at 37 multiply–adds an entry, the supernodes
-/// 1.1× faster at 46 and 1.3× at 63).
-const SUPERNODAL_FLOPS_PER_ENTRY: u64 = 40;
+/// instead of the 2×2-block one: where they cross on crushes since the blocks gather a
+/// supernode's updates (benches/README.md, session 23: the blocks 1.35× faster at 63
+/// multiply–adds an entry, 1.18× at 107, even at 153; before, the supernodes were 1.3×
+/// faster at 63 and this was 40).
+const SUPERNODAL_FLOPS_PER_ENTRY: u64 = 150;
 
 /// Nested dissection is tried on patterns of at least this many groups of unknowns …
 const DISSECTION_MIN_GROUPS: usize = 2048;
@@ -534,6 +534,9 @@ pub(crate) struct NormalEquations {
     // the factor is thin (`blocked`).
     block: BlockCholesky,
     blocked: bool,
+    // Multiply–adds per factor entry above which faer's supernodal factorization takes over
+    // (`SUPERNODAL_FLOPS_PER_ENTRY`; a test lowers it to reach faer's on a small crush).
+    supernodal_flops_per_entry: u64,
     side: Side,
     counts: FactorizationCounts,
     times: StageTimes,
@@ -651,6 +654,7 @@ impl NormalEquations {
             symbolic: None,
             block: BlockCholesky::default(),
             blocked: false,
+            supernodal_flops_per_entry: SUPERNODAL_FLOPS_PER_ENTRY,
             side: Side::Upper,
             counts: FactorizationCounts::default(),
             times: StageTimes::default(),
@@ -832,9 +836,8 @@ impl NormalEquations {
         // The blocks' own analysis is skipped when the count above already says their factor
         // is too dense (groups all pairs: group columns are block columns).
         let pairs = self.group_start.windows(2).all(|w| w[1] - w[0] == 2);
-        let dense = |(products, entries): (u64, u64)| {
-            8 * products > SUPERNODAL_FLOPS_PER_ENTRY * 4 * entries
-        };
+        let threshold = self.supernodal_flops_per_entry;
+        let dense = |(products, entries): (u64, u64)| 8 * products > threshold * 4 * entries;
         let known_dense = pairs && fill.is_some_and(dense);
         if known_dense {
             self.block = BlockCholesky::default();
@@ -1270,7 +1273,8 @@ mod tests {
     fn a_crush_is_ordered_by_nested_dissection_and_solved() {
         // 10,000 disks in a hexagonal packing, each row a contact between neighbours: the
         // minimum-degree factor is dense, nested dissection's has fewer multiply–adds
-        // (dissection.rs), and faer's supernodal factorization solves the system.
+        // (dissection.rs); the 2×2 blocks solve the system (63 multiply–adds an entry), and
+        // so does faer's supernodal factorization where its threshold is lower.
         let side = 100;
         let at = |r: usize, c: usize| r * side + c;
         let mut j = ConstraintRows::new(2 * side * side);
@@ -1307,27 +1311,34 @@ mod tests {
         let d: Vec<f64> = (0..j.len()).map(|_| rng.random_range(0.0..1e4)).collect();
         let b: Vec<f64> = (0..j.dim()).map(|_| rng.random_range(-1.0..1.0)).collect();
         let shift = 1.0;
-        let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
-        ne.analyse(&j).unwrap();
-        assert!(ne.factorize(&j, shift, &d));
-        let mut x = b.clone();
-        ne.solve_in_place(&mut x);
-        let counts = ne.counts();
-        assert_eq!((counts.dissections, counts.block_factorizations), (1, 0));
-        // shift·x + Jᵀ D J x = b, row by row of J.
-        let mut ax: Vec<f64> = x.iter().map(|v| shift * v).collect();
-        for i in 0..j.len() {
-            let (cols, coefs) = j.row(i);
-            let jx: f64 = cols.iter().zip(coefs).map(|(&c, a)| a * x[c]).sum();
-            for (&c, a) in cols.iter().zip(coefs) {
-                ax[c] += d[i] * a * jx;
+        for (threshold, blocks) in [(SUPERNODAL_FLOPS_PER_ENTRY, 1), (40, 0)] {
+            let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
+            ne.supernodal_flops_per_entry = threshold;
+            ne.analyse(&j).unwrap();
+            assert!(ne.factorize(&j, shift, &d));
+            let mut x = b.clone();
+            ne.solve_in_place(&mut x);
+            let counts = ne.counts();
+            assert_eq!(
+                (counts.dissections, counts.block_factorizations),
+                (1, blocks),
+                "threshold {threshold}"
+            );
+            // shift·x + Jᵀ D J x = b, row by row of J.
+            let mut ax: Vec<f64> = x.iter().map(|v| shift * v).collect();
+            for i in 0..j.len() {
+                let (cols, coefs) = j.row(i);
+                let jx: f64 = cols.iter().zip(coefs).map(|(&c, a)| a * x[c]).sum();
+                for (&c, a) in cols.iter().zip(coefs) {
+                    ax[c] += d[i] * a * jx;
+                }
             }
+            let worst = ax
+                .iter()
+                .zip(&b)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(worst <= 1e-8, "threshold {threshold}: residual {worst}");
         }
-        let worst = ax
-            .iter()
-            .zip(&b)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        assert!(worst <= 1e-8, "residual {worst}");
     }
 }
