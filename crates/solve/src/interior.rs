@@ -805,8 +805,11 @@ impl InteriorPoint {
         }
         let keys = j.keys();
         let mut found = 0;
+        // Rows mostly come in increasing keys (a crowd's pairs by person): each search starts
+        // where the last one ended, galloping.
+        let mut from = 0;
         for i in 0..m {
-            let at = kept.binary_search_by_key(&keys[i], |e| e.0).ok();
+            let at = find_from(kept, keys[i], &mut from);
             if let Some(&(_, s, l)) = at.map(|k| &kept[k]).filter(|e| inside(e.1) && inside(e.2)) {
                 (self.s[i], lam[i]) = (s, l);
                 found += 1;
@@ -839,6 +842,38 @@ impl InteriorPoint {
     fn max_step((primal, dual): (f64, f64)) -> f64 {
         primal.min(dual)
     }
+}
+
+/// The position of `key` in `kept` (sorted by key), searched from `from` on by galloping
+/// when `key` is not below the key there (else in the whole), `from` then set past where
+/// the search ended: the same answer as a binary search over the whole, in a few
+/// comparisons for keys that mostly increase.
+fn find_from(
+    kept: &[(ConstraintKey, f64, f64)],
+    key: ConstraintKey,
+    from: &mut usize,
+) -> Option<usize> {
+    let start = if *from < kept.len() && kept[*from].0 <= key {
+        *from
+    } else if *from > 0 && *from <= kept.len() && kept[*from - 1].0 < key {
+        *from
+    } else {
+        0
+    };
+    // Gallop: the first `start + 2^k − 1` whose key is at least `key` bounds the search.
+    let (mut lo, mut step) = (start, 1);
+    while lo + step <= kept.len() && kept[lo + step - 1].0 < key {
+        lo += step;
+        step *= 2;
+    }
+    let hi = (lo + step).min(kept.len());
+    let at = kept[lo..hi].binary_search_by_key(&key, |e| e.0);
+    let (found, end) = match at {
+        Ok(p) => (Some(lo + p), lo + p + 1),
+        Err(p) => (None, lo + p),
+    };
+    *from = end;
+    found
 }
 
 /// How far along `dx` the positive `x` may go, where that is less than all the way (`dx` and
@@ -1078,6 +1113,36 @@ mod tests {
             )
             .unwrap();
         (rep, sol)
+    }
+
+    /// The galloping search finds what a binary search over the whole finds, for queries
+    /// that increase, repeat, go back, miss, and run past either end.
+    #[test]
+    fn a_search_from_the_last_position_finds_what_a_binary_search_finds() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        for len in [0, 1, 2, 5, 64, 1000] {
+            let mut keys: Vec<u64> = (0..len)
+                .map(|_| rng.random_range(0..4 * len as u64 + 4))
+                .collect();
+            keys.sort_unstable();
+            keys.dedup();
+            let kept: Vec<(u64, f64, f64)> = keys.iter().map(|&k| (k, 1.0, 1.0)).collect();
+            let top = 4 * len as u64 + 8;
+            let mut from = 0;
+            for q in 0..3000 {
+                let key = match q % 4 {
+                    0 | 1 => (q as u64 / 2) % top,
+                    2 => rng.random_range(0..top),
+                    _ => top + q as u64,
+                };
+                let expected = kept.binary_search_by_key(&key, |e| e.0).ok();
+                assert_eq!(
+                    find_from(&kept, key, &mut from),
+                    expected,
+                    "len {len} key {key}"
+                );
+            }
+        }
     }
 
     #[test]
