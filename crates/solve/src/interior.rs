@@ -844,18 +844,17 @@ impl InteriorPoint {
     }
 }
 
-/// The position of `key` in `kept` (sorted by key), searched from `from` on by galloping
-/// when `key` is not below the key there (else in the whole), `from` then set past where
-/// the search ended: the same answer as a binary search over the whole, in a few
+/// The position of `key` in `kept` (sorted by key, no key twice), searched from `from` on by
+/// galloping when the key before `from` is below `key` (else from the start), `from` then
+/// set past where the search ended: the same answer as a binary search over the whole, in a few
 /// comparisons for keys that mostly increase.
 fn find_from(
     kept: &[(ConstraintKey, f64, f64)],
     key: ConstraintKey,
     from: &mut usize,
 ) -> Option<usize> {
-    let start = if *from < kept.len() && kept[*from].0 <= key {
-        *from
-    } else if *from > 0 && *from <= kept.len() && kept[*from - 1].0 < key {
+    // Every key before `from` is below `key` when the one just before it is.
+    let start = if *from > 0 && *from <= kept.len() && kept[*from - 1].0 < key {
         *from
     } else {
         0
