@@ -844,10 +844,10 @@ impl InteriorPoint {
     }
 }
 
-/// The position of `key` in `kept` (sorted by key, no key twice), searched from `from` on by
-/// galloping when the key before `from` is below `key` (else from the start), `from` then
-/// set past where the search ended: the same answer as a binary search over the whole, in a few
-/// comparisons for keys that mostly increase.
+/// The position of `key` in `kept` (sorted by key), searched from `from` on by galloping
+/// when the key before `from` is below `key` (else from the start), `from` then set past
+/// where the search ended: what a binary search over the whole finds (of a key kept twice,
+/// either, as there), in a few comparisons for keys that mostly increase.
 fn find_from(
     kept: &[(ConstraintKey, f64, f64)],
     key: ConstraintKey,
