@@ -854,7 +854,7 @@ impl AutoSolver {
             return;
         }
         if !self.indexed {
-            self.jt.build(j);
+            self.jt.build_rows(j);
             self.indexed = true;
         }
         let Self {

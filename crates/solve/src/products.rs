@@ -50,6 +50,36 @@ impl Transpose {
         self.refresh(j);
     }
 
+    /// The rows of each unknown alone ([`Self::rows_of`]; no coefficients, nothing for
+    /// [`Self::dot`]), without the build's scratch: a third of its memory, for an index that
+    /// only walks the rows around an unknown (`auto`'s joins, on a million people ~80 MB
+    /// less).
+    pub(crate) fn build_rows(&mut self, j: &ConstraintRows) {
+        let n = j.dim();
+        // Counts two ahead, so that filling moves each start one ahead, onto its place.
+        self.col_start.clear();
+        self.col_start.resize(n + 2, 0);
+        for &c in j.columns() {
+            self.col_start[c + 2] += 1;
+        }
+        for c in 0..n {
+            self.col_start[c + 2] += self.col_start[c + 1];
+        }
+        self.rows.clear();
+        self.rows.resize(j.nnz(), 0);
+        let (starts, columns) = (j.row_starts(), j.columns());
+        for i in 0..j.len() {
+            for &c in &columns[starts[i]..starts[i + 1]] {
+                let k = &mut self.col_start[c + 1];
+                self.rows[*k] = i as Index;
+                *k += 1;
+            }
+        }
+        self.col_start.truncate(n + 1);
+        self.entries = Vec::new();
+        self.values = Vec::new();
+    }
+
     /// Copies the coefficients of `j`, whose rows have the columns [`Self::build`] saw.
     pub(crate) fn refresh(&mut self, j: &ConstraintRows) {
         let coefs = j.coefficients();
@@ -84,4 +114,42 @@ pub(crate) fn row_dot(j: &ConstraintRows, x: &[f64], i: usize) -> f64 {
 pub(crate) fn row_dot_sum(j: &ConstraintRows, x: &[f64], y: &[f64], i: usize) -> f64 {
     let (c, a) = j.row(i);
     c.iter().zip(a).map(|(&c, &a)| a * (x[c] + y[c])).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The index of rows alone lists each unknown's rows as the whole transpose does, on rows
+    /// with repeated and unused columns, and after a larger build.
+    #[test]
+    fn the_rows_alone_are_the_rows_of_the_whole_transpose() {
+        let mut j = ConstraintRows::new(7);
+        for (i, cols) in [
+            vec![0, 3],
+            vec![3, 3, 5],
+            vec![1],
+            vec![6, 0, 2],
+            vec![],
+            vec![5],
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            j.push(i as u64, 0.0, cols.into_iter().map(|c| (c, 1.0)));
+        }
+        let mut whole = Transpose::default();
+        whole.build(&j);
+        let mut rows = Transpose::default();
+        let mut larger = ConstraintRows::new(9);
+        larger.push(0, 0.0, [(8, 1.0), (7, 2.0)]);
+        rows.build(&larger);
+        rows.build_rows(&j);
+        for c in 0..7 {
+            assert_eq!(rows.rows_of(c), whole.rows_of(c), "unknown {c}");
+        }
+        assert_eq!(rows.rows_of(3), &[0, 1, 1]);
+        assert!(rows.rows_of(4).is_empty());
+        assert_eq!(rows.col_start.len(), 8);
+    }
 }
