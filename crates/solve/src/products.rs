@@ -17,44 +17,27 @@ pub(crate) struct Transpose {
     rows: Vec<Index>,
     entries: Vec<Index>,
     values: Vec<f64>,
-    next: Vec<usize>, // scratch for building
 }
 
 impl Transpose {
+    /// The whole transpose of `j`: each unknown's rows, where its coefficients are in `j`,
+    /// and a copy of them.
     pub(crate) fn build(&mut self, j: &ConstraintRows) {
-        let n = j.dim();
-        self.col_start.clear();
-        self.col_start.resize(n + 1, 0);
-        for &c in j.columns() {
-            self.col_start[c + 1] += 1;
-        }
-        for c in 0..n {
-            self.col_start[c + 1] += self.col_start[c];
-        }
-        self.rows.clear();
-        self.rows.resize(j.nnz(), 0);
-        self.entries.clear();
-        self.entries.resize(j.nnz(), 0);
-        let starts = j.row_starts();
-        self.next.clear();
-        self.next.extend_from_slice(&self.col_start);
-        for i in 0..j.len() {
-            for e in starts[i]..starts[i + 1] {
-                let c = j.columns()[e];
-                let k = self.next[c];
-                self.rows[k] = i as Index;
-                self.entries[k] = e as Index;
-                self.next[c] += 1;
-            }
-        }
+        self.index(j, true);
         self.refresh(j);
     }
 
     /// The rows of each unknown alone ([`Self::rows_of`]; no coefficients, nothing for
-    /// [`Self::dot`]), without the build's scratch: a third of its memory, for an index that
-    /// only walks the rows around an unknown (`auto`'s joins, on a million people ~80 MB
-    /// less).
+    /// [`Self::dot`]): a third of the memory, for an index that only walks the rows around
+    /// an unknown (`auto`'s joins: on a million people ~80 MB less).
     pub(crate) fn build_rows(&mut self, j: &ConstraintRows) {
+        self.index(j, false);
+        self.values = Vec::new();
+    }
+
+    /// `col_start` and `rows`, and with `entries` where each coefficient is in `j` (else
+    /// none): a counting sort of `j`'s entries by column, rows ascending.
+    fn index(&mut self, j: &ConstraintRows, entries: bool) {
         let n = j.dim();
         // Counts two ahead, so that filling moves each start one ahead, onto its place.
         self.col_start.clear();
@@ -67,17 +50,24 @@ impl Transpose {
         }
         self.rows.clear();
         self.rows.resize(j.nnz(), 0);
+        self.entries.clear();
+        if entries {
+            self.entries.resize(j.nnz(), 0);
+        } else {
+            self.entries.shrink_to_fit();
+        }
         let (starts, columns) = (j.row_starts(), j.columns());
         for i in 0..j.len() {
-            for &c in &columns[starts[i]..starts[i + 1]] {
-                let k = &mut self.col_start[c + 1];
+            for e in starts[i]..starts[i + 1] {
+                let k = &mut self.col_start[columns[e] + 1];
                 self.rows[*k] = i as Index;
+                if entries {
+                    self.entries[*k] = e as Index;
+                }
                 *k += 1;
             }
         }
         self.col_start.truncate(n + 1);
-        self.entries = Vec::new();
-        self.values = Vec::new();
     }
 
     /// Copies the coefficients of `j`, whose rows have the columns [`Self::build`] saw.
