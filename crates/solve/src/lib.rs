@@ -25,6 +25,7 @@ mod newton;
 mod normal;
 mod problem;
 mod products;
+mod supernodal;
 mod workers;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};

@@ -34,6 +34,7 @@ use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
+use crate::supernodal;
 use crate::workers::Workers;
 
 /// What the factorization machinery did over the solver's life (for benchmarks).
@@ -547,6 +548,8 @@ pub(crate) struct NormalEquations {
     amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
+    // The supernodal solve's buffer (a supernode's rows).
+    solve_scratch: Vec<f64>,
     // The row of an update, in the factor's order (left zero by each update).
     update_w: Vec<f64>,
     // The second thread of factorizations and solves in 2×2 blocks split in two, whether
@@ -663,6 +666,7 @@ impl NormalEquations {
             mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
             amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
+            solve_scratch: Vec::new(),
             update_w: Vec::new(),
             helper: None,
             split_choice: SplitChoice::default(),
@@ -1058,14 +1062,21 @@ impl NormalEquations {
             let par = self.par();
             let symbolic = self.symbolic.as_ref().expect("analysed");
             let (l, x, mem) = (&self.l, &mut self.x, &mut self.mem.0);
-            w.install(|| {
-                LltRef::new(symbolic, l).solve_in_place_with_conj(
-                    Conj::No,
-                    MatMut::from_column_major_slice_mut(x, n, 1),
-                    par,
-                    MemStack::new(mem),
-                )
-            });
+            match symbolic.raw() {
+                // A supernodal factor is a crush's, far larger than the caches: our solve reads
+                // it at the memory's rate (crate::supernodal).
+                SymbolicCholeskyRaw::Supernodal(s) => {
+                    supernodal::solve_in_place(s, l, x, &mut self.solve_scratch)
+                }
+                SymbolicCholeskyRaw::Simplicial(_) => w.install(|| {
+                    LltRef::new(symbolic, l).solve_in_place_with_conj(
+                        Conj::No,
+                        MatMut::from_column_major_slice_mut(x, n, 1),
+                        par,
+                        MemStack::new(mem),
+                    )
+                }),
+            }
         }
         self.times.factorize += clock.elapsed().as_secs_f64();
         let (x, perm_inv) = (&self.x, &self.perm_inv);

@@ -1,0 +1,370 @@
+//! Triangular solves with faer's supernodal Cholesky factor, reading the factor in its
+//! storage order at the memory's rate.
+//!
+//! A crush's factor (nested dissection, ~22 million entries at 10⁵ people) is far larger
+//! than any cache, so a solve is a read of the factor twice. faer's own solve takes a
+//! matrix–vector product and a triangular solve per supernode, the backward one with its
+//! supernodes taken from the last to the first and each one's columns read from the front:
+//! every supernode starts a new stream of memory the processor has not prefetched
+//! (benches/README.md, session 24: 40 ms a solve of the pressed crush of 10⁵, ~9 GB/s).
+//! Here the forward solve reads each supernode's columns in storage order, one
+//! multiply–subtract along each; the backward one reads them in exactly the reverse order,
+//! each dot product from its end, so that the whole backward solve is one decreasing
+//! stream: 22 ms a solve.
+
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
+
+use crate::products::Index;
+
+/// A supernode's place in faer's arrays: its first column, its width, the rows of its
+/// pattern below, and where its rows and values start.
+#[derive(Debug, Clone, Copy)]
+struct Supernode {
+    begin: usize,
+    width: usize,
+    below: usize,
+    rows_at: usize,
+    values_at: usize,
+}
+
+fn supernode(symbolic: &SymbolicSupernodalCholesky<Index>, s: usize) -> Supernode {
+    let begin = symbolic.supernode_begin()[s] as usize;
+    let end = symbolic.supernode_end()[s] as usize;
+    let rows = symbolic.col_ptr_for_row_idx();
+    Supernode {
+        begin,
+        width: end - begin,
+        below: (rows[s + 1] - rows[s]) as usize,
+        rows_at: rows[s] as usize,
+        values_at: symbolic.col_ptr_for_val()[s] as usize,
+    }
+}
+
+/// Solves `L Lᵀ x = b` in place (`x` holds `b` in the factor's order), `L` in faer's
+/// supernodal layout (its values, `len_val` of them); `y` is scratch.
+///
+/// One pass over the factor each way. Forward, supernode after supernode, its part of `x`
+/// and the updates of its rows below in one buffer, each column one multiply–subtract
+/// along it. Backward, supernode before supernode, each column's rows below one dot
+/// product, the columns from the last, then the diagonal block (now in cache) the same
+/// way. The same bits with or without AVX (no fused multiply–add, the same order).
+pub(crate) fn solve_in_place(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    x: &mut [f64],
+    y: &mut Vec<f64>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        #[target_feature(enable = "avx")]
+        fn avx(
+            symbolic: &SymbolicSupernodalCholesky<Index>,
+            l: &[f64],
+            x: &mut [f64],
+            y: &mut Vec<f64>,
+        ) {
+            solve::<true>(symbolic, l, x, y)
+        }
+        // SAFETY: the processor has AVX (just checked), all `avx` asks for.
+        #[allow(unsafe_code)]
+        return unsafe { avx(symbolic, l, x, y) };
+    }
+    solve::<false>(symbolic, l, x, y)
+}
+
+/// [`solve_in_place`]; `AVX` only where the processor has it (its dot products use it).
+#[inline(always)]
+fn solve<const AVX: bool>(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    x: &mut [f64],
+    y: &mut Vec<f64>,
+) {
+    let ns = symbolic.n_supernodes();
+    let rows = symbolic.row_idx();
+    // Forward: L z = b.
+    for s in 0..ns {
+        let sn = supernode(symbolic, s);
+        let (w, f) = (sn.width, sn.width + sn.below);
+        let ls = &l[sn.values_at..sn.values_at + f * w];
+        let pattern = &rows[sn.rows_at..sn.rows_at + sn.below];
+        y.clear();
+        y.extend_from_slice(&x[sn.begin..sn.begin + w]);
+        y.resize(f, 0.0);
+        for k in 0..w {
+            let col = &ls[k * f..(k + 1) * f];
+            let yk = y[k] / col[k];
+            y[k] = yk;
+            axpy_neg(&mut y[k + 1..f], &col[k + 1..f], yk);
+        }
+        x[sn.begin..sn.begin + w].copy_from_slice(&y[..w]);
+        for (&r, &v) in pattern.iter().zip(&y[w..f]) {
+            x[r as usize] += v;
+        }
+    }
+    // Backward: Lᵀ x = z.
+    for s in (0..ns).rev() {
+        let sn = supernode(symbolic, s);
+        let (w, f) = (sn.width, sn.width + sn.below);
+        let ls = &l[sn.values_at..sn.values_at + f * w];
+        let pattern = &rows[sn.rows_at..sn.rows_at + sn.below];
+        y.clear();
+        y.extend_from_slice(&x[sn.begin..sn.begin + w]);
+        y.extend(pattern.iter().map(|&r| x[r as usize]));
+        // The rows below first, the columns from the last and each from its end: the
+        // memory read as one decreasing stream, which the processor prefetches (a new
+        // stream at each supernode doubled the time); then the diagonal block, now in cache.
+        for k in (0..w).rev() {
+            let col = &ls[k * f..(k + 1) * f];
+            y[k] -= dot::<AVX>(&col[w..f], &y[w..f]);
+        }
+        for k in (0..w).rev() {
+            let col = &ls[k * f..(k + 1) * f];
+            let d = dot::<AVX>(&col[k + 1..w], &y[k + 1..w]);
+            y[k] = (y[k] - d) / col[k];
+        }
+        x[sn.begin..sn.begin + w].copy_from_slice(&y[..w]);
+    }
+}
+
+/// `y −= a·x`, element by element.
+#[inline(always)]
+fn axpy_neg(y: &mut [f64], x: &[f64], a: f64) {
+    for (y, &x) in y.iter_mut().zip(x) {
+        *y -= x * a;
+    }
+}
+
+/// `Σ a_i b_i`, the memory read from the end to the start: the `n mod 8` first elements
+/// apart, the rest in two groups of four interleaved partial sums, added lane by lane, then
+/// the four lanes in a fixed order: the same bits with or without AVX.
+#[inline(always)]
+fn dot<const AVX: bool>(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let head = n % 8;
+    let t = lanes::<AVX>(&a[head..], &b[head..]);
+    let mut tail = 0.0;
+    for (&a, &b) in a[..head].iter().zip(&b[..head]).rev() {
+        tail += a * b;
+    }
+    ((t[0] + t[2]) + (t[1] + t[3])) + tail
+}
+
+/// [`dot`]'s partial sums over `a` and `b`, both of a multiple of 8 elements.
+#[inline(always)]
+fn lanes<const AVX: bool>(a: &[f64], b: &[f64]) -> [f64; 4] {
+    debug_assert!(a.len() == b.len() && a.len().is_multiple_of(8));
+    #[cfg(target_arch = "x86_64")]
+    if AVX {
+        // SAFETY: `AVX` is true only where the processor has AVX ([`solve_in_place`] checks);
+        // `a` and `b` hold the same multiple of 8 elements (asserted), all `dot_avx` reads.
+        #[allow(unsafe_code)]
+        return unsafe { dot_avx(a.as_ptr(), b.as_ptr(), a.len()) };
+    }
+    dot_lanes(a, b)
+}
+
+/// [`dot`]'s partial sums, lane by lane.
+#[inline(always)]
+fn dot_lanes(a: &[f64], b: &[f64]) -> [f64; 4] {
+    let (mut s0, mut s1) = ([0.0f64; 4], [0.0f64; 4]);
+    for (a, b) in a.chunks_exact(8).zip(b.chunks_exact(8)).rev() {
+        for lane in 0..4 {
+            s0[lane] += a[lane] * b[lane];
+            s1[lane] += a[4 + lane] * b[4 + lane];
+        }
+    }
+    let mut t = [0.0f64; 4];
+    for lane in 0..4 {
+        t[lane] = s0[lane] + s1[lane];
+    }
+    t
+}
+
+/// [`dot_lanes`] in two 4-lane registers (the same operations, the same bits): `body`
+/// elements (a multiple of 8) from each of `a` and `b`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[allow(unsafe_code)]
+unsafe fn dot_avx(a: *const f64, b: *const f64, body: usize) -> [f64; 4] {
+    use std::arch::x86_64::{
+        _mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+    let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+    let mut k = body;
+    while k > 0 {
+        k -= 8;
+        // SAFETY: `k + 8 <= body`, and the caller's `a` and `b` hold `body` elements.
+        unsafe {
+            s0 = _mm256_add_pd(
+                s0,
+                _mm256_mul_pd(_mm256_loadu_pd(a.add(k)), _mm256_loadu_pd(b.add(k))),
+            );
+            s1 = _mm256_add_pd(
+                s1,
+                _mm256_mul_pd(_mm256_loadu_pd(a.add(k + 4)), _mm256_loadu_pd(b.add(k + 4))),
+            );
+        }
+    }
+    let mut t = [0.0f64; 4];
+    // SAFETY: `t` holds four lanes.
+    unsafe { _mm256_storeu_pd(t.as_mut_ptr(), _mm256_add_pd(s0, s1)) };
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+    use faer::linalg::cholesky::llt::factor::LltRegularization;
+    use faer::sparse::linalg::SupernodalThreshold;
+    use faer::sparse::linalg::cholesky::{
+        CholeskySymbolicParams, LltRef, SymbolicCholeskyRaw, SymmetricOrdering,
+        factorize_symbolic_cholesky,
+    };
+    use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+    use faer::{Conj, MatMut, Par, Side};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The lower triangle of `I + Σ w_e (e_a − e_b)(e_a − e_b)ᵀ` over the edges of a
+    /// `k × k` grid with its diagonals (a contact network's kind of pattern), random weights.
+    fn grid(k: usize, rng: &mut ChaCha8Rng) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
+        let n = k * k;
+        let mut cols: Vec<Vec<(u32, f64)>> = (0..n).map(|c| vec![(c as u32, 1.0)]).collect();
+        for i in 0..k {
+            for j in 0..k {
+                let a = i * k + j;
+                for (di, dj) in [(0, 1), (1, 0), (1, 1), (1, usize::MAX)] {
+                    let (i2, j2) = (i + di, j.wrapping_add(dj));
+                    if i2 < k && j2 < k {
+                        let b = i2 * k + j2;
+                        let w = rng.random_range(0.01..100.0);
+                        cols[a][0].1 += w;
+                        cols[b][0].1 += w;
+                        let (lo, hi) = (a.min(b), a.max(b));
+                        cols[lo].push((hi as u32, -w));
+                    }
+                }
+            }
+        }
+        let (mut ptr, mut idx, mut val) = (vec![0u32], Vec::new(), Vec::new());
+        for mut c in cols {
+            c.sort_by_key(|e| e.0);
+            idx.extend(c.iter().map(|e| e.0));
+            val.extend(c.iter().map(|e| e.1));
+            ptr.push(idx.len() as u32);
+        }
+        (ptr, idx, val)
+    }
+
+    #[test]
+    fn the_supernodal_solve_solves_what_faers_solves() {
+        let mut rng = ChaCha8Rng::seed_from_u64(24);
+        // (faer factorizes a 1 × 1 matrix simplicially whatever it is asked.)
+        for k in [2, 3, 7, 30] {
+            let n = k * k;
+            let (ptr, idx, val) = grid(k, &mut rng);
+            let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
+            let a = SparseColMatRef::new(pattern, &val);
+            // AMD's ordering: supernodes of every width, rows below scattered.
+            let symbolic = factorize_symbolic_cholesky(
+                pattern,
+                Side::Lower,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
+                panic!("k = {k}: supernodal forced");
+            };
+            let mut l = vec![0.0; symbolic.len_val()];
+            let req = StackReq::any_of(&[
+                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+                symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+            ]);
+            let mut mem = MemBuffer::new(req);
+            symbolic
+                .factorize_numeric_llt(
+                    &mut l,
+                    a,
+                    Side::Lower,
+                    LltRegularization::default(),
+                    Par::Seq,
+                    MemStack::new(&mut mem),
+                    Default::default(),
+                )
+                .unwrap();
+            let b: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            // faer's: permutes, solves, permutes back.
+            let mut expected = b.clone();
+            LltRef::new(&symbolic, &l).solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(&mut expected, n, 1),
+                Par::Seq,
+                MemStack::new(&mut mem),
+            );
+            // Ours, in the factor's order.
+            let (fwd, _) = symbolic.perm().expect("AMD ordered").arrays();
+            let mut x: Vec<f64> = fwd.iter().map(|&p| b[p as usize]).collect();
+            let mut y = Vec::new();
+            solve_in_place(s, &l, &mut x, &mut y);
+            let mut got = vec![0.0; n];
+            for (k, &p) in fwd.iter().enumerate() {
+                got[p as usize] = x[k];
+            }
+            let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (g, e) in got.iter().zip(&expected) {
+                assert!(
+                    (g - e).abs() <= 1e-12 * scale,
+                    "k = {k}: {g} against faer's {e}"
+                );
+            }
+            // And it solves the system: A x = b, the lower triangle read both ways.
+            let mut ax = vec![0.0; n];
+            for c in 0..n {
+                for p in ptr[c] as usize..ptr[c + 1] as usize {
+                    let (r, v) = (idx[p] as usize, val[p]);
+                    ax[r] += v * got[c];
+                    if r != c {
+                        ax[c] += v * got[r];
+                    }
+                }
+            }
+            let big = val.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
+                assert!(
+                    (ax - b).abs() <= 1e-11 * big * scale,
+                    "k = {k}, row {r}: {ax} ≠ {b}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_dot_product_gives_the_same_bits_with_and_without_avx() {
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let avx = cfg!(target_arch = "x86_64") && {
+            #[cfg(target_arch = "x86_64")]
+            let has = std::arch::is_x86_feature_detected!("avx");
+            #[cfg(not(target_arch = "x86_64"))]
+            let has = false;
+            has
+        };
+        for n in 0..70 {
+            let a: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let b: Vec<f64> = (0..n).map(|_| rng.random_range(-1e3..1e3)).collect();
+            let portable = dot::<false>(&a, &b);
+            let naive: f64 = a.iter().zip(&b).map(|(a, b)| a * b).sum();
+            let size: f64 = a.iter().zip(&b).map(|(a, b)| (a * b).abs()).sum();
+            assert!((portable - naive).abs() <= 1e-14 * size.max(1.0), "n = {n}");
+            if avx {
+                assert_eq!(dot::<true>(&a, &b).to_bits(), portable.to_bits(), "n = {n}");
+            }
+        }
+    }
+}
