@@ -687,7 +687,13 @@ impl BlockCholesky {
 }
 
 /// `Lᵀ x = y` on the columns `cols` (each after the columns below it: decreasing, or the rest
-/// before the parts), each `x_k` from its own column: `[r₀, r₁] −= bᵀ x_i` as one pair of lanes.
+/// before the parts), each `x_k` from its own column: `[r₀, r₁] −= Σ bᵀ x_i`.
+///
+/// Each column's blocks are read from its last to its first, so that the columns taken in
+/// decreasing order read the factor as one decreasing stream, which the processor
+/// prefetches (a crush's factor is far larger than the caches: read from each column's front,
+/// every column started a stream of its own, and the pressed crush of 40,000 took 1.2× longer
+/// a step).
 #[inline(always)]
 fn backward_columns(
     l: &BlockPattern,
@@ -697,9 +703,9 @@ fn backward_columns(
 ) {
     for k in cols {
         let lk = l.col(k);
-        let mut r = [x.get(2 * k), x.get(2 * k + 1)];
         let below = lk.start + 1..lk.end;
-        for (&i, b) in l.row[below.clone()].iter().zip(&values[below]) {
+        let mut r = [x.get(2 * k), x.get(2 * k + 1)];
+        for (&i, b) in l.row[below.clone()].iter().zip(&values[below]).rev() {
             let i = 2 * i as usize;
             let (x0, x1) = (x.get(i), x.get(i + 1));
             r = [
