@@ -19,6 +19,7 @@ mod clarabel_ref;
 mod components;
 mod dissection;
 mod error;
+mod frontal;
 mod gauss_seidel;
 mod interior;
 mod newton;

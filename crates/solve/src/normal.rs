@@ -1,6 +1,7 @@
 //! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized in 2×2
 //! blocks ([`crate::blocked`]) when the unknowns pair up and the factor is thin, by faer's
-//! sparse Cholesky otherwise: ordering, pattern, symbolic analysis (redone only when the
+//! sparse Cholesky otherwise (a supernodal one factorized by [`crate::frontal`], on two
+//! threads where the helper is there, and solved by [`crate::supernodal`]): ordering, pattern, symbolic analysis (redone only when the
 //! columns of `J`'s rows change), numeric factorization, triangular solves, and the time
 //! spent in each.
 //!
@@ -32,6 +33,7 @@ use moreau_core::{ConstraintRows, Helper, Parallelism};
 use crate::blocked::{Block, BlockCholesky, BlockColumns, BlockPattern};
 use crate::dissection::{Dissection, FillCount};
 use crate::error::SolveError;
+use crate::frontal::Multifrontal;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
 use crate::supernodal;
@@ -480,7 +482,7 @@ impl BlockColumns for NormalColumns<'_> {
 }
 
 /// faer's workspace, sized at each symbolic analysis.
-struct Scratch(MemBuffer);
+pub(crate) struct Scratch(pub(crate) MemBuffer);
 
 impl std::fmt::Debug for Scratch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -531,6 +533,10 @@ pub(crate) struct NormalEquations {
     jt: Transpose,
     pattern: NormalPattern,
     symbolic: Option<SymbolicCholesky<Index>>,
+    // The multifrontal factorization of a supernodal `symbolic` (crate::frontal).
+    frontal: Multifrontal,
+    // Whether `frontal` holds the analysis of `symbolic` (else faer's own factorization).
+    frontal_ready: bool,
     // The factorization in 2×2 blocks, used instead of faer's when the unknowns pair up and
     // the factor is thin (`blocked`).
     block: BlockCholesky,
@@ -655,6 +661,8 @@ impl NormalEquations {
             jt: Transpose::default(),
             pattern: NormalPattern::default(),
             symbolic: None,
+            frontal: Multifrontal::default(),
+            frontal_ready: false,
             block: BlockCholesky::default(),
             blocked: false,
             supernodal_flops_per_entry: SUPERNODAL_FLOPS_PER_ENTRY,
@@ -755,6 +763,7 @@ impl NormalEquations {
         // start, fits: checked above). Until the analysis below succeeds there is none: a
         // failed one must not leave the previous one standing for this structure.
         self.symbolic = None;
+        self.frontal_ready = false;
         self.blocked = false;
         self.j_row_start.clear();
         self.j_row_start.extend(starts.iter().map(|&s| s as Index));
@@ -940,6 +949,10 @@ impl NormalEquations {
             }
         };
         self.counts.matrix_nnz = self.pattern.row_idx.len();
+        self.frontal_ready = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => self.frontal.analyse(s),
+            SymbolicCholeskyRaw::Simplicial(_) => false,
+        };
         self.symbolic = Some(symbolic);
         self.counts.analyses += 1;
         Ok(true)
@@ -988,6 +1001,14 @@ impl NormalEquations {
         let a = SparseColMatRef::new(self.pattern.symbolic(), &self.h);
         self.counts.factorizations += 1;
         let (l, side, mem) = (&mut self.l, self.side, &mut self.mem.0);
+        if let (true, SymbolicCholeskyRaw::Supernodal(s)) = (self.frontal_ready, symbolic.raw()) {
+            // A crush's factor: multifrontal, its two halves at once where the helper thread
+            // is there and free.
+            let helper = self.helper.as_deref().filter(|h| !h.is_held());
+            let ok = self.frontal.factorize(s, a, l, helper);
+            self.times.factorize += clock.elapsed().as_secs_f64();
+            return ok;
+        }
         let ok = self.workers.install(|| {
             symbolic
                 .factorize_numeric_llt(
