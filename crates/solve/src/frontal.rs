@@ -32,31 +32,9 @@ use moreau_core::Helper;
 
 use crate::normal::Scratch;
 use crate::products::Index;
+use crate::supernodal::Supernode;
 
 const NONE: Index = Index::MAX;
-
-/// A supernode's place in faer's arrays.
-#[derive(Debug, Clone, Copy)]
-struct Supernode {
-    begin: usize,
-    width: usize,
-    below: usize,
-    rows_at: usize,
-    values_at: usize,
-}
-
-fn supernode(symbolic: &SymbolicSupernodalCholesky<Index>, s: usize) -> Supernode {
-    let begin = symbolic.supernode_begin()[s] as usize;
-    let end = symbolic.supernode_end()[s] as usize;
-    let rows = symbolic.col_ptr_for_row_idx();
-    Supernode {
-        begin,
-        width: end - begin,
-        below: (rows[s + 1] - rows[s]) as usize,
-        rows_at: rows[s] as usize,
-        values_at: symbolic.col_ptr_for_val()[s] as usize,
-    }
-}
 
 /// What one thread's factorization of a range of supernodes writes besides the factor.
 #[derive(Debug, Default)]
@@ -112,11 +90,11 @@ impl Multifrontal {
         // The parent of a supernode: the one holding the first row of its pattern.
         let mut owner = vec![NONE; n];
         for s in 0..ns {
-            let sn = supernode(symbolic, s);
+            let sn = Supernode::of(symbolic, s);
             owner[sn.begin..sn.begin + sn.width].fill(s as Index);
         }
         let parent = |s: usize| -> Option<usize> {
-            let sn = supernode(symbolic, s);
+            let sn = Supernode::of(symbolic, s);
             (sn.below > 0).then(|| owner[rows[sn.rows_at] as usize] as usize)
         };
         tree.child_start.clear();
@@ -148,13 +126,13 @@ impl Multifrontal {
         tree.rel_start.clear();
         tree.rel_start.resize(ns + 1, 0);
         for s in 0..ns {
-            tree.rel_start[s + 1] = tree.rel_start[s] + supernode(symbolic, s).below;
+            tree.rel_start[s + 1] = tree.rel_start[s] + Supernode::of(symbolic, s).below;
         }
         tree.rel.clear();
         tree.rel.resize(tree.rel_start[ns], NONE);
         for p in 0..ns {
-            let sp = supernode(symbolic, p);
-            let pattern = &rows[sp.rows_at..sp.rows_at + sp.below];
+            let sp = Supernode::of(symbolic, p);
+            let pattern = sp.pattern(symbolic);
             for k in 0..sp.width {
                 local[sp.begin + k] = k as Index;
             }
@@ -163,9 +141,9 @@ impl Multifrontal {
             }
             for &c in &tree.children[tree.child_start[p]..tree.child_start[p + 1]] {
                 let c = c as usize;
-                let sc = supernode(symbolic, c);
+                let sc = Supernode::of(symbolic, c);
                 let mut last = None;
-                for (i, &r) in rows[sc.rows_at..sc.rows_at + sc.below].iter().enumerate() {
+                for (i, &r) in sc.pattern(symbolic).iter().enumerate() {
                     let l = local[r as usize];
                     // Every row in the parent's front, in increasing positions.
                     if l == NONE || last.is_some_and(|m| l <= m) {
@@ -184,7 +162,7 @@ impl Multifrontal {
         self.updates.resize_with(ns, Vec::new);
         self.updates.truncate(ns);
         let widest = (0..ns)
-            .map(|s| supernode(symbolic, s).width)
+            .map(|s| Supernode::of(symbolic, s).width)
             .max()
             .unwrap_or(0);
         for t in &mut self.threads {
@@ -219,7 +197,7 @@ impl Multifrontal {
         let [t0, t1] = &mut self.threads;
         let ok = match (self.split, helper) {
             (Some((at, fork)), Some(helper)) => {
-                let values_at = |s: usize| supernode(symbolic, s).values_at;
+                let values_at = |s: usize| Supernode::of(symbolic, s).values_at;
                 let (l0, rest) = l.split_at_mut(values_at(at));
                 let (l1, l_top) = rest.split_at_mut(values_at(fork) - values_at(at));
                 let (u0, rest) = self.updates.split_at_mut(at);
@@ -261,18 +239,17 @@ impl Multifrontal {
 /// interleave, or a fork too lopsided to pay.
 fn split(symbolic: &SymbolicSupernodalCholesky<Index>, tree: &Tree) -> Option<(usize, usize)> {
     let ns = symbolic.n_supernodes();
-    if ns < 3 || supernode(symbolic, ns - 1).below != 0 {
+    if ns < 3 || Supernode::of(symbolic, ns - 1).below != 0 {
         return None;
     }
     let kids = |s: usize| &tree.children[tree.child_start[s]..tree.child_start[s + 1]];
-    let mut fork = ns - 1;
+    let (mut fork, mut chain) = (ns - 1, 0);
     while let [only] = kids(fork) {
         fork = *only as usize;
+        chain += 1;
     }
-    // Every supernode above the fork on its chain (one root, no other subtree up there).
-    if kids(fork).len() < 2
-        || ns - 1 - fork != (fork + 1..ns).filter(|&s| kids(s).len() == 1).count()
-    {
+    // Every supernode above the fork on its chain (no other subtree up there).
+    if kids(fork).len() < 2 || chain != ns - 1 - fork {
         return None;
     }
     // Below the fork: which of its children each supernode descends from (parents come
@@ -286,10 +263,15 @@ fn split(symbolic: &SymbolicSupernodalCholesky<Index>, tree: &Tree) -> Option<(u
     let mut from = vec![NONE; fork];
     let mut span = vec![(usize::MAX, 0usize, 0.0f64); fork];
     for s in (0..fork).rev() {
-        let p = parent[s] as usize;
+        // (A root below the fork: a forest, not split.)
+        let p = parent[s];
+        if p == NONE {
+            return None;
+        }
+        let p = p as usize;
         let c = if p == fork { s } else { from[p] as usize };
         from[s] = c as Index;
-        let sn = supernode(symbolic, s);
+        let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width as f64, (sn.width + sn.below) as f64);
         let (lo, hi, work) = &mut span[c];
         (*lo, *hi, *work) = ((*lo).min(s), (*hi).max(s), *work + w * f * f);
@@ -363,15 +345,14 @@ fn factor_range(
     pool: &Mutex<Vec<Vec<f64>>>,
 ) -> bool {
     let par = Par::Seq;
-    let rows = symbolic.row_idx();
     let ThreadScratch { local, mem } = scratch;
     let mem = &mut mem.as_mut().expect("analysed").0;
     let mut ok = true;
     for s in range {
-        let sn = supernode(symbolic, s);
+        let sn = Supernode::of(symbolic, s);
         let (w, r) = (sn.width, sn.below);
         let f = w + r;
-        let pattern = &rows[sn.rows_at..sn.rows_at + r];
+        let pattern = sn.pattern(symbolic);
         for (i, &row) in pattern.iter().enumerate() {
             local[row as usize] = (w + i) as Index;
         }
@@ -465,20 +446,23 @@ fn factor_range(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::supernodal::tests::{compressed, faer_supernodal};
     use faer::Side;
     use faer::sparse::SymbolicSparseColMatRef;
-    use faer::sparse::linalg::SupernodalThreshold;
-    use faer::sparse::linalg::cholesky::{
-        CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
-    };
+    use faer::sparse::linalg::cholesky::{SymbolicCholeskyRaw, SymmetricOrdering};
 
     /// The lower triangle of `I + Σ w_e (e_a − e_b)(e_a − e_b)ᵀ` over two `k × k` grids with
     /// their diagonals, numbered one after the other, and a line of `k` nodes after them
     /// joined to the first grid's last column and the second's first (a nested dissection's
-    /// shape: two sides, then their separator). `negative` makes that node's diagonal
-    /// negative (not positive definite).
-    fn two_grids(k: usize, negative: Option<usize>) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
-        let n = 2 * k * k + k;
+    /// shape: two sides, then their separator); unless `joined`, the line is left out (a
+    /// forest of two trees). `negative` makes that node's diagonal negative (not positive
+    /// definite).
+    fn two_grids(
+        k: usize,
+        negative: Option<usize>,
+        joined: bool,
+    ) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
+        let n = 2 * k * k + if joined { k } else { 0 };
         let mut seed = 3u64;
         let mut weight = || {
             seed = seed
@@ -499,7 +483,7 @@ mod tests {
                 }
             }
         }
-        for i in 0..k {
+        for i in (0..k).filter(|_| joined) {
             let sep = 2 * k * k + i;
             edges.push((i * k + k - 1, sep));
             edges.push((k * k + i * k, sep));
@@ -517,22 +501,15 @@ mod tests {
         if let Some(v) = negative {
             cols[v][0].1 = -1.0;
         }
-        let (mut ptr, mut idx, mut val) = (vec![0u32], Vec::new(), Vec::new());
-        for mut c in cols {
-            c.sort_by_key(|e| e.0);
-            idx.extend(c.iter().map(|e| e.0));
-            val.extend(c.iter().map(|e| e.1));
-            ptr.push(idx.len() as u32);
-        }
-        (ptr, idx, val)
+        compressed(cols)
     }
 
     /// A factor's values, or none when refused.
     type Values = Option<Vec<f64>>;
 
     /// faer's factor values and ours, on one thread and split over two.
-    fn factors(k: usize, negative: Option<usize>) -> (Values, [Values; 2], bool) {
-        let (ptr, idx, val) = two_grids(k, negative);
+    fn factors(k: usize, negative: Option<usize>, joined: bool) -> (Values, [Values; 2], bool) {
+        let (ptr, idx, val) = two_grids(k, negative, joined);
         let n = ptr.len() - 1;
         let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
         let a = SparseColMatRef::new(pattern, &val);
@@ -550,34 +527,10 @@ mod tests {
             uptr.push(uidx.len() as u32);
         }
         let upper = SymbolicSparseColMatRef::new_checked(n, n, &uptr, None, &uidx);
-        let symbolic = factorize_symbolic_cholesky(
-            upper,
-            Side::Upper,
-            SymmetricOrdering::Identity,
-            CholeskySymbolicParams {
-                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let (symbolic, faer) = faer_supernodal(upper, Side::Upper, SymmetricOrdering::Identity, a);
         let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
             panic!("supernodal forced");
         };
-        let mut faer = vec![0.0; symbolic.len_val()];
-        let mut mem = MemBuffer::new(
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-        );
-        let faer_ok = symbolic
-            .factorize_numeric_llt(
-                &mut faer,
-                a,
-                Side::Lower,
-                LltRegularization::default(),
-                Par::Seq,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .is_ok();
         let mut mf = Multifrontal::default();
         assert!(mf.analyse(s));
         let helper = Helper::start().expect("a thread");
@@ -591,14 +544,15 @@ mod tests {
             }
             Some(l)
         });
-        (faer_ok.then_some(faer), ours, mf.is_split())
+        (faer, ours, mf.is_split())
     }
 
     #[test]
     fn the_multifrontal_factor_is_faers_on_one_thread_and_on_two() {
-        for k in [8, 16] {
-            let (faer, [one, two], split) = factors(k, None);
-            assert!(split, "k = {k}: the two grids are the two parts");
+        for (k, joined) in [(8, true), (16, true), (8, false)] {
+            let (faer, [one, two], split) = factors(k, None, joined);
+            // Two trees (no separator): no fork, one thread.
+            assert_eq!(split, joined, "k = {k}: the two grids are the two parts");
             let (faer, one, two) = (faer.unwrap(), one.unwrap(), two.unwrap());
             let scale = faer.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             for (e, (a, b)) in faer.iter().zip(one.iter().zip(&two)) {
@@ -620,12 +574,12 @@ mod tests {
         let k = 12;
         // A node of the first grid, of the second, of the separator.
         for v in [5, k * k + 7, 2 * k * k + 3] {
-            let (faer, [one, two], _) = factors(k, Some(v));
+            let (faer, [one, two], _) = factors(k, Some(v), true);
             assert!(faer.is_none(), "node {v}: faer refuses it");
             assert!(one.is_none() && two.is_none(), "node {v}");
             // And the next factorization of a good matrix starts clean.
         }
-        let (_, [one, two], _) = factors(k, None);
+        let (_, [one, two], _) = factors(k, None, true);
         assert!(one.is_some() && two.is_some());
     }
 }

@@ -19,24 +19,40 @@ use crate::products::Index;
 /// A supernode's place in faer's arrays: its first column, its width, the rows of its
 /// pattern below, and where its rows and values start.
 #[derive(Debug, Clone, Copy)]
-struct Supernode {
-    begin: usize,
-    width: usize,
-    below: usize,
-    rows_at: usize,
-    values_at: usize,
+pub(crate) struct Supernode {
+    pub(crate) begin: usize,
+    pub(crate) width: usize,
+    pub(crate) below: usize,
+    pub(crate) rows_at: usize,
+    pub(crate) values_at: usize,
 }
 
-fn supernode(symbolic: &SymbolicSupernodalCholesky<Index>, s: usize) -> Supernode {
-    let begin = symbolic.supernode_begin()[s] as usize;
-    let end = symbolic.supernode_end()[s] as usize;
-    let rows = symbolic.col_ptr_for_row_idx();
-    Supernode {
-        begin,
-        width: end - begin,
-        below: (rows[s + 1] - rows[s]) as usize,
-        rows_at: rows[s] as usize,
-        values_at: symbolic.col_ptr_for_val()[s] as usize,
+impl Supernode {
+    /// Supernode `s` of `symbolic`.
+    pub(crate) fn of(symbolic: &SymbolicSupernodalCholesky<Index>, s: usize) -> Self {
+        let begin = symbolic.supernode_begin()[s] as usize;
+        let end = symbolic.supernode_end()[s] as usize;
+        let rows = symbolic.col_ptr_for_row_idx();
+        Self {
+            begin,
+            width: end - begin,
+            below: (rows[s + 1] - rows[s]) as usize,
+            rows_at: rows[s] as usize,
+            values_at: symbolic.col_ptr_for_val()[s] as usize,
+        }
+    }
+
+    /// Its rows below its columns (its pattern).
+    pub(crate) fn pattern<'a>(
+        &self,
+        symbolic: &'a SymbolicSupernodalCholesky<Index>,
+    ) -> &'a [Index] {
+        &symbolic.row_idx()[self.rows_at..self.rows_at + self.below]
+    }
+
+    /// Its values in `l`: column-major, `width + below` rows, `width` columns.
+    pub(crate) fn values<'a>(&self, l: &'a [f64]) -> &'a [f64] {
+        &l[self.values_at..self.values_at + (self.width + self.below) * self.width]
     }
 }
 
@@ -81,13 +97,11 @@ fn solve<const AVX: bool>(
     y: &mut Vec<f64>,
 ) {
     let ns = symbolic.n_supernodes();
-    let rows = symbolic.row_idx();
     // Forward: L z = b.
     for s in 0..ns {
-        let sn = supernode(symbolic, s);
+        let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width, sn.width + sn.below);
-        let ls = &l[sn.values_at..sn.values_at + f * w];
-        let pattern = &rows[sn.rows_at..sn.rows_at + sn.below];
+        let (ls, pattern) = (sn.values(l), sn.pattern(symbolic));
         y.clear();
         y.extend_from_slice(&x[sn.begin..sn.begin + w]);
         y.resize(f, 0.0);
@@ -104,10 +118,9 @@ fn solve<const AVX: bool>(
     }
     // Backward: Lᵀ x = z.
     for s in (0..ns).rev() {
-        let sn = supernode(symbolic, s);
+        let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width, sn.width + sn.below);
-        let ls = &l[sn.values_at..sn.values_at + f * w];
-        let pattern = &rows[sn.rows_at..sn.rows_at + sn.below];
+        let (ls, pattern) = (sn.values(l), sn.pattern(symbolic));
         y.clear();
         y.extend_from_slice(&x[sn.begin..sn.begin + w]);
         y.extend(pattern.iter().map(|&r| x[r as usize]));
@@ -214,13 +227,13 @@ unsafe fn dot_avx(a: *const f64, b: *const f64, body: usize) -> [f64; 4] {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
-    use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+    use faer::dyn_stack::{MemBuffer, MemStack};
     use faer::linalg::cholesky::llt::factor::LltRegularization;
     use faer::sparse::linalg::SupernodalThreshold;
     use faer::sparse::linalg::cholesky::{
-        CholeskySymbolicParams, LltRef, SymbolicCholeskyRaw, SymmetricOrdering,
+        CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
         factorize_symbolic_cholesky,
     };
     use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -249,6 +262,11 @@ mod tests {
                 }
             }
         }
+        compressed(cols)
+    }
+
+    /// Columns of `(row, value)` entries, in compressed columns (rows sorted).
+    pub(crate) fn compressed(cols: Vec<Vec<(u32, f64)>>) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
         let (mut ptr, mut idx, mut val) = (vec![0u32], Vec::new(), Vec::new());
         for mut c in cols {
             c.sort_by_key(|e| e.0);
@@ -257,6 +275,43 @@ mod tests {
             ptr.push(idx.len() as u32);
         }
         (ptr, idx, val)
+    }
+
+    /// faer's supernodal symbolic factor of `pattern` (one triangle, `side`), forced
+    /// supernodal, and its numeric factor of `a` (the lower triangle, the same pattern's
+    /// matrix) by faer: none when faer refuses it.
+    pub(crate) fn faer_supernodal(
+        pattern: SymbolicSparseColMatRef<'_, u32>,
+        side: Side,
+        ordering: SymmetricOrdering<'_, u32>,
+        a: SparseColMatRef<'_, u32, f64>,
+    ) -> (SymbolicCholesky<u32>, Option<Vec<f64>>) {
+        let symbolic = factorize_symbolic_cholesky(
+            pattern,
+            side,
+            ordering,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut l = vec![0.0; symbolic.len_val()];
+        let mut mem = MemBuffer::new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        );
+        let ok = symbolic
+            .factorize_numeric_llt(
+                &mut l,
+                a,
+                Side::Lower,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .is_ok();
+        (symbolic, ok.then_some(l))
     }
 
     #[test]
@@ -269,36 +324,12 @@ mod tests {
             let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
             let a = SparseColMatRef::new(pattern, &val);
             // AMD's ordering: supernodes of every width, rows below scattered.
-            let symbolic = factorize_symbolic_cholesky(
-                pattern,
-                Side::Lower,
-                SymmetricOrdering::Amd,
-                CholeskySymbolicParams {
-                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                    ..Default::default()
-                },
-            )
-            .unwrap();
+            let (symbolic, l) = faer_supernodal(pattern, Side::Lower, SymmetricOrdering::Amd, a);
+            let l = l.expect("positive definite");
             let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
                 panic!("k = {k}: supernodal forced");
             };
-            let mut l = vec![0.0; symbolic.len_val()];
-            let req = StackReq::any_of(&[
-                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-                symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-            ]);
-            let mut mem = MemBuffer::new(req);
-            symbolic
-                .factorize_numeric_llt(
-                    &mut l,
-                    a,
-                    Side::Lower,
-                    LltRegularization::default(),
-                    Par::Seq,
-                    MemStack::new(&mut mem),
-                    Default::default(),
-                )
-                .unwrap();
+            let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
             let b: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
             // faer's: permutes, solves, permutes back.
             let mut expected = b.clone();
