@@ -1,9 +1,9 @@
 //! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized in 2×2
 //! blocks ([`crate::blocked`]) when the unknowns pair up and the factor is thin, by faer's
 //! sparse Cholesky otherwise (a supernodal one factorized by [`crate::frontal`], on two
-//! threads where the helper is there, and solved by [`crate::supernodal`]): ordering, pattern, symbolic analysis (redone only when the
-//! columns of `J`'s rows change), numeric factorization, triangular solves, and the time
-//! spent in each.
+//! threads where the helper is there, and solved by [`crate::supernodal`]): ordering,
+//! pattern, symbolic analysis (redone only when the columns of `J`'s rows change), numeric
+//! factorization, triangular solves, and the time spent in each.
 //!
 //! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
 //! rows, a person's x and y; on large patterns whose minimum-degree factor is dense, a
@@ -682,10 +682,11 @@ impl NormalEquations {
         })
     }
 
-    /// From the next analysis on, factorizations and triangular solves in 2×2 blocks run on
-    /// two threads where the elimination tree splits in two parts that pay (the shared helper
-    /// thread, [`Helper::shared`], for the second part, when no other job holds it; the same
-    /// bits as on one thread). Without a thread to be had, nothing changes.
+    /// From the next analysis on, factorizations and triangular solves in 2×2 blocks, and
+    /// multifrontal factorizations of faer's supernodal factors, run on two threads where the
+    /// elimination tree splits in two parts that pay (the shared helper thread,
+    /// [`Helper::shared`], for the second part, when no other job holds it; the same bits as
+    /// on one thread). Without a thread to be had, nothing changes.
     pub(crate) fn split_over_two_threads(&mut self) {
         if self.helper.is_none() {
             self.helper = Helper::shared();
