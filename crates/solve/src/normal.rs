@@ -913,11 +913,21 @@ impl NormalEquations {
                 Side::Lower
             }
         };
-        let par = self.par();
-        let req = StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, par),
-        ]);
+        // A supernodal factor is factorized and solved by our own (crate::frontal, with its own
+        // scratch, and crate::supernodal); faer's scratch only for faer's.
+        self.frontal_ready = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => self.frontal.analyse(s),
+            SymbolicCholeskyRaw::Simplicial(_) => false,
+        };
+        let req = if self.frontal_ready {
+            StackReq::EMPTY
+        } else {
+            let par = self.par();
+            StackReq::any_of(&[
+                symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+                symbolic.solve_in_place_scratch::<f64>(1, par),
+            ])
+        };
         self.mem = Scratch(MemBuffer::new(req));
         self.l.clear();
         self.l.resize(symbolic.len_val(), 0.0);
@@ -950,10 +960,6 @@ impl NormalEquations {
             }
         };
         self.counts.matrix_nnz = self.pattern.row_idx.len();
-        self.frontal_ready = match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => self.frontal.analyse(s),
-            SymbolicCholeskyRaw::Simplicial(_) => false,
-        };
         self.symbolic = Some(symbolic);
         self.counts.analyses += 1;
         Ok(true)
@@ -1307,7 +1313,8 @@ mod tests {
         // 10,000 disks in a hexagonal packing, each row a contact between neighbours: the
         // minimum-degree factor is dense, nested dissection's has fewer multiply–adds
         // (dissection.rs); the 2×2 blocks solve the system (63 multiply–adds an entry), and
-        // so does faer's supernodal factorization where its threshold is lower.
+        // so does the supernodal path (faer's symbolic factor, the multifrontal factorization
+        // and our supernodal solve) where its threshold is lower.
         let side = 100;
         let at = |r: usize, c: usize| r * side + c;
         let mut j = ConstraintRows::new(2 * side * side);
