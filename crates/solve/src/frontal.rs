@@ -184,6 +184,12 @@ impl Multifrontal {
         self.split.is_some()
     }
 
+    /// The split (supernodes `[0, at)` and `[at, fork)`, two disjoint unions of subtrees),
+    /// if the tree has one that pays.
+    pub(crate) fn split(&self) -> Option<(usize, usize)> {
+        self.split
+    }
+
     /// Factorizes `a_lower` (the lower triangle, in the symbolic factor's order) into `l`, in
     /// faer's supernodal layout; false when a pivot is not positive. With a `helper`, the
     /// second part of the split on it while this thread does the first, then the rest here.
@@ -444,6 +450,7 @@ fn factor_range(
 mod tests {
     use super::*;
     use crate::supernodal::tests::{compressed, faer_supernodal};
+    use crate::supernodal::{SplitScratch, solve_in_place, solve_in_place_split};
     use faer::Side;
     use faer::sparse::SymbolicSparseColMatRef;
     use faer::sparse::linalg::cholesky::{SymbolicCholeskyRaw, SymmetricOrdering};
@@ -501,6 +508,25 @@ mod tests {
         compressed(cols)
     }
 
+    /// The upper triangle's pattern of the lower triangle `ptr`, `idx` (the symbolic
+    /// analysis reads the upper triangle, as `normal.rs` gives it).
+    fn upper_triangle(ptr: &[u32], idx: &[u32]) -> (Vec<u32>, Vec<u32>) {
+        let n = ptr.len() - 1;
+        let mut upper: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for c in 0..n {
+            for &r in &idx[ptr[c] as usize..ptr[c + 1] as usize] {
+                upper[r as usize].push(c as u32);
+            }
+        }
+        let (mut uptr, mut uidx) = (vec![0u32], Vec::new());
+        for mut c in upper {
+            c.sort();
+            uidx.extend(c);
+            uptr.push(uidx.len() as u32);
+        }
+        (uptr, uidx)
+    }
+
     /// A factor's values, or none when refused.
     type Values = Option<Vec<f64>>;
 
@@ -515,19 +541,7 @@ mod tests {
         let (ptr, idx, _) = two_grids(k, None, joined);
         let n = ptr.len() - 1;
         let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
-        // The symbolic analysis reads the upper triangle (as `normal.rs` gives it).
-        let mut upper: Vec<Vec<u32>> = vec![Vec::new(); n];
-        for c in 0..n {
-            for &r in &idx[ptr[c] as usize..ptr[c + 1] as usize] {
-                upper[r as usize].push(c as u32);
-            }
-        }
-        let (mut uptr, mut uidx) = (vec![0u32], Vec::new());
-        for mut c in upper {
-            c.sort();
-            uidx.extend(c);
-            uptr.push(uidx.len() as u32);
-        }
+        let (uptr, uidx) = upper_triangle(&ptr, &idx);
         let upper = SymbolicSparseColMatRef::new_checked(n, n, &uptr, None, &uidx);
         let mut mf = Multifrontal::default();
         let helper = Helper::start().expect("a thread");
@@ -610,6 +624,67 @@ mod tests {
                 }
                 None => assert_faers(k, result),
             }
+        }
+    }
+
+    #[test]
+    fn the_split_solve_gives_the_one_thread_solves_bits() {
+        // The two grids and their separator: the solve's two parts at once, the second's
+        // updates of the separator's rows added after the first's, as one thread adds them.
+        let k = 16;
+        let (ptr, idx, val) = two_grids(k, None, true);
+        let n = ptr.len() - 1;
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
+        let (uptr, uidx) = upper_triangle(&ptr, &idx);
+        let upper = SymbolicSparseColMatRef::new_checked(n, n, &uptr, None, &uidx);
+        let a = SparseColMatRef::new(pattern, &val);
+        let (symbolic, l) = faer_supernodal(upper, Side::Upper, SymmetricOrdering::Identity, a);
+        let l = l.expect("positive definite");
+        let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
+            panic!("supernodal forced");
+        };
+        let mut mf = Multifrontal::default();
+        assert!(mf.analyse(s));
+        let split = mf.split().expect("the two grids are the two parts");
+        let helper = Helper::start().expect("a thread");
+        let mut seed = 11u64;
+        let b: Vec<f64> = (0..n)
+            .map(|_| {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            })
+            .collect();
+        let mut one = b.clone();
+        solve_in_place(s, &l, &mut one, &mut Vec::new());
+        let mut scratch = SplitScratch::default();
+        // Twice: the second solve reuses the first's scratch.
+        for _ in 0..2 {
+            let mut two = b.clone();
+            solve_in_place_split(s, &l, &mut two, split, &mut scratch, &helper);
+            for (r, (x1, x2)) in one.iter().zip(&two).enumerate() {
+                assert_eq!(
+                    x1.to_bits(),
+                    x2.to_bits(),
+                    "row {r}: one thread and two differ"
+                );
+            }
+        }
+        // And it solves the system (the identity ordering: the factor's order is the
+        // matrix's): A x = b, the lower triangle read both ways.
+        let mut ax = vec![0.0; n];
+        for c in 0..n {
+            for p in ptr[c] as usize..ptr[c + 1] as usize {
+                let (r, v) = (idx[p] as usize, val[p]);
+                ax[r] += v * one[c];
+                if r != c {
+                    ax[c] += v * one[r];
+                }
+            }
+        }
+        for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
+            assert!((ax - b).abs() <= 1e-9, "row {r}: {ax} ≠ {b}");
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The normal equations `shift·I + Jᵀ diag(d) J` of the Newton solvers, factorized in 2×2
 //! blocks ([`crate::blocked`]) when the unknowns pair up and the factor is thin, by faer's
-//! sparse Cholesky otherwise (a supernodal one factorized by [`crate::frontal`], on two
-//! threads where the helper is there, and solved by [`crate::supernodal`]): ordering,
+//! sparse Cholesky otherwise (a supernodal one factorized by [`crate::frontal`] and solved
+//! by [`crate::supernodal`], both on two threads where the helper is there): ordering,
 //! pattern, symbolic analysis (redone only when the columns of `J`'s rows change), numeric
 //! factorization, triangular solves, and the time spent in each.
 //!
@@ -554,8 +554,10 @@ pub(crate) struct NormalEquations {
     amd_mem: (Scratch, usize),
     // The right-hand side in the factor's order.
     x: Vec<f64>,
-    // The supernodal solve's buffer (a supernode's rows).
+    // The supernodal solve's buffer (a supernode's rows), and its two threads' scratch for
+    // a factor the multifrontal factorization split.
     solve_scratch: Vec<f64>,
+    split_solve_scratch: supernodal::SplitScratch,
     // The row of an update, in the factor's order (left zero by each update).
     update_w: Vec<f64>,
     // The second thread of factorizations and solves in 2×2 blocks split in two, whether
@@ -675,6 +677,7 @@ impl NormalEquations {
             amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
             x: Vec::new(),
             solve_scratch: Vec::new(),
+            split_solve_scratch: supernodal::SplitScratch::default(),
             update_w: Vec::new(),
             helper: None,
             split_choice: SplitChoice::default(),
@@ -1093,9 +1096,13 @@ impl NormalEquations {
             match symbolic.raw() {
                 // A supernodal factor is a crush's, far larger than the caches: our solve reads
                 // it at the memory's rate (crate::supernodal).
-                SymbolicCholeskyRaw::Supernodal(s) => {
-                    supernodal::solve_in_place(s, l, x, &mut self.solve_scratch)
-                }
+                SymbolicCholeskyRaw::Supernodal(s) => match (&self.helper, self.frontal.split()) {
+                    (Some(helper), Some(split)) if self.frontal_ready && !helper.is_held() => {
+                        let scratch = &mut self.split_solve_scratch;
+                        supernodal::solve_in_place_split(s, l, x, split, scratch, helper)
+                    }
+                    _ => supernodal::solve_in_place(s, l, x, &mut self.solve_scratch),
+                },
                 SymbolicCholeskyRaw::Simplicial(_) => w.install(|| {
                     LltRef::new(symbolic, l).solve_in_place_with_conj(
                         Conj::No,

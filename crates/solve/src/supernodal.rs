@@ -10,9 +10,12 @@
 //! Here the forward solve reads each supernode's columns in storage order, one
 //! multiply–subtract along each; the backward one reads them in exactly the reverse order,
 //! each dot product from its end, so that the whole backward solve is one decreasing
-//! stream: 22 ms a solve.
+//! stream: 22 ms a solve. Where the multifrontal factorization split the tree in two
+//! ([`crate::frontal`]), the solves split the same way on two threads, with the same bits.
 
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
+
+use moreau_core::Helper;
 
 use crate::products::Index;
 
@@ -70,40 +73,182 @@ pub(crate) fn solve_in_place(
     x: &mut [f64],
     y: &mut Vec<f64>,
 ) {
+    let (ns, n) = (symbolic.n_supernodes(), x.len());
+    let mut none = InPlace {
+        rows: &mut [],
+        at: n,
+    };
+    forward_range(symbolic, l, 0..ns, x, 0, &mut none, y);
+    backward_range(symbolic, l, 0..ns, x, 0, (&[], n), y);
+}
+
+/// Scratch of [`solve_in_place_split`]: each thread's buffer, and the second part's updates
+/// of the rest's rows in the order it made them.
+#[derive(Debug, Default)]
+pub(crate) struct SplitScratch {
+    y: [Vec<f64>; 2],
+    later: Vec<f64>,
+}
+
+/// [`solve_in_place`] on two threads, where supernodes `[0, at)` and `[at, fork)` are two
+/// disjoint unions of subtrees (their rows below are their own or the rest's `[fork, ns)`,
+/// [`crate::frontal`]'s split): forward, the two parts at once, the second keeping its
+/// updates of the rest's rows, which are then added in the order one thread adds them;
+/// then the rest. Backward, the rest, then the two parts at once (each reads the rest's
+/// rows and writes its own). The same operations in the same order: the same bits as
+/// [`solve_in_place`].
+pub(crate) fn solve_in_place_split(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    x: &mut [f64],
+    (at, fork): (usize, usize),
+    scratch: &mut SplitScratch,
+    helper: &Helper,
+) {
+    let (ns, n) = (symbolic.n_supernodes(), x.len());
+    let begin = |s: usize| Supernode::of(symbolic, s).begin;
+    let (mid, top) = (begin(at), begin(fork));
+    let [y0, y1] = &mut scratch.y;
+    let later = &mut scratch.later;
+    {
+        let (x0, rest) = x.split_at_mut(mid);
+        let (x1, x_top) = rest.split_at_mut(top - mid);
+        later.clear();
+        helper.join_once(
+            || {
+                let mut here = InPlace {
+                    rows: x_top,
+                    at: top,
+                };
+                forward_range(symbolic, l, 0..at, x0, 0, &mut here, y0);
+            },
+            || {
+                let mut keep = Kept {
+                    at: top,
+                    values: later,
+                };
+                forward_range(symbolic, l, at..fork, x1, mid, &mut keep, y1);
+            },
+        );
+        let mut kept = later.iter();
+        for s in at..fork {
+            for &r in Supernode::of(symbolic, s).pattern(symbolic) {
+                let r = r as usize;
+                if r >= top {
+                    x_top[r - top] += kept.next().expect("one value kept per row of the rest");
+                }
+            }
+        }
+        debug_assert!(kept.next().is_none());
+        let mut none = InPlace {
+            rows: &mut [],
+            at: n,
+        };
+        forward_range(symbolic, l, fork..ns, x_top, top, &mut none, y0);
+        backward_range(symbolic, l, fork..ns, x_top, top, (&[], n), y0);
+    }
+    let (x0, rest) = x.split_at_mut(mid);
+    let (x1, x_top) = rest.split_at_mut(top - mid);
+    let x_top = &*x_top;
+    helper.join_once(
+        || backward_range(symbolic, l, 0..at, x0, 0, (x_top, top), y0),
+        || backward_range(symbolic, l, at..fork, x1, mid, (x_top, top), y1),
+    );
+}
+
+/// Where a forward part's updates of the rows from `at()` on go.
+trait Later {
+    fn at(&self) -> usize;
+    fn add(&mut self, row: usize, v: f64);
+}
+
+/// Added into `rows` (row `at` first).
+struct InPlace<'a> {
+    rows: &'a mut [f64],
+    at: usize,
+}
+
+impl Later for InPlace<'_> {
+    #[inline(always)]
+    fn at(&self) -> usize {
+        self.at
+    }
+
+    #[inline(always)]
+    fn add(&mut self, row: usize, v: f64) {
+        self.rows[row - self.at] += v;
+    }
+}
+
+/// Kept in the order they come, to be added later.
+struct Kept<'a> {
+    at: usize,
+    values: &'a mut Vec<f64>,
+}
+
+impl Later for Kept<'_> {
+    #[inline(always)]
+    fn at(&self) -> usize {
+        self.at
+    }
+
+    #[inline(always)]
+    fn add(&mut self, _row: usize, v: f64) {
+        self.values.push(v);
+    }
+}
+
+/// `L z = b` on the supernodes `supernodes`, whose columns are in `own` (row `own_at`
+/// first) with the rows below them, but for the rows from `later.at()` on.
+fn forward_range(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    supernodes: std::ops::Range<usize>,
+    own: &mut [f64],
+    own_at: usize,
+    later: &mut impl Later,
+    y: &mut Vec<f64>,
+) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         #[target_feature(enable = "avx")]
         fn avx(
             symbolic: &SymbolicSupernodalCholesky<Index>,
             l: &[f64],
-            x: &mut [f64],
+            supernodes: std::ops::Range<usize>,
+            own: &mut [f64],
+            own_at: usize,
+            later: &mut impl Later,
             y: &mut Vec<f64>,
         ) {
-            solve::<true>(symbolic, l, x, y)
+            forward(symbolic, l, supernodes, own, own_at, later, y)
         }
         // SAFETY: the processor has AVX (just checked), all `avx` asks for.
         #[allow(unsafe_code)]
-        return unsafe { avx(symbolic, l, x, y) };
+        return unsafe { avx(symbolic, l, supernodes, own, own_at, later, y) };
     }
-    solve::<false>(symbolic, l, x, y)
+    forward(symbolic, l, supernodes, own, own_at, later, y)
 }
 
-/// [`solve_in_place`]; `AVX` only where the processor has it (its dot products use it).
+/// [`forward_range`] (no dot products: the same code with or without AVX).
 #[inline(always)]
-fn solve<const AVX: bool>(
+fn forward(
     symbolic: &SymbolicSupernodalCholesky<Index>,
     l: &[f64],
-    x: &mut [f64],
+    supernodes: std::ops::Range<usize>,
+    own: &mut [f64],
+    own_at: usize,
+    later: &mut impl Later,
     y: &mut Vec<f64>,
 ) {
-    let ns = symbolic.n_supernodes();
-    // Forward: L z = b.
-    for s in 0..ns {
+    let later_at = later.at();
+    for s in supernodes {
         let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width, sn.width + sn.below);
         let (ls, pattern) = (sn.values(l), sn.pattern(symbolic));
+        let b = sn.begin - own_at;
         y.clear();
-        y.extend_from_slice(&x[sn.begin..sn.begin + w]);
+        y.extend_from_slice(&own[b..b + w]);
         y.resize(f, 0.0);
         for k in 0..w {
             let col = &ls[k * f..(k + 1) * f];
@@ -111,19 +256,77 @@ fn solve<const AVX: bool>(
             y[k] = yk;
             axpy_neg(&mut y[k + 1..f], &col[k + 1..f], yk);
         }
-        x[sn.begin..sn.begin + w].copy_from_slice(&y[..w]);
+        own[b..b + w].copy_from_slice(&y[..w]);
         for (&r, &v) in pattern.iter().zip(&y[w..f]) {
-            x[r as usize] += v;
+            let r = r as usize;
+            if r < later_at {
+                own[r - own_at] += v;
+            } else {
+                later.add(r, v);
+            }
         }
     }
-    // Backward: Lᵀ x = z.
-    for s in (0..ns).rev() {
+}
+
+/// `Lᵀ x = z` on the supernodes `supernodes` (from the last), whose columns are in `own`
+/// (row `own_at` first) with the rows below them but for those from `above.1` on, which
+/// are read from `above.0`.
+fn backward_range(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    supernodes: std::ops::Range<usize>,
+    own: &mut [f64],
+    own_at: usize,
+    above: (&[f64], usize),
+    y: &mut Vec<f64>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        #[target_feature(enable = "avx")]
+        fn avx(
+            symbolic: &SymbolicSupernodalCholesky<Index>,
+            l: &[f64],
+            supernodes: std::ops::Range<usize>,
+            own: &mut [f64],
+            own_at: usize,
+            above: (&[f64], usize),
+            y: &mut Vec<f64>,
+        ) {
+            backward::<true>(symbolic, l, supernodes, own, own_at, above, y)
+        }
+        // SAFETY: the processor has AVX (just checked), all `avx` asks for.
+        #[allow(unsafe_code)]
+        return unsafe { avx(symbolic, l, supernodes, own, own_at, above, y) };
+    }
+    backward::<false>(symbolic, l, supernodes, own, own_at, above, y)
+}
+
+/// [`backward_range`]; `AVX` only where the processor has it (its dot products use it).
+#[inline(always)]
+fn backward<const AVX: bool>(
+    symbolic: &SymbolicSupernodalCholesky<Index>,
+    l: &[f64],
+    supernodes: std::ops::Range<usize>,
+    own: &mut [f64],
+    own_at: usize,
+    (above, above_at): (&[f64], usize),
+    y: &mut Vec<f64>,
+) {
+    for s in supernodes.rev() {
         let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width, sn.width + sn.below);
         let (ls, pattern) = (sn.values(l), sn.pattern(symbolic));
+        let b = sn.begin - own_at;
         y.clear();
-        y.extend_from_slice(&x[sn.begin..sn.begin + w]);
-        y.extend(pattern.iter().map(|&r| x[r as usize]));
+        y.extend_from_slice(&own[b..b + w]);
+        y.extend(pattern.iter().map(|&r| {
+            let r = r as usize;
+            if r < above_at {
+                own[r - own_at]
+            } else {
+                above[r - above_at]
+            }
+        }));
         // The rows below first, the columns from the last and each from its end: the
         // memory read as one decreasing stream, which the processor prefetches (a new
         // stream at each supernode doubled the time); then the diagonal block, now in cache.
@@ -136,7 +339,7 @@ fn solve<const AVX: bool>(
             let d = dot::<AVX>(&col[k + 1..w], &y[k + 1..w]);
             y[k] = (y[k] - d) / col[k];
         }
-        x[sn.begin..sn.begin + w].copy_from_slice(&y[..w]);
+        own[b..b + w].copy_from_slice(&y[..w]);
     }
 }
 
