@@ -100,7 +100,7 @@ impl EpsPolicy {
 #[derive(Debug, Clone, PartialEq)]
 pub enum StepSequence {
     /// Equal steps `h` from `t0` to `t_end`, the last one shortened to land on `t_end`
-    /// ([`fixed_step`](crate::fixed_step)).
+    /// ([`fixed_step`](crate::fixed_step())).
     Fixed {
         /// The step.
         h: f64,

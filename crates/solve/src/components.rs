@@ -209,8 +209,9 @@ impl Components {
         self.check(p.jacobian, p.b, sol, None, target, &mut scratch, met);
     }
 
-    /// [`check_whole`](Self::check_whole) for a sub-problem of these components and its
-    /// solution: sets `met[c]` for the components of the sub-problem only.
+    /// Whether each component meets its share of `target`, as `check_whole` (in the tests)
+    /// for the whole problem, for a sub-problem of these components and its solution: sets
+    /// `met[c]` for the components of the sub-problem only.
     pub fn check_sub(
         &self,
         sub: &SubProblem,
@@ -411,8 +412,8 @@ impl SubProblem {
         self.scatter_into(parts, &DisjointSolution::new(sol), keep);
     }
 
-    /// [`scatter`](Self::scatter) into a solution other threads write at the same time
-    /// (the answers of other components).
+    /// Writes the sub-problem's solution, as `scatter` (in the tests), into a solution other
+    /// threads write at the same time (the answers of other components).
     pub fn scatter_into(&self, parts: &Components, sol: &DisjointSolution<'_>, keep: &[bool]) {
         let local_sol = &self.solution;
         for (k, &i) in self.rows.iter().enumerate() {
