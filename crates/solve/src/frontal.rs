@@ -449,7 +449,7 @@ fn factor_range(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::supernodal::tests::{compressed, faer_supernodal};
+    use crate::supernodal::tests::{compressed, faer_supernodal, symmetric_times};
     use crate::supernodal::{SplitScratch, solve_in_place, solve_in_place_split};
     use faer::Side;
     use faer::sparse::SymbolicSparseColMatRef;
@@ -672,17 +672,8 @@ mod tests {
             }
         }
         // And it solves the system (the identity ordering: the factor's order is the
-        // matrix's): A x = b, the lower triangle read both ways.
-        let mut ax = vec![0.0; n];
-        for c in 0..n {
-            for p in ptr[c] as usize..ptr[c + 1] as usize {
-                let (r, v) = (idx[p] as usize, val[p]);
-                ax[r] += v * one[c];
-                if r != c {
-                    ax[c] += v * one[r];
-                }
-            }
-        }
+        // matrix's).
+        let ax = symmetric_times(&ptr, &idx, &val, &one);
         for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
             assert!((ax - b).abs() <= 1e-9, "row {r}: {ax} ≠ {b}");
         }

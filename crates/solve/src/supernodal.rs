@@ -73,13 +73,14 @@ pub(crate) fn solve_in_place(
     x: &mut [f64],
     y: &mut Vec<f64>,
 ) {
-    let (ns, n) = (symbolic.n_supernodes(), x.len());
-    let mut none = InPlace {
+    let (factor, n) = (Factor { symbolic, l }, x.len());
+    let all = 0..symbolic.n_supernodes();
+    let none = &mut InPlace {
         rows: &mut [],
         at: n,
     };
-    forward_range(symbolic, l, 0..ns, x, 0, &mut none, y);
-    backward_range(symbolic, l, 0..ns, x, 0, (&[], n), y);
+    forward_range(factor.part(all.clone(), x, 0), none, y);
+    backward_range(factor.part(all, x, 0), (&[], n), y);
 }
 
 /// Scratch of [`solve_in_place_split`]: each thread's buffer, and the second part's updates
@@ -106,6 +107,7 @@ pub(crate) fn solve_in_place_split(
     helper: &Helper,
 ) {
     let (ns, n) = (symbolic.n_supernodes(), x.len());
+    let factor = Factor { symbolic, l };
     let begin = |s: usize| Supernode::of(symbolic, s).begin;
     let (mid, top) = (begin(at), begin(fork));
     let [y0, y1] = &mut scratch.y;
@@ -116,18 +118,18 @@ pub(crate) fn solve_in_place_split(
         later.clear();
         helper.join_once(
             || {
-                let mut here = InPlace {
+                let here = &mut InPlace {
                     rows: x_top,
                     at: top,
                 };
-                forward_range(symbolic, l, 0..at, x0, 0, &mut here, y0);
+                forward_range(factor.part(0..at, x0, 0), here, y0);
             },
             || {
-                let mut keep = Kept {
+                let keep = &mut Kept {
                     at: top,
                     values: later,
                 };
-                forward_range(symbolic, l, at..fork, x1, mid, &mut keep, y1);
+                forward_range(factor.part(at..fork, x1, mid), keep, y1);
             },
         );
         let mut kept = later.iter();
@@ -140,19 +142,19 @@ pub(crate) fn solve_in_place_split(
             }
         }
         debug_assert!(kept.next().is_none());
-        let mut none = InPlace {
+        let none = &mut InPlace {
             rows: &mut [],
             at: n,
         };
-        forward_range(symbolic, l, fork..ns, x_top, top, &mut none, y0);
-        backward_range(symbolic, l, fork..ns, x_top, top, (&[], n), y0);
+        forward_range(factor.part(fork..ns, x_top, top), none, y0);
+        backward_range(factor.part(fork..ns, x_top, top), (&[], n), y0);
     }
     let (x0, rest) = x.split_at_mut(mid);
     let (x1, x_top) = rest.split_at_mut(top - mid);
     let x_top = &*x_top;
     helper.join_once(
-        || backward_range(symbolic, l, 0..at, x0, 0, (x_top, top), y0),
-        || backward_range(symbolic, l, at..fork, x1, mid, (x_top, top), y1),
+        || backward_range(factor.part(0..at, x0, 0), (x_top, top), y0),
+        || backward_range(factor.part(at..fork, x1, mid), (x_top, top), y1),
     );
 }
 
@@ -198,49 +200,64 @@ impl Later for Kept<'_> {
     }
 }
 
-/// `L z = b` on the supernodes `supernodes`, whose columns are in `own` (row `own_at`
-/// first) with the rows below them, but for the rows from `later.at()` on.
-fn forward_range(
-    symbolic: &SymbolicSupernodalCholesky<Index>,
-    l: &[f64],
+/// The factor: faer's supernodal symbolic factor and the values.
+#[derive(Clone, Copy)]
+struct Factor<'a> {
+    symbolic: &'a SymbolicSupernodalCholesky<Index>,
+    l: &'a [f64],
+}
+
+impl<'a> Factor<'a> {
+    /// The part of a solve that takes `supernodes`, whose columns `own` holds (row `own_at`
+    /// first).
+    fn part<'x>(
+        self,
+        supernodes: std::ops::Range<usize>,
+        own: &'x mut [f64],
+        own_at: usize,
+    ) -> Part<'a, 'x> {
+        Part {
+            factor: self,
+            supernodes,
+            own,
+            own_at,
+        }
+    }
+}
+
+/// A part of a solve: the supernodes it takes (forward in order, backward from the last),
+/// and the part of `x` that holds their columns (`own`, row `own_at` first).
+struct Part<'a, 'x> {
+    factor: Factor<'a>,
     supernodes: std::ops::Range<usize>,
-    own: &mut [f64],
+    own: &'x mut [f64],
     own_at: usize,
-    later: &mut impl Later,
-    y: &mut Vec<f64>,
-) {
+}
+
+/// `L z = b` on a part whose rows below are its own, but for those from `later.at()` on.
+fn forward_range(part: Part<'_, '_>, later: &mut impl Later, y: &mut Vec<f64>) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         #[target_feature(enable = "avx")]
-        fn avx(
-            symbolic: &SymbolicSupernodalCholesky<Index>,
-            l: &[f64],
-            supernodes: std::ops::Range<usize>,
-            own: &mut [f64],
-            own_at: usize,
-            later: &mut impl Later,
-            y: &mut Vec<f64>,
-        ) {
-            forward(symbolic, l, supernodes, own, own_at, later, y)
+        fn avx(part: Part<'_, '_>, later: &mut impl Later, y: &mut Vec<f64>) {
+            forward(part, later, y)
         }
         // SAFETY: the processor has AVX (just checked), all `avx` asks for.
         #[allow(unsafe_code)]
-        return unsafe { avx(symbolic, l, supernodes, own, own_at, later, y) };
+        return unsafe { avx(part, later, y) };
     }
-    forward(symbolic, l, supernodes, own, own_at, later, y)
+    forward(part, later, y)
 }
 
 /// [`forward_range`] (no dot products: the same code with or without AVX).
 #[inline(always)]
-fn forward(
-    symbolic: &SymbolicSupernodalCholesky<Index>,
-    l: &[f64],
-    supernodes: std::ops::Range<usize>,
-    own: &mut [f64],
-    own_at: usize,
-    later: &mut impl Later,
-    y: &mut Vec<f64>,
-) {
+fn forward(part: Part<'_, '_>, later: &mut impl Later, y: &mut Vec<f64>) {
+    let Part {
+        factor: Factor { symbolic, l },
+        supernodes,
+        own,
+        own_at,
+    } = part;
     let later_at = later.at();
     for s in supernodes {
         let sn = Supernode::of(symbolic, s);
@@ -268,50 +285,35 @@ fn forward(
     }
 }
 
-/// `Lᵀ x = z` on the supernodes `supernodes` (from the last), whose columns are in `own`
-/// (row `own_at` first) with the rows below them but for those from `above.1` on, which
-/// are read from `above.0`.
-fn backward_range(
-    symbolic: &SymbolicSupernodalCholesky<Index>,
-    l: &[f64],
-    supernodes: std::ops::Range<usize>,
-    own: &mut [f64],
-    own_at: usize,
-    above: (&[f64], usize),
-    y: &mut Vec<f64>,
-) {
+/// `Lᵀ x = z` on a part whose rows below are its own, but for those from `above.1` on,
+/// which are read from `above.0`.
+fn backward_range(part: Part<'_, '_>, above: (&[f64], usize), y: &mut Vec<f64>) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         #[target_feature(enable = "avx")]
-        fn avx(
-            symbolic: &SymbolicSupernodalCholesky<Index>,
-            l: &[f64],
-            supernodes: std::ops::Range<usize>,
-            own: &mut [f64],
-            own_at: usize,
-            above: (&[f64], usize),
-            y: &mut Vec<f64>,
-        ) {
-            backward::<true>(symbolic, l, supernodes, own, own_at, above, y)
+        fn avx(part: Part<'_, '_>, above: (&[f64], usize), y: &mut Vec<f64>) {
+            backward::<true>(part, above, y)
         }
         // SAFETY: the processor has AVX (just checked), all `avx` asks for.
         #[allow(unsafe_code)]
-        return unsafe { avx(symbolic, l, supernodes, own, own_at, above, y) };
+        return unsafe { avx(part, above, y) };
     }
-    backward::<false>(symbolic, l, supernodes, own, own_at, above, y)
+    backward::<false>(part, above, y)
 }
 
 /// [`backward_range`]; `AVX` only where the processor has it (its dot products use it).
 #[inline(always)]
 fn backward<const AVX: bool>(
-    symbolic: &SymbolicSupernodalCholesky<Index>,
-    l: &[f64],
-    supernodes: std::ops::Range<usize>,
-    own: &mut [f64],
-    own_at: usize,
+    part: Part<'_, '_>,
     (above, above_at): (&[f64], usize),
     y: &mut Vec<f64>,
 ) {
+    let Part {
+        factor: Factor { symbolic, l },
+        supernodes,
+        own,
+        own_at,
+    } = part;
     for s in supernodes.rev() {
         let sn = Supernode::of(symbolic, s);
         let (w, f) = (sn.width, sn.width + sn.below);
@@ -468,6 +470,22 @@ pub(crate) mod tests {
         compressed(cols)
     }
 
+    /// `A x`, `A` symmetric given by its lower triangle in compressed columns (read both
+    /// ways).
+    pub(crate) fn symmetric_times(ptr: &[u32], idx: &[u32], val: &[f64], x: &[f64]) -> Vec<f64> {
+        let mut ax = vec![0.0; x.len()];
+        for c in 0..x.len() {
+            for p in ptr[c] as usize..ptr[c + 1] as usize {
+                let (r, v) = (idx[p] as usize, val[p]);
+                ax[r] += v * x[c];
+                if r != c {
+                    ax[c] += v * x[r];
+                }
+            }
+        }
+        ax
+    }
+
     /// Columns of `(row, value)` entries, in compressed columns (rows sorted).
     pub(crate) fn compressed(cols: Vec<Vec<(u32, f64)>>) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
         let (mut ptr, mut idx, mut val) = (vec![0u32], Vec::new(), Vec::new());
@@ -558,17 +576,8 @@ pub(crate) mod tests {
                     "k = {k}: {g} against faer's {e}"
                 );
             }
-            // And it solves the system: A x = b, the lower triangle read both ways.
-            let mut ax = vec![0.0; n];
-            for c in 0..n {
-                for p in ptr[c] as usize..ptr[c + 1] as usize {
-                    let (r, v) = (idx[p] as usize, val[p]);
-                    ax[r] += v * got[c];
-                    if r != c {
-                        ax[c] += v * got[r];
-                    }
-                }
-            }
+            // And it solves the system.
+            let ax = symmetric_times(&ptr, &idx, &val, &got);
             let big = val.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
                 assert!(
