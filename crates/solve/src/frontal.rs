@@ -631,51 +631,54 @@ mod tests {
     fn the_split_solve_gives_the_one_thread_solves_bits() {
         // The two grids and their separator: the solve's two parts at once, the second's
         // updates of the separator's rows added after the first's, as one thread adds them.
-        let k = 16;
-        let (ptr, idx, val) = two_grids(k, None, true);
-        let n = ptr.len() - 1;
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
-        let (uptr, uidx) = upper_triangle(&ptr, &idx);
-        let upper = SymbolicSparseColMatRef::new_checked(n, n, &uptr, None, &uidx);
-        let a = SparseColMatRef::new(pattern, &val);
-        let (symbolic, l) = faer_supernodal(upper, Side::Upper, SymmetricOrdering::Identity, a);
-        let l = l.expect("positive definite");
-        let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
-            panic!("supernodal forced");
-        };
-        let mut mf = Multifrontal::default();
-        assert!(mf.analyse(s));
-        let split = mf.split().expect("the two grids are the two parts");
+        // Grids of 6 × 6 to 24 × 24 nodes (at 3 × 3 the tree does not split).
         let helper = Helper::start().expect("a thread");
-        let mut seed = 11u64;
-        let b: Vec<f64> = (0..n)
-            .map(|_| {
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-            })
-            .collect();
-        let mut one = b.clone();
-        solve_in_place(s, &l, &mut one, &mut Vec::new());
         let mut scratch = SplitScratch::default();
-        // Twice: the second solve reuses the first's scratch.
-        for _ in 0..2 {
-            let mut two = b.clone();
-            solve_in_place_split(s, &l, &mut two, split, &mut scratch, &helper);
-            for (r, (x1, x2)) in one.iter().zip(&two).enumerate() {
-                assert_eq!(
-                    x1.to_bits(),
-                    x2.to_bits(),
-                    "row {r}: one thread and two differ"
-                );
+        for k in [6, 16, 24] {
+            let (ptr, idx, val) = two_grids(k, None, true);
+            let n = ptr.len() - 1;
+            let pattern = SymbolicSparseColMatRef::new_checked(n, n, &ptr, None, &idx);
+            let (uptr, uidx) = upper_triangle(&ptr, &idx);
+            let upper = SymbolicSparseColMatRef::new_checked(n, n, &uptr, None, &uidx);
+            let a = SparseColMatRef::new(pattern, &val);
+            let (symbolic, l) = faer_supernodal(upper, Side::Upper, SymmetricOrdering::Identity, a);
+            let l = l.expect("positive definite");
+            let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
+                panic!("supernodal forced");
+            };
+            let mut mf = Multifrontal::default();
+            assert!(mf.analyse(s));
+            let split = mf.split().expect("the two grids are the two parts");
+            let mut seed = 11u64;
+            let b: Vec<f64> = (0..n)
+                .map(|_| {
+                    seed = seed
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+                })
+                .collect();
+            let mut one = b.clone();
+            solve_in_place(s, &l, &mut one, &mut Vec::new());
+            // Twice: the second solve reuses the first's scratch (and every size reuses the
+            // larger ones').
+            for _ in 0..2 {
+                let mut two = b.clone();
+                solve_in_place_split(s, &l, &mut two, split, &mut scratch, &helper);
+                for (r, (x1, x2)) in one.iter().zip(&two).enumerate() {
+                    assert_eq!(
+                        x1.to_bits(),
+                        x2.to_bits(),
+                        "k = {k}, row {r}: one thread and two differ"
+                    );
+                }
             }
-        }
-        // And it solves the system (the identity ordering: the factor's order is the
-        // matrix's).
-        let ax = symmetric_times(&ptr, &idx, &val, &one);
-        for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
-            assert!((ax - b).abs() <= 1e-9, "row {r}: {ax} ≠ {b}");
+            // And it solves the system (the identity ordering: the factor's order is the
+            // matrix's).
+            let ax = symmetric_times(&ptr, &idx, &val, &one);
+            for (r, (ax, b)) in ax.iter().zip(&b).enumerate() {
+                assert!((ax - b).abs() <= 1e-9, "k = {k}, row {r}: {ax} ≠ {b}");
+            }
         }
     }
 }
