@@ -178,12 +178,6 @@ impl Multifrontal {
         true
     }
 
-    /// Whether the factorization has two parts to run at once.
-    #[cfg(test)]
-    pub(crate) fn is_split(&self) -> bool {
-        self.split.is_some()
-    }
-
     /// The split (supernodes `[0, at)` and `[at, fork)`, two disjoint unions of subtrees),
     /// if the tree has one that pays.
     pub(crate) fn split(&self) -> Option<(usize, usize)> {
@@ -571,7 +565,7 @@ mod tests {
                 (faer, ours)
             })
             .collect();
-        (results, mf.is_split())
+        (results, mf.split().is_some())
     }
 
     /// Ours on one thread and two against faer's factor (to 10⁻¹² of its largest entry) and
