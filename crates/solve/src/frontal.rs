@@ -448,6 +448,8 @@ mod tests {
     use faer::Side;
     use faer::sparse::SymbolicSparseColMatRef;
     use faer::sparse::linalg::cholesky::{SymbolicCholeskyRaw, SymmetricOrdering};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     /// The lower triangle of `I + Σ w_e (e_a − e_b)(e_a − e_b)ᵀ` over two `k × k` grids with
     /// their diagonals, numbered one after the other, and a line of `k` nodes after them
@@ -628,6 +630,7 @@ mod tests {
         // Grids of 6 × 6 to 24 × 24 nodes (at 3 × 3 the tree does not split).
         let helper = Helper::start().expect("a thread");
         let mut scratch = SplitScratch::default();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
         for k in [6, 16, 24] {
             let (ptr, idx, val) = two_grids(k, None, true);
             let n = ptr.len() - 1;
@@ -643,15 +646,7 @@ mod tests {
             let mut mf = Multifrontal::default();
             assert!(mf.analyse(s));
             let split = mf.split().expect("the two grids are the two parts");
-            let mut seed = 11u64;
-            let b: Vec<f64> = (0..n)
-                .map(|_| {
-                    seed = seed
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-                })
-                .collect();
+            let b: Vec<f64> = (0..n).map(|_| rng.random_range(-0.5..0.5)).collect();
             let mut one = b.clone();
             solve_in_place(s, &l, &mut one, &mut Vec::new());
             // Twice: the second solve reuses the first's scratch (and every size reuses the

@@ -686,7 +686,8 @@ impl NormalEquations {
     }
 
     /// From the next analysis on, factorizations and triangular solves in 2×2 blocks, and
-    /// multifrontal factorizations of faer's supernodal factors, run on two threads where the
+    /// multifrontal factorizations of faer's supernodal factors and their solves, run on two
+    /// threads where the
     /// elimination tree splits in two parts that pay (the shared helper thread,
     /// [`Helper::shared`], for the second part, when no other job holds it; the same bits as
     /// on one thread). Without a thread to be had, nothing changes.

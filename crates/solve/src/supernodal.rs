@@ -375,7 +375,7 @@ fn lanes<const AVX: bool>(a: &[f64], b: &[f64]) -> [f64; 4] {
     debug_assert!(a.len() == b.len() && a.len().is_multiple_of(8));
     #[cfg(target_arch = "x86_64")]
     if AVX {
-        // SAFETY: `AVX` is true only where the processor has AVX ([`solve_in_place`] checks);
+        // SAFETY: `AVX` is true only where the processor has AVX ([`backward_range`] checks);
         // `a` and `b` hold the same multiple of 8 elements (asserted), all `dot_avx` reads.
         #[allow(unsafe_code)]
         return unsafe { dot_avx(a.as_ptr(), b.as_ptr(), a.len()) };
