@@ -307,6 +307,13 @@ pub struct InteriorPoint {
     last_changes: Option<f64>,
     // when the polish is tried
     polish_backoff: BackOff,
+    // The polish's last factorization, while nothing has been analysed or factorized since
+    // (see [`PolishFactor`]); and one read from a memory, made again by the next solve.
+    polish_factor: Option<PolishFactor>,
+    restored_polish_factor: Option<PolishFactor>,
+    // the right-hand side of a polish solve with that factorization, and its residual
+    polish_rhs: Vec<f64>,
+    polish_residual: Vec<f64>,
     // The iterate kept for the next start (row key, s, λ; sorted by key), the iterations of
     // the last cold start, and when a start from the kept iterate is tried.
     kept_iterate: Vec<(ConstraintKey, f64, f64)>,
@@ -318,6 +325,49 @@ pub struct InteriorPoint {
     augmented_on: bool,
     // Every solve by the augmented form (tests).
     augmented_only: bool,
+}
+
+/// The warm polish's factorization of `I + J_Aᵀ D J_A`, reused by the next settled solves.
+///
+/// In a settled crush the people barely move between steps: `J` changes in its last digits,
+/// its rows and the active set not at all. The next polish then solves with the factor in
+/// hand instead of factorizing again (measured: the pressed crush of 10⁵ once settled, 355 →
+/// 125 ms a step, benches/README.md, session 26); the certificate judges its answer as any
+/// other, and a polish that does not certify with it is tried again with a factorization of
+/// its own before the interior point takes over. The factor is used only while nothing has
+/// been analysed or factorized since it was made (`analyses`, `factorizations`), and with the
+/// same rows active (`d`'s positive entries).
+///
+/// What made it (`J`'s coefficients, `d`, and a hash of `J`'s structure) is part of the
+/// solver's memory, so that a restored solver makes the same factor again and goes on with
+/// the same bits as the original.
+#[derive(Debug, Clone, PartialEq)]
+struct PolishFactor {
+    analyses: usize,
+    factorizations: usize,
+    d: Vec<f64>,
+    coefficients: Vec<f64>,
+    structure: u64,
+}
+
+/// A hash of `j`'s structure (its dimension, row starts and columns): what decides whether
+/// the normal equations' analysis is redone.
+fn structure_hash(j: &ConstraintRows) -> u64 {
+    // FNV-1a over 64-bit words.
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |x: u64| {
+        h ^= x;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    };
+    eat(j.dim() as u64);
+    eat(j.len() as u64);
+    for &s in j.row_starts() {
+        eat(s as u64);
+    }
+    for &c in j.columns() {
+        eat(c as u64);
+    }
+    h
 }
 
 /// An attempt that may lose (the polish, the kept iterate's start): after `k` losses in a
@@ -376,6 +426,10 @@ impl InteriorPoint {
             last_changes: None,
             polish_backoff: BackOff::default(),
             kept_iterate: Vec::new(),
+            polish_factor: None,
+            restored_polish_factor: None,
+            polish_rhs: Vec::new(),
+            polish_residual: Vec::new(),
             cold_iterations: None,
             kept_backoff: BackOff::default(),
             augmented: AugmentedSystem::default(),
@@ -488,15 +542,18 @@ impl InteriorPoint {
     /// the solve's `v` and `λ⁺` meet `target` after an update (then in `v`, `lam`); `None` as soon
     /// as an update does not halve the largest residual of those rows, or after
     /// `polish_updates`.
+    ///
+    /// With `reuse`, the factorization of the last polish is taken instead of a new one where
+    /// it still fits ([`PolishFactor`]); the second value says whether it was.
     fn polish(
         &mut self,
         p: &ProjectionProblem<'_>,
         target: Target,
         v: &mut [f64],
         lam: &mut [f64],
-    ) -> Option<Certificate> {
+        reuse: bool,
+    ) -> (Option<Certificate>, bool) {
         let j = p.jacobian;
-        let m = p.rows();
         let penalty = self.settings.polish_penalty;
         let floor = self.warm_floor;
         self.normal
@@ -512,9 +569,49 @@ impl InteriorPoint {
                 }
             });
         }
-        if !self.normal.factorize(j, 1.0, &self.d) {
-            return None;
+        let reused = reuse && self.polish_factor_fits();
+        if !reused {
+            self.polish_factor = None;
+            if !self.normal.factorize(j, 1.0, &self.d) {
+                return (None, false);
+            }
+            let c = self.normal.counts();
+            self.polish_factor = Some(PolishFactor {
+                analyses: c.analyses,
+                factorizations: c.factorizations,
+                d: self.d.clone(),
+                coefficients: j.coefficients().to_vec(),
+                structure: structure_hash(j),
+            });
         }
+        (self.polish_updates(p, target, v, lam, reused), reused)
+    }
+
+    /// Whether the last polish's factorization is the one in hand and fits this polish's
+    /// `d`: nothing analysed or factorized since, the same rows active.
+    fn polish_factor_fits(&self) -> bool {
+        let c = self.normal.counts();
+        self.polish_factor.as_ref().is_some_and(|f| {
+            (f.analyses, f.factorizations) == (c.analyses, c.factorizations)
+                && f.d.len() == self.d.len()
+                && f.d
+                    .iter()
+                    .zip(&self.d)
+                    .all(|(a, b)| (*a > 0.0) == (*b > 0.0))
+        })
+    }
+
+    /// The polish's multiplier updates with the factorization in hand (see [`Self::polish`]).
+    fn polish_updates(
+        &mut self,
+        p: &ProjectionProblem<'_>,
+        target: Target,
+        v: &mut [f64],
+        lam: &mut [f64],
+        reused: bool,
+    ) -> Option<Certificate> {
+        let j = p.jacobian;
+        let m = p.rows();
         let mut last = f64::INFINITY;
         for _ in 0..self.settings.polish_updates {
             let wk = self.normal.workers();
@@ -525,7 +622,13 @@ impl InteriorPoint {
             }
             let (y, jt) = (&self.scratch_m, self.normal.transpose());
             wk.map(&mut self.dv, |c, _| p.w[c] + jt.dot(y, c));
+            if reused {
+                self.polish_rhs.clone_from(&self.dv);
+            }
             self.normal.solve_in_place(&mut self.dv);
+            if reused && !self.refine_polish_solve(j) {
+                return None;
+            }
             let (wk, d, dv) = (self.normal.workers(), &self.d, &self.dv);
             wk.map(&mut self.rp, |i, _| {
                 if d[i] > 0.0 {
@@ -551,6 +654,72 @@ impl InteriorPoint {
             last = residual;
         }
         None
+    }
+
+    /// Makes `dv`, solved with a polish factorization made for an earlier `J`, solve
+    /// `(I + Jᵀ D J) dv = polish_rhs` for this one: iterative refinement against the true
+    /// matrix, each round a pair of triangular solves. True when the residual is below
+    /// [`STALE_SOLVE_TOLERANCE`] of the right-hand side (at once in a settled crush, whose `J`
+    /// moved in its last digits); false when a round does not halve it or
+    /// [`STALE_SOLVE_ROUNDS`] are spent (the polish then factorizes).
+    fn refine_polish_solve(&mut self, j: &ConstraintRows) -> bool {
+        let norm = |x: &[f64]| x.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let scale = norm(&self.polish_rhs);
+        let mut last = f64::INFINITY;
+        for round in 0..=STALE_SOLVE_ROUNDS {
+            // r = rhs − dv − Jᵀ(D (J dv))
+            j.mul(&self.dv, &mut self.scratch_m);
+            for (t, d) in self.scratch_m.iter_mut().zip(&self.d) {
+                *t *= -d;
+            }
+            self.polish_residual.clear();
+            self.polish_residual
+                .extend(self.polish_rhs.iter().zip(&self.dv).map(|(r, x)| r - x));
+            j.mul_transpose_add(&self.scratch_m, &mut self.polish_residual);
+            let r = norm(&self.polish_residual);
+            if r <= STALE_SOLVE_TOLERANCE * scale {
+                return true;
+            }
+            if round == STALE_SOLVE_ROUNDS || !(r <= 0.5 * last) {
+                return false;
+            }
+            last = r;
+            self.normal.solve_in_place(&mut self.polish_residual);
+            for (x, dx) in self.dv.iter_mut().zip(&self.polish_residual) {
+                *x += dx;
+            }
+        }
+        false
+    }
+
+    /// Makes again, for `j`, the polish factorization a restored memory describes, if `j`
+    /// has the structure it was made for (else the original would have analysed again and
+    /// dropped it too).
+    fn make_polish_factor_again(&mut self, j: &ConstraintRows, mut f: PolishFactor) {
+        if f.structure != structure_hash(j)
+            || f.d.len() != j.len()
+            || f.coefficients.len() != j.nnz()
+        {
+            return;
+        }
+        let mut made = ConstraintRows::new(j.dim());
+        let (keys, values, starts, columns) = (j.keys(), j.values(), j.row_starts(), j.columns());
+        for i in 0..j.len() {
+            let (a, b) = (starts[i], starts[i + 1]);
+            made.push(
+                keys[i],
+                values[i],
+                columns[a..b]
+                    .iter()
+                    .copied()
+                    .zip(f.coefficients[a..b].iter().copied()),
+            );
+        }
+        if self.normal.factorize(&made, 1.0, &f.d) {
+            let c = self.normal.counts();
+            (f.analyses, f.factorizations) = (c.analyses, c.factorizations);
+            self.polish_factor = Some(f);
+        }
     }
 
     /// The fraction of rows whose activity differs between the caller's multipliers (in
@@ -947,6 +1116,9 @@ impl ProjectionSolver for InteriorPoint {
 
         let times = self.times();
         self.normal.analyse(j)?;
+        if let Some(restored) = self.restored_polish_factor.take() {
+            self.make_polish_factor_again(j, restored);
+        }
         self.augmented_on = self.augmented_only;
         self.augmented.forget();
         let settled = self
@@ -956,9 +1128,20 @@ impl ProjectionSolver for InteriorPoint {
         if tried && self.polish_backoff.allows() {
             // Backed off where it keeps failing (a crush of 40,000 whose contacts still open
             // and close by the handful).
-            let polished = self.polish(p, target, v, lam);
+            let mut polished = match self.polish(p, target, v, lam, true) {
+                // The factorization kept from an earlier step did not do: again with one of
+                // its own, from the caller's multipliers.
+                (None, true) => {
+                    lam.copy_from_slice(&self.warm);
+                    self.polish(p, target, v, lam, false).0
+                }
+                (polished, _) => polished,
+            };
+            if polished.is_none() {
+                self.polish_factor = None;
+            }
             self.polish_backoff.record(polished.is_some());
-            if let Some(cert) = polished {
+            if let Some(cert) = polished.take() {
                 self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
                 let mut report = SolveReport {
                     solver: self.name(),
@@ -1028,9 +1211,26 @@ impl ProjectionSolver for InteriorPoint {
     /// `[last_changes, the polish's losses and skips, cold_iterations, the kept start's losses
     /// and skips, (key_high, key_low, s, λ) of each row of the kept iterate…]`: what decides
     /// the next solve's polish and start (`-1` for none yet; each key in two 32-bit halves,
-    /// exact in an f64).
+    /// exact in an f64). With the warm polish's factorization kept for the next settled
+    /// solves, what made it follows: `[−2, the six numbers above, K, the kept iterate's 4K
+    /// numbers, M, d (M numbers), C, J's coefficients (C numbers), the structure's hash in
+    /// two 32-bit halves]`.
     fn memory(&self) -> Vec<f64> {
-        let mut memory = Vec::with_capacity(MEMORY_HEAD + 4 * self.kept_iterate.len());
+        let counts = self.normal.counts();
+        let factor = self
+            .restored_polish_factor
+            .as_ref()
+            .or(self.polish_factor.as_ref().filter(|f| {
+                (f.analyses, f.factorizations) == (counts.analyses, counts.factorizations)
+            }));
+        let mut memory = Vec::with_capacity(
+            MEMORY_HEAD
+                + 4 * self.kept_iterate.len()
+                + factor.map_or(0, |f| 6 + f.d.len() + f.coefficients.len()),
+        );
+        if factor.is_some() {
+            memory.push(POLISH_FACTOR_LAYOUT);
+        }
         memory.extend([
             self.last_changes.unwrap_or(-1.0),
             self.polish_backoff.losses as f64,
@@ -1039,8 +1239,18 @@ impl ProjectionSolver for InteriorPoint {
             self.kept_backoff.losses as f64,
             self.kept_backoff.skips as f64,
         ]);
+        if factor.is_some() {
+            memory.push(self.kept_iterate.len() as f64);
+        }
         for &(key, s, l) in &self.kept_iterate {
             memory.extend([(key >> 32) as f64, (key as u32) as f64, s, l]);
+        }
+        if let Some(f) = factor {
+            memory.push(f.d.len() as f64);
+            memory.extend_from_slice(&f.d);
+            memory.push(f.coefficients.len() as f64);
+            memory.extend_from_slice(&f.coefficients);
+            memory.extend([(f.structure >> 32) as f64, (f.structure as u32) as f64]);
         }
         memory
     }
@@ -1052,11 +1262,19 @@ impl ProjectionSolver for InteriorPoint {
         self.polish_backoff = BackOff::default();
         (self.cold_iterations, self.kept_backoff) = (None, BackOff::default());
         self.kept_iterate.clear();
-        let (Some(head), Some(rows)) = (
-            memory.get(..MEMORY_HEAD),
-            memory.get(MEMORY_HEAD..).filter(|r| r.len() % 4 == 0),
-        ) else {
-            return;
+        (self.polish_factor, self.restored_polish_factor) = (None, None);
+        // With a polish factorization: its layout mark, the head, the kept rows' count and
+        // numbers, then the factorization's; without: the head and the kept rows' numbers.
+        let (head, rows, factor) = if memory.first() == Some(&POLISH_FACTOR_LAYOUT) {
+            let Some(parts) = split_polish_memory(&memory[1..]) else {
+                return;
+            };
+            parts
+        } else {
+            match (memory.get(..MEMORY_HEAD), memory.get(MEMORY_HEAD..)) {
+                (Some(head), Some(rows)) if rows.len() % 4 == 0 => (head, rows, None),
+                _ => return,
+            }
         };
         let (Some(pf), Some(ps), Some(wf), Some(ws)) = (
             count(head[1]),
@@ -1081,8 +1299,54 @@ impl ProjectionSolver for InteriorPoint {
                 .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2], r[3])),
         );
         self.kept_iterate.sort_unstable_by_key(|e| e.0);
+        self.restored_polish_factor = factor;
     }
 }
+
+/// The parts of a memory in the layout with a polish factorization (after its mark): the
+/// head, the kept iterate's numbers and the factorization; `None` if it is not one.
+fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishFactor>)> {
+    let count = |x: &f64| (*x >= 0.0 && x.fract() == 0.0).then_some(*x as usize);
+    let head = memory.get(..MEMORY_HEAD)?;
+    let rest = &memory[MEMORY_HEAD..];
+    let k = count(rest.first()?)?.checked_mul(4)?;
+    let rows = rest.get(1..1 + k)?;
+    let rest = &rest[1 + k..];
+    let m = count(rest.first()?)?;
+    let d = rest.get(1..1 + m)?;
+    let rest = &rest[1 + m..];
+    let c = count(rest.first()?)?;
+    let coefficients = rest.get(1..1 + c)?;
+    let [high, low] = rest.get(1 + c..)? else {
+        return None;
+    };
+    let half = |x: &f64| count(x).filter(|&x| x <= u32::MAX as usize);
+    let structure = ((half(high)? as u64) << 32) | half(low)? as u64;
+    Some((
+        head,
+        rows,
+        Some(PolishFactor {
+            analyses: 0,
+            factorizations: 0,
+            d: d.to_vec(),
+            coefficients: coefficients.to_vec(),
+            structure,
+        }),
+    ))
+}
+
+/// A polish solve with a factorization made for an earlier `J` is taken when its residual
+/// against this `J` is at most this fraction of the right-hand side (the pressed crush of
+/// 10⁵ once settled: ~3·10⁻¹⁰ at once, which is also about the rounding of the residual
+/// itself with the polish's penalty of 10⁶).
+const STALE_SOLVE_TOLERANCE: f64 = 1e-8;
+
+/// Rounds of iterative refinement a polish solve with such a factorization may take.
+const STALE_SOLVE_ROUNDS: usize = 4;
+
+/// The first number of [`InteriorPoint`]'s memory when it holds a polish factorization (the
+/// other layout begins with `last_changes`, at least −1).
+const POLISH_FACTOR_LAYOUT: f64 = -2.0;
 
 /// Numbers before the kept iterate's rows in [`InteriorPoint`]'s memory.
 const MEMORY_HEAD: usize = 6;

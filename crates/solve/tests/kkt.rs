@@ -1179,6 +1179,12 @@ fn small_crush() -> (Vec<f64>, ConstraintRows, Vec<f64>) {
 /// neighbours at a distance `r` from the centre close at about `d/r` m/s, so only the
 /// contacts within `0.05 d / gap` of the centre are violated at `w`.
 fn crush(side: usize, fill: f64) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
+    crush_moved(side, fill, &[])
+}
+
+/// [`crush`] with each disk moved by `moves` (none where it is shorter): the rows are still
+/// those of the packing's neighbours, their normals and gaps the moved disks'.
+fn crush_moved(side: usize, fill: f64, moves: &[[f64; 2]]) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
     let (d, mu) = (0.48, 0.05);
     let radius = fill * d / 2.0;
     let (per_row, rows_of_people) = (side, side);
@@ -1202,11 +1208,18 @@ fn crush(side: usize, fill: f64) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
     }
     let mut rows = ConstraintRows::new(2 * n);
     let mut b = Vec::new();
+    let moved: Vec<[f64; 2]> = (0..n)
+        .map(|i| match moves.get(i) {
+            Some(m) => [q[i][0] + m[0], q[i][1] + m[1]],
+            None => q[i],
+        })
+        .collect();
     for i in 0..n {
         for j in i + 1..n {
             let (dx, dy) = (q[i][0] - q[j][0], q[i][1] - q[j][1]);
-            let dist = (dx * dx + dy * dy).sqrt();
-            if dist < d + 0.1 {
+            if (dx * dx + dy * dy).sqrt() < d + 0.1 {
+                let (dx, dy) = (moved[i][0] - moved[j][0], moved[i][1] - moved[j][1]);
+                let dist = (dx * dx + dy * dy).sqrt();
                 let e = [dx / dist, dy / dist];
                 rows.push(
                     (i * n + j) as u64,
@@ -1379,9 +1392,10 @@ fn a_crush_with_local_pressure_sets_rows_aside_by_their_own_reach() {
 /// A settled crush: the small crush solved again and again from the previous answer's
 /// multipliers (the integrator's warm start), everyone pushing 2 % harder each time, so that
 /// the contacts stay and only their multipliers move. Once a solve ends with the active set
-/// it started from, the next is answered by the warm polish in one factorization; every
-/// answer is Clarabel's, and the same on two threads. Then everyone pulls away: the polish is
-/// tried, fails, and the interior point answers.
+/// it started from, the next is answered by the warm polish in one factorization, and the
+/// one after by the polish with that factorization again; every answer is Clarabel's, and
+/// the same on two threads. Then everyone pulls away: the polish is tried, fails, and the
+/// interior point answers.
 #[test]
 fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
     let (w, rows, b) = small_crush();
@@ -1447,12 +1461,11 @@ fn a_settled_crush_is_answered_by_the_warm_polish_in_one_factorization() {
         assert_eq!((a.iterations, a.gap), (b.iterations, b.gap));
     }
     // Cold, then warm by the interior point (its warm start not yet known to be settled),
-    // then polished.
+    // then polished, then polished with the same factorization (the rows and `J` the same).
     assert!(reports[0].factorizations > 5, "{:?}", reports[0]);
     assert!(reports[1].factorizations > 1, "{:?}", reports[1]);
-    for rep in &reports[2..] {
-        assert_eq!((rep.iterations, rep.factorizations), (1, 1), "{rep:?}");
-    }
+    assert_eq!((reports[2].iterations, reports[2].factorizations), (1, 1));
+    assert_eq!((reports[3].iterations, reports[3].factorizations), (1, 0));
     // Without the polish the settled solves take the interior point's iterations.
     let (_, _, plain) = settled(
         InteriorPointSettings::builder()
@@ -1901,10 +1914,142 @@ fn a_restored_interior_point_polishes_as_the_original() {
     for k in 2..4 {
         let a = solve(&mut original, &mut sol, k);
         let b = solve(&mut restored, &mut restored_sol, k);
-        assert_eq!(a, (1, 1), "push {k}: the original polished");
+        // The second polish takes the first one's factorization (the rows the same).
+        assert_eq!(
+            a,
+            (1, usize::from(k == 2)),
+            "push {k}: the original polished"
+        );
         assert_eq!(a, b, "push {k}");
         assert_eq!(sol, restored_sol, "push {k}");
     }
+}
+
+/// The small crush settled, its people moving a little between solves (by up to 10⁻⁷ m each
+/// way): `J` changes in its last digits, its rows not. Each solve after the first polish
+/// takes that polish's factorization again (its solves refined against the new `J`), and its
+/// answer, judged by the certificate as any other, is Clarabel's. A solve whose people have
+/// moved farther (10⁻⁴ m), where that factorization no longer does, is answered too, with
+/// factorizations of its own.
+#[test]
+fn a_settled_crush_that_moves_a_little_is_polished_with_the_factorization_in_hand() {
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let mut interior = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut sol = ProjectionSolution::default();
+    let mut factorizations = Vec::new();
+    for k in 0..7 {
+        let (w, rows, b) = moved(k, if k == 6 { 1e-4 } else { 1e-7 });
+        let p = ProjectionProblem {
+            w: &w,
+            jacobian: &rows,
+            b: &b,
+        };
+        let rep = interior.solve(&p, t, &mut sol).unwrap();
+        let name = format!("step {k}");
+        assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+        check_report(&p, t, &name, &sol, &rep);
+        assert_clarabel_objective(&p, &name, &sol, rep.gap, &clarabel_answer(&p, t));
+        factorizations.push((rep.iterations, rep.factorizations));
+    }
+    // Cold, the interior point again, then polished: with a factorization, then with it
+    // again and again; moved far, polished or solved with factorizations of its own.
+    assert!(
+        factorizations[0].1 > 5 && factorizations[1].1 > 1,
+        "{factorizations:?}"
+    );
+    assert_eq!(factorizations[2], (1, 1), "{factorizations:?}");
+    assert_eq!(&factorizations[3..6], &[(1, 0); 3], "{factorizations:?}");
+    assert!(factorizations[6].1 >= 1, "{factorizations:?}");
+}
+
+/// Regression for the factorization the polish keeps: a solver restored from the memory
+/// taken after a polish makes that factorization again, from the coefficients it was made
+/// of (not the new `J`'s), and goes on with the original's bits; the memory round-trips.
+#[test]
+fn a_restored_interior_point_polishes_with_the_original_factorization() {
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let steps: Vec<(Vec<f64>, ConstraintRows, Vec<f64>)> = (0..6).map(|k| moved(k, 1e-7)).collect();
+    let solve = |interior: &mut InteriorPoint, sol: &mut ProjectionSolution, k: usize| {
+        let p = ProjectionProblem {
+            w: &steps[k].0,
+            jacobian: &steps[k].1,
+            b: &steps[k].2,
+        };
+        let rep = interior.solve(&p, t, sol).unwrap();
+        assert_eq!(rep.status, SolveStatus::Converged, "step {k}: {rep:?}");
+        check_report(&p, t, &format!("step {k}"), sol, &rep);
+        rep
+    };
+    let mut original = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut sol = ProjectionSolution::default();
+    for k in 0..3 {
+        solve(&mut original, &mut sol, k);
+    }
+    let memory = original.memory();
+    let mut restored = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    restored.set_memory(&memory);
+    assert_eq!(restored.memory(), memory, "the memory round-trips");
+    let mut restored_sol = sol.clone();
+    for k in 3..6 {
+        let a = solve(&mut original, &mut sol, k);
+        let b = solve(&mut restored, &mut restored_sol, k);
+        assert_eq!(
+            a.factorizations, 0,
+            "step {k}: the original reused its factorization"
+        );
+        // The restored solver makes it again once, then reuses it as the original does.
+        assert_eq!(b.factorizations, usize::from(k == 3), "step {k}");
+        assert_eq!((a.iterations, a.gap), (b.iterations, b.gap), "step {k}");
+        assert_eq!(sol, restored_sol, "step {k}");
+    }
+    // Made from the new `J` instead, the factorization gives other bits: the comparison
+    // above can tell.
+    let mut fresh = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut fresh_sol = ProjectionSolution::default();
+    for k in 0..3 {
+        solve(&mut fresh, &mut fresh_sol, k);
+    }
+    let mut other = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut head = fresh.memory();
+    // The same memory without its factorization (the older layout): the next polish
+    // factorizes the new `J`.
+    let kept = head[7] as usize;
+    head = head[1..8 + 4 * kept].to_vec();
+    head.remove(6);
+    other.set_memory(&head);
+    let mut other_sol = fresh_sol.clone();
+    let a = solve(&mut fresh, &mut fresh_sol, 3);
+    let b = solve(&mut other, &mut other_sol, 3);
+    assert_eq!((a.factorizations, b.factorizations), (0, 1));
+    assert_ne!(fresh_sol, other_sol, "another factorization, other bits");
+}
+
+/// The small crush with its people moved a little by step `k`: each disk by up to `size`
+/// metres in each direction (drawn per step and disk; none at step 0), everyone pushing
+/// `1 + 0.02 k` times as hard: `(w, J, b)`, the same rows at every step.
+fn moved(k: usize, size: f64) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(1_000 + k as u64);
+    let moves: Vec<[f64; 2]> = (0..15 * 15)
+        .map(|_| {
+            let mut draw = || {
+                if k == 0 {
+                    0.0
+                } else {
+                    size * rng.random_range(-1.0..=1.0)
+                }
+            };
+            [draw(), draw()]
+        })
+        .collect();
+    let (w, rows, b) = crush_moved(15, 0.995, &moves);
+    let w = w.iter().map(|x| (1.0 + 0.02 * k as f64) * x).collect();
+    (w, rows, b)
 }
 
 /// Regression: a crush of 900 disks asked a gap of 10⁻¹² drives `D = λ/s` past what the
