@@ -1128,7 +1128,7 @@ impl ProjectionSolver for InteriorPoint {
         if tried && self.polish_backoff.allows() {
             // Backed off where it keeps failing (a crush of 40,000 whose contacts still open
             // and close by the handful).
-            let mut polished = match self.polish(p, target, v, lam, true) {
+            let polished = match self.polish(p, target, v, lam, true) {
                 // The factorization kept from an earlier step did not do: again with one of
                 // its own, from the caller's multipliers.
                 (None, true) => {
@@ -1137,11 +1137,8 @@ impl ProjectionSolver for InteriorPoint {
                 }
                 (polished, _) => polished,
             };
-            if polished.is_none() {
-                self.polish_factor = None;
-            }
             self.polish_backoff.record(polished.is_some());
-            if let Some(cert) = polished.take() {
+            if let Some(cert) = polished {
                 self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
                 let mut report = SolveReport {
                     solver: self.name(),
@@ -1156,6 +1153,8 @@ impl ProjectionSolver for InteriorPoint {
                 return Ok(report);
             }
         }
+        // The interior point's factorizations replace the polish's.
+        self.polish_factor = None;
         let correctors = {
             let c = self.normal.counts();
             let dense =
