@@ -334,7 +334,8 @@ pub struct InteriorPoint {
 /// hand instead of factorizing again (measured: the pressed crush of 10⁵ once settled, 355 →
 /// 125 ms a step, benches/README.md, session 26); the certificate judges its answer as any
 /// other, and a polish that does not certify with it is tried again with a factorization of
-/// its own before the interior point takes over. The factor is used only while nothing has
+/// its own before the interior point takes over (and after `k` such failures in a row the
+/// next `2ᵏ − 1` polishes factorize at once). The factor is used only while nothing has
 /// been analysed or factorized since it was made (`analyses`, `factorizations`), and with the
 /// same rows active (`d`'s positive entries).
 ///
@@ -348,6 +349,10 @@ struct PolishFactor {
     d: Vec<f64>,
     coefficients: Vec<f64>,
     structure: u64,
+    // When it is tried again: where the people move more between steps than it allows (the
+    // crush of 10,000 once settled: its first solve's residual 13–20 times the right-hand
+    // side), after `k` failures in a row the next `2ᵏ − 1` polishes factorize at once.
+    reuse: BackOff,
 }
 
 /// A hash of `j`'s structure (its dimension, row starts and columns): what decides whether
@@ -569,9 +574,18 @@ impl InteriorPoint {
                 }
             });
         }
-        let reused = reuse && self.polish_factor_fits();
+        let fits = reuse && self.polish_factor_fits();
+        let reused = fits
+            && self
+                .polish_factor
+                .as_mut()
+                .is_some_and(|f| f.reuse.allows());
         if !reused {
-            self.polish_factor = None;
+            // (A factorization that fits but is skipped hands its back-off to the new one.)
+            let reuse = match self.polish_factor.take() {
+                Some(f) if fits => f.reuse,
+                _ => BackOff::default(),
+            };
             if !self.normal.factorize(j, 1.0, &self.d) {
                 return (None, false);
             }
@@ -582,9 +596,14 @@ impl InteriorPoint {
                 d: self.d.clone(),
                 coefficients: j.coefficients().to_vec(),
                 structure: structure_hash(j),
+                reuse,
             });
         }
-        (self.polish_updates(p, target, v, lam, reused), reused)
+        let polished = self.polish_updates(p, target, v, lam, reused);
+        if reused && let Some(f) = self.polish_factor.as_mut() {
+            f.reuse.record(polished.is_some());
+        }
+        (polished, reused)
     }
 
     /// Whether the last polish's factorization is the one in hand and fits this polish's
@@ -1132,8 +1151,13 @@ impl ProjectionSolver for InteriorPoint {
                 // The factorization kept from an earlier step did not do: again with one of
                 // its own, from the caller's multipliers.
                 (None, true) => {
+                    let reuse = self.polish_factor.as_ref().map(|f| f.reuse);
                     lam.copy_from_slice(&self.warm);
-                    self.polish(p, target, v, lam, false).0
+                    let polished = self.polish(p, target, v, lam, false).0;
+                    if let (Some(f), Some(reuse)) = (self.polish_factor.as_mut(), reuse) {
+                        f.reuse = reuse;
+                    }
+                    polished
                 }
                 (polished, _) => polished,
             };
@@ -1213,7 +1237,7 @@ impl ProjectionSolver for InteriorPoint {
     /// exact in an f64). With the warm polish's factorization kept for the next settled
     /// solves, what made it follows: `[−2, the six numbers above, K, the kept iterate's 4K
     /// numbers, M, d (M numbers), C, J's coefficients (C numbers), the structure's hash in
-    /// two 32-bit halves]`.
+    /// two 32-bit halves, its reuse's losses and skips]`.
     fn memory(&self) -> Vec<f64> {
         let counts = self.normal.counts();
         let factor = self
@@ -1249,7 +1273,12 @@ impl ProjectionSolver for InteriorPoint {
             memory.extend_from_slice(&f.d);
             memory.push(f.coefficients.len() as f64);
             memory.extend_from_slice(&f.coefficients);
-            memory.extend([(f.structure >> 32) as f64, (f.structure as u32) as f64]);
+            memory.extend([
+                (f.structure >> 32) as f64,
+                (f.structure as u32) as f64,
+                f.reuse.losses as f64,
+                f.reuse.skips as f64,
+            ]);
         }
         memory
     }
@@ -1316,11 +1345,15 @@ fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishF
     let rest = &rest[1 + m..];
     let c = count(rest.first()?)?;
     let coefficients = rest.get(1..1 + c)?;
-    let [high, low] = rest.get(1 + c..)? else {
+    let [high, low, losses, skips] = rest.get(1 + c..)? else {
         return None;
     };
     let half = |x: &f64| count(x).filter(|&x| x <= u32::MAX as usize);
     let structure = ((half(high)? as u64) << 32) | half(low)? as u64;
+    let reuse = BackOff {
+        losses: (count(losses)? as u32).min(6),
+        skips: count(skips)?,
+    };
     Some((
         head,
         rows,
@@ -1330,6 +1363,7 @@ fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishF
             d: d.to_vec(),
             coefficients: coefficients.to_vec(),
             structure,
+            reuse,
         }),
     ))
 }
