@@ -331,8 +331,9 @@ pub struct InteriorPoint {
 ///
 /// In a settled crush the people barely move between steps: `J` changes in its last digits,
 /// its rows and the active set not at all. The next polish then solves with the factor in
-/// hand instead of factorizing again (measured: the pressed crush of 10⁵ once settled, 355 →
-/// 125 ms a step, benches/README.md, session 26); the certificate judges its answer as any
+/// hand instead of factorizing again (measured: the pressed crush of 10⁵ once settled, 320–330
+/// → 106–108 ms a step on one thread, benches/README.md, session 26); the certificate judges
+/// its answer as any
 /// other, and a polish that does not certify with it is tried again with a factorization of
 /// its own before the interior point takes over (and after `k` such failures in a row the
 /// next `2ᵏ − 1` polishes factorize at once). The factor is used only while nothing has
@@ -1331,21 +1332,25 @@ impl ProjectionSolver for InteriorPoint {
     }
 }
 
+/// A count, then as many times `per` numbers: those numbers and the rest; `None` if `memory`
+/// does not begin so.
+fn counted(memory: &[f64], per: usize) -> Option<(&[f64], &[f64])> {
+    let n = *memory.first()?;
+    let n = (n >= 0.0 && n.fract() == 0.0).then_some(n as usize)?;
+    let end = n.checked_mul(per)?.checked_add(1)?;
+    Some((memory.get(1..end)?, memory.get(end..)?))
+}
+
 /// The parts of a memory in the layout with a polish factorization (after its mark): the
 /// head, the kept iterate's numbers and the factorization; `None` if it is not one.
 fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishFactor>)> {
     let count = |x: &f64| (*x >= 0.0 && x.fract() == 0.0).then_some(*x as usize);
     let head = memory.get(..MEMORY_HEAD)?;
     let rest = &memory[MEMORY_HEAD..];
-    let k = count(rest.first()?)?.checked_mul(4)?;
-    let rows = rest.get(1..1 + k)?;
-    let rest = &rest[1 + k..];
-    let m = count(rest.first()?)?;
-    let d = rest.get(1..1 + m)?;
-    let rest = &rest[1 + m..];
-    let c = count(rest.first()?)?;
-    let coefficients = rest.get(1..1 + c)?;
-    let [high, low, losses, skips] = rest.get(1 + c..)? else {
+    let (rows, rest) = counted(rest, 4)?;
+    let (d, rest) = counted(rest, 1)?;
+    let (coefficients, rest) = counted(rest, 1)?;
+    let [high, low, losses, skips] = rest else {
         return None;
     };
     let half = |x: &f64| count(x).filter(|&x| x <= u32::MAX as usize);

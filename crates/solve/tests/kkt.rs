@@ -1967,7 +1967,8 @@ fn a_settled_crush_that_moves_a_little_is_polished_with_the_factorization_in_han
 
 /// Regression for the factorization the polish keeps: a solver restored from the memory
 /// taken after a polish makes that factorization again, from the coefficients it was made
-/// of (not the new `J`'s), and goes on with the original's bits; the memory round-trips.
+/// of (not the new `J`'s), and goes on with the original's bits; the memory round-trips, and
+/// one cut short leaves a solver as new.
 #[test]
 fn a_restored_interior_point_polishes_with_the_original_factorization() {
     let t = Target {
@@ -1995,6 +1996,11 @@ fn a_restored_interior_point_polishes_with_the_original_factorization() {
     let mut restored = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
     restored.set_memory(&memory);
     assert_eq!(restored.memory(), memory, "the memory round-trips");
+    // Cut short, it is no memory: the solver stays as new.
+    let new = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    let mut damaged = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+    damaged.set_memory(&memory[..memory.len() - 1]);
+    assert_eq!(damaged.memory(), new.memory(), "a memory cut short");
     let mut restored_sol = sol.clone();
     for k in 3..6 {
         let a = solve(&mut original, &mut sol, k);
