@@ -260,8 +260,10 @@ def test_12_bottleneck(tmp_path_factory):
     which everyone went through the corridor must meet the criteria, and at most four of the
     six may clog (with one run in four clogging, five or six clog once in 200 changes). A clog
     can also give way late (seed 15 with the code of 2026-11-26: stuck 13 s, then 21 people in
-    the corridor at the horizon): in a run that clogged, whoever is in the corridor at the
-    horizon must be walking through it."""
+    the corridor at the horizon): in a run that clogged, whoever has been in the corridor for
+    the whole last second must be walking through it. (Regression, 2026-11-27: the criterion
+    counted someone who crossed the entrance line in the last second sliding along the wall,
+    0.23 m along the corridor and as much across it, as stopped inside.)"""
     tmp = tmp_path_factory.mktemp("rimea12")
     base = (SCENES / "test12-bottleneck.toml").read_text()
     assert "\nseed = 12\n" in base
@@ -279,11 +281,12 @@ def test_12_bottleneck(tmp_path_factory):
         into = data[data["x"] >= 10.0].groupby("id")["frame"].min()  # corridor entrance
         out = data[data["x"] >= 15.0].groupby("id")["frame"].min()  # corridor exit
         if len(into) < 150:
-            # Clogged, for good or until late: whoever is in the corridor at the horizon
-            # must be walking through it (at least 0.3 m in its last second), not stopped.
+            # Clogged, for good or until late: whoever has been in the corridor for the whole
+            # last second must be walking through it (at least 0.3 m along it), not stopped.
             last = data["frame"].max()
             now = data[(data["frame"] == last) & (data["x"] >= 10.0) & (data["x"] < 15.0)]
             before = data[data["frame"] == last - int(fps)].set_index("id")["x"]
+            now = now[before.reindex(now["id"]).to_numpy() >= 10.0]
             walked = now.set_index("id")["x"] - before.reindex(now["id"]).to_numpy()
             assert (walked >= 0.3).all(), f"seed {seed}: stopped inside the corridor: {walked}"
             clogged.append((seed, len(into)))
