@@ -582,8 +582,10 @@ impl InteriorPoint {
                 .as_mut()
                 .is_some_and(|f| f.reuse.allows());
         if !reused {
-            // (A factorization that fits but is skipped hands its back-off to the new one.)
-            let reuse = match self.polish_factor.take() {
+            // The last one's storage is written over; a factorization that fits but is
+            // skipped hands its back-off to the new one.
+            let last = self.polish_factor.take();
+            let backoff = match &last {
                 Some(f) if fits => f.reuse,
                 _ => BackOff::default(),
             };
@@ -591,14 +593,20 @@ impl InteriorPoint {
                 return (None, false);
             }
             let c = self.normal.counts();
-            self.polish_factor = Some(PolishFactor {
-                analyses: c.analyses,
-                factorizations: c.factorizations,
-                d: self.d.clone(),
-                coefficients: j.coefficients().to_vec(),
-                structure: structure_hash(j),
-                reuse,
+            let mut f = last.unwrap_or_else(|| PolishFactor {
+                analyses: 0,
+                factorizations: 0,
+                d: Vec::new(),
+                coefficients: Vec::new(),
+                structure: 0,
+                reuse: BackOff::default(),
             });
+            f.d.clone_from(&self.d);
+            f.coefficients.clear();
+            f.coefficients.extend_from_slice(j.coefficients());
+            (f.analyses, f.factorizations) = (c.analyses, c.factorizations);
+            (f.structure, f.reuse) = (structure_hash(j), backoff);
+            self.polish_factor = Some(f);
         }
         let polished = self.polish_updates(p, target, v, lam, reused);
         if reused && let Some(f) = self.polish_factor.as_mut() {
