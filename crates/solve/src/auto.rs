@@ -35,6 +35,26 @@ const PREDICTED_MARGIN: f64 = 1.0;
 /// ... and at least this share of the previous answer's largest change of any slack.
 const LARGEST_CHANGE_SHARE: f64 = 0.25;
 
+/// The wait before Gauss–Seidel tries a component it gave up again doubles each time in a row
+/// that it gives it up, at most this many times (see [`AutoSettings::retry_after`]).
+const MAX_RETRY_DOUBLINGS: u32 = 4;
+
+/// The solves a component Gauss–Seidel gave up `streak` times in a row before (0: the first
+/// time) waits before it is tried again.
+fn retry_wait(retry_after: u32, streak: u32) -> u32 {
+    retry_after.saturating_mul(1 << streak.min(MAX_RETRY_DOUBLINGS))
+}
+
+/// A row of a large component Gauss–Seidel gave up (or skipped since), remembered by its key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct GivenUp {
+    key: ConstraintKey,
+    /// The solves left before Gauss–Seidel tries its component again.
+    left: u32,
+    /// How many times in a row Gauss–Seidel gave its component up.
+    streak: u32,
+}
+
 /// With each row set aside by its own reach ([`Reach::Own`]), the rows needed join the
 /// others with every row this many hops around them (rows sharing an unknown), twice as
 /// many each round, for at most [`OWN_REACH_ROUNDS`] rounds; then every row. A crush's
@@ -89,7 +109,10 @@ pub struct AutoSettings {
     /// A component of 256 rows or more (`GROUP_ROWS`) that Gauss–Seidel gave up goes straight to
     /// the interior point for this many solves after (recognised by its rows' keys: most of
     /// a sample of its rows were in it); then Gauss–Seidel tries it again (a jam may have
-    /// cleared). 0: Gauss–Seidel tries every component every time.
+    /// cleared). Each time in a row that it gives the same component up again, the wait
+    /// doubles, up to 16 times this (`MAX_RETRY_DOUBLINGS`): a crush that stays pressed is
+    /// not swept in vain every 16 solves (measured: benches/README.md, session 27). 0:
+    /// Gauss–Seidel tries every component every time.
     pub retry_after: usize,
     /// Rows whose slack at `w` (before any correction) exceeds this factor times their
     /// reach are set aside: they split no component and are only checked, by the
@@ -225,8 +248,11 @@ pub struct AutoSolver {
     to_interior: Vec<bool>,
     // the rows (by key, sorted) of the large components Gauss–Seidel gave up or skipped,
     // with the solves left before it tries them again; and the next solve's
-    given_up: Vec<(ConstraintKey, u32)>,
-    next_given_up: Vec<(ConstraintKey, u32)>,
+    given_up: Vec<GivenUp>,
+    next_given_up: Vec<GivenUp>,
+    // per component: how many times in a row Gauss–Seidel gave it up before, when it tries
+    // it again (0: never, or not lately)
+    streak: Vec<u32>,
     warm: Vec<f64>,
     // per row: J w (the slack at w is b + J w); set aside
     jw: Vec<f64>,
@@ -270,6 +296,7 @@ struct Sweep<'a> {
     components: &'a Components,
     warm: &'a [f64],
     skip: &'a [bool],
+    streak: &'a [u32],
 }
 
 /// The groups of components of one sweep, shared by the threads that solve them: each takes
@@ -435,6 +462,7 @@ impl AutoSolver {
             skip_gs: Vec::new(),
             given_up: Vec::new(),
             next_given_up: Vec::new(),
+            streak: Vec::new(),
             warm: Vec::new(),
             jw: Vec::new(),
             set_aside: Vec::new(),
@@ -544,7 +572,7 @@ impl ProjectionSolver for AutoSolver {
             rounds,
             rows_kept: self.set_aside.iter().filter(|&&a| !a).count(),
         };
-        self.next_given_up.sort_unstable_by_key(|&(key, _)| key);
+        self.next_given_up.sort_unstable_by_key(|g| g.key);
         std::mem::swap(&mut self.given_up, &mut self.next_given_up);
         // How far the correction moved any row's slack, s(v) − s(w) (`scratch_m` holds J v):
         // the next solve's reach.
@@ -554,14 +582,14 @@ impl ProjectionSolver for AutoSolver {
         Ok(report)
     }
 
-    /// `[−2, last_change, G, (key_high, key_low, solves_left) of each of the G rows given
-    /// up…, L₀, the first interior point's memory (L₀ numbers), L₁, the second's]`, finite
-    /// numbers (JSON has no infinity): −2 marks this layout, `last_change` is −1 before the
-    /// first solve, each key in two 32-bit halves (exact in an f64).
+    /// `[−3, last_change, G, (key_high, key_low, solves_left, streak) of each of the G rows
+    /// given up…, L₀, the first interior point's memory (L₀ numbers), L₁, the second's]`,
+    /// finite numbers (JSON has no infinity): −3 marks this layout, `last_change` is −1 before
+    /// the first solve, each key in two 32-bit halves (exact in an f64).
     fn memory(&self) -> Vec<f64> {
         let interiors = self.interiors.each_ref().map(|i| i.memory());
         let mut memory = Vec::with_capacity(
-            3 + 3 * self.given_up.len() + interiors.iter().map(|m| 1 + m.len()).sum::<usize>(),
+            3 + 4 * self.given_up.len() + interiors.iter().map(|m| 1 + m.len()).sum::<usize>(),
         );
         memory.push(MEMORY_LAYOUT);
         memory.push(if self.last_change.is_finite() {
@@ -570,8 +598,13 @@ impl ProjectionSolver for AutoSolver {
             -1.0
         });
         memory.push(self.given_up.len() as f64);
-        for &(key, left) in &self.given_up {
-            memory.extend([(key >> 32) as f64, (key as u32) as f64, left as f64]);
+        for g in &self.given_up {
+            memory.extend([
+                (g.key >> 32) as f64,
+                (g.key as u32) as f64,
+                g.left as f64,
+                g.streak as f64,
+            ]);
         }
         for m in &interiors {
             memory.push(m.len() as f64);
@@ -580,38 +613,46 @@ impl ProjectionSolver for AutoSolver {
         memory
     }
 
-    /// Takes what [`memory`](Self::memory) gave. The layouts of earlier builds are read too
-    /// (`[last_change, (key_high, key_low, solves_left)…]`, and `[skip_from, skip_left,
-    /// last_change]` from before components were recognised by their rows), with the
-    /// interior points as new; anything else leaves the solver as new.
+    /// Takes what [`memory`](Self::memory) gave. The layouts of earlier builds are read too:
+    /// `[−2, last_change, G, (key_high, key_low, solves_left)…, L₀, …]` from before the wait
+    /// doubled (each row given up once), and with the interior points as new `[last_change,
+    /// (key_high, key_low, solves_left)…]` and `[skip_from, skip_left, last_change]` (from
+    /// before components were recognised by their rows); anything else leaves the solver as
+    /// new.
     fn set_memory(&mut self, memory: &[f64]) {
         self.given_up.clear();
         for interior in &mut self.interiors {
             interior.set_memory(&[]);
         }
-        let (last_change, rows, interiors) = match memory {
-            [layout, last_change, given_up, rest @ ..] if *layout == MEMORY_LAYOUT => {
+        // (The numbers of a row given up: 4 in this layout, 3 in the earlier ones.)
+        let (last_change, rows, width, interiors) = match memory {
+            [layout, last_change, given_up, rest @ ..]
+                if *layout == MEMORY_LAYOUT || *layout == MEMORY_LAYOUT_ONCE =>
+            {
+                let width = if *layout == MEMORY_LAYOUT { 4 } else { 3 };
                 // (`as` saturates; a damaged count finds no rows and restores nothing.)
-                let rows = (*given_up as usize).saturating_mul(3);
+                let rows = (*given_up as usize).saturating_mul(width);
                 match (rest.get(..rows), rest.get(rows..)) {
-                    (Some(rows), Some(interiors)) => (*last_change, rows, interiors),
-                    _ => (-1.0, &[][..], &[][..]),
+                    (Some(rows), Some(interiors)) => (*last_change, rows, width, interiors),
+                    _ => (-1.0, &[][..], 4, &[][..]),
                 }
             }
-            [_, _, last_change] => (*last_change, &[][..], &[][..]),
-            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows, &[][..]),
-            _ => (-1.0, &[][..], &[][..]),
+            [_, _, last_change] => (*last_change, &[][..], 3, &[][..]),
+            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows, 3, &[][..]),
+            _ => (-1.0, &[][..], 4, &[][..]),
         };
         self.last_change = if last_change >= 0.0 {
             last_change
         } else {
             f64::INFINITY
         };
-        self.given_up.extend(
-            rows.chunks_exact(3)
-                .map(|r| (((r[0] as u64) << 32) | r[1] as u64, r[2] as u32)),
-        );
-        self.given_up.sort_unstable_by_key(|&(key, _)| key);
+        self.given_up
+            .extend(rows.chunks_exact(width).map(|r| GivenUp {
+                key: ((r[0] as u64) << 32) | r[1] as u64,
+                left: r[2] as u32,
+                streak: r.get(3).map_or(1, |&s| s as u32),
+            }));
+        self.given_up.sort_unstable_by_key(|g| g.key);
         let mut rest = interiors;
         for interior in &mut self.interiors {
             let Some((&len, after)) = rest.split_first() else {
@@ -627,8 +668,12 @@ impl ProjectionSolver for AutoSolver {
 }
 
 /// The first number of [`AutoSolver`]'s memory in its current layout (earlier layouts began
-/// with `last_change`, at least −1).
-const MEMORY_LAYOUT: f64 = -2.0;
+/// with `last_change`, at least −1, or with [`MEMORY_LAYOUT_ONCE`]).
+const MEMORY_LAYOUT: f64 = -3.0;
+
+/// The first number of [`AutoSolver`]'s memory in the layout from before the wait before a
+/// retry doubled (three numbers a row given up, no streak).
+const MEMORY_LAYOUT_ONCE: f64 = -2.0;
 
 impl GaussSeidelGroups {
     /// Gauss–Seidel on every component not skipped, by groups: each component of
@@ -642,13 +687,14 @@ impl GaussSeidelGroups {
         &mut self,
         on: &Sweep<'_>,
         finished: &mut [bool],
-        next_given_up: &mut Vec<(ConstraintKey, u32)>,
+        next_given_up: &mut Vec<GivenUp>,
         sol: &mut ProjectionSolution,
     ) -> Result<usize, SolveError> {
         let Sweep {
             problem: p,
             components,
             skip,
+            streak,
             ..
         } = *on;
         let m = p.rows();
@@ -724,7 +770,8 @@ impl GaussSeidelGroups {
         self.given_up_groups.sort_unstable();
         for &g in &self.given_up_groups {
             let c = self.group[self.group_start[g]] as usize;
-            AutoSolver::remember(next_given_up, p, components.rows_of(c), self.retry_after);
+            let rows = components.rows_of(c);
+            AutoSolver::give_up(next_given_up, p, rows, self.retry_after, streak[c]);
         }
         Ok(row_passes.div_ceil(m.max(1)))
     }
@@ -734,12 +781,14 @@ impl AutoSolver {
     /// Decides which components skip Gauss–Seidel: those of [`GROUP_ROWS`] rows or more
     /// whose rows were mostly (in a sample of up to 16) in a component given up, with
     /// solves left before the retry; their rows are remembered for the next solve with one
-    /// solve fewer.
+    /// solve fewer. Those whose wait is over keep their streak of give-ups for the retry.
     fn choose_skips(&mut self, p: &ProjectionProblem<'_>) {
         const SAMPLES: usize = 16;
         let count = self.finished.len();
         self.skip_gs.clear();
         self.skip_gs.resize(count, false);
+        self.streak.clear();
+        self.streak.resize(count, 0);
         if self.given_up.is_empty() {
             return;
         }
@@ -749,30 +798,55 @@ impl AutoSolver {
             if rows.len() < GROUP_ROWS {
                 continue;
             }
-            let (mut found, mut left) = (0, u32::MAX);
+            let (mut found, mut left, mut streak) = (0, u32::MAX, 0);
             for k in 0..SAMPLES {
                 let key = keys[rows[k * rows.len() / SAMPLES] as usize];
-                if let Ok(at) = self.given_up.binary_search_by_key(&key, |&(key, _)| key) {
+                if let Ok(at) = self.given_up.binary_search_by_key(&key, |g| g.key) {
                     found += 1;
-                    left = left.min(self.given_up[at].1);
+                    left = left.min(self.given_up[at].left);
+                    streak = streak.max(self.given_up[at].streak);
                 }
             }
-            if 2 * found > SAMPLES && left > 0 {
-                self.skip_gs[c] = true;
-                Self::remember(&mut self.next_given_up, p, rows, left - 1);
+            if 2 * found > SAMPLES {
+                if left > 0 {
+                    self.skip_gs[c] = true;
+                    Self::remember(&mut self.next_given_up, p, rows, left - 1, streak);
+                } else {
+                    self.streak[c] = streak;
+                }
             }
         }
     }
 
-    /// Adds `rows` (by key) with `left` solves before Gauss–Seidel tries them again.
+    /// Adds `rows` (by key) with `left` solves before Gauss–Seidel tries them again, given up
+    /// `streak` times in a row.
     fn remember(
-        into: &mut Vec<(ConstraintKey, u32)>,
+        into: &mut Vec<GivenUp>,
         p: &ProjectionProblem<'_>,
         rows: &[u32],
         left: u32,
+        streak: u32,
     ) {
         let keys = p.jacobian.keys();
-        into.extend(rows.iter().map(|&i| (keys[i as usize], left)));
+        into.extend(rows.iter().map(|&i| GivenUp {
+            key: keys[i as usize],
+            left,
+            streak,
+        }));
+    }
+
+    /// Remembers the rows of a component Gauss–Seidel has just given up, after `streak` times
+    /// in a row before: the wait before it tries again doubles with each (see
+    /// [`AutoSettings::retry_after`]).
+    fn give_up(
+        into: &mut Vec<GivenUp>,
+        p: &ProjectionProblem<'_>,
+        rows: &[u32],
+        retry_after: u32,
+        streak: u32,
+    ) {
+        let wait = retry_wait(retry_after, streak);
+        Self::remember(into, p, rows, wait, streak.saturating_add(1));
     }
 
     /// Whether the answer of the last [`solve_split`](Self::solve_split) violates row `i`, set
@@ -924,11 +998,12 @@ impl AutoSolver {
                 report.add_work(&rep);
                 self.finished[0] = rep.status.is_converged();
                 if !self.finished[0] && m >= GROUP_ROWS {
-                    Self::remember(
+                    Self::give_up(
                         &mut self.next_given_up,
                         p,
                         self.components.rows_of(0),
                         self.settings.retry_after as u32,
+                        self.streak[0],
                     );
                 }
             }
@@ -950,14 +1025,15 @@ impl AutoSolver {
                 components,
                 warm,
                 skip_gs,
+                streak,
                 finished,
                 to_interior,
                 next_given_up,
                 helper,
                 ..
             } = self;
-            let (components, warm, skip_gs): (&Components, &[f64], &[bool]) =
-                (components, warm, skip_gs);
+            let (components, warm, skip_gs, streak): (&Components, &[f64], &[bool], &[u32]) =
+                (components, warm, skip_gs, streak);
             let by_size = |c: &usize| (components.rows_of(*c).len(), std::cmp::Reverse(*c));
             // The interior point takes the largest component on its own (it takes the
             // iterations it needs, not the most any component needs), the others together.
@@ -979,6 +1055,7 @@ impl AutoSolver {
                 components,
                 warm,
                 skip: skip_gs,
+                streak,
             };
             let (swept, largest) = match known {
                 Some(c) => (None, Some(c)),
@@ -1082,14 +1159,14 @@ mod tests {
     use super::*;
     use moreau_core::ConstraintRows;
 
-    /// Many small components (three unknowns pushed together, two rows each) and three long
-    /// chains pushed together that Gauss–Seidel does not finish in its budget: more rows in
-    /// Gauss–Seidel's groups than it sweeps on one thread, so with threads the groups are
-    /// swept on all of them. Three solves in a row (the chains given up, then skipped, as
-    /// remembered), on one, two and three threads: the same bits, reports and memory.
-    #[test]
-    fn gauss_seidels_groups_swept_on_threads_give_the_same_bits() {
-        let (triples, chains, chain_len) = (9_000, 3, 400);
+    /// `triples` small components (three unknowns pushed together, two rows each) and
+    /// `chains` long chains of `chain_len` unknowns pushed together, which Gauss–Seidel does
+    /// not finish in its budget: `(J, w, b)`.
+    fn triples_and_chains(
+        triples: usize,
+        chains: usize,
+        chain_len: usize,
+    ) -> (ConstraintRows, Vec<f64>, Vec<f64>) {
         let n = 3 * triples + chains * chain_len;
         let mut rows = ConstraintRows::new(n);
         let (mut w, mut b) = (vec![0.0; n], Vec::new());
@@ -1123,6 +1200,18 @@ mod tests {
                 }
             }
         }
+        (rows, w, b)
+    }
+
+    /// Many small components (three unknowns pushed together, two rows each) and three long
+    /// chains pushed together that Gauss–Seidel does not finish in its budget: more rows in
+    /// Gauss–Seidel's groups than it sweeps on one thread, so with threads the groups are
+    /// swept on all of them. Three solves in a row (the chains given up, then skipped, as
+    /// remembered), on one, two and three threads: the same bits, reports and memory.
+    #[test]
+    fn gauss_seidels_groups_swept_on_threads_give_the_same_bits() {
+        let (triples, chains, chain_len) = (9_000, 3, 400);
+        let (rows, w, b) = triples_and_chains(triples, chains, chain_len);
         assert!(
             2 * triples >= PARALLEL_GROUP_ROWS,
             "the groups are swept on threads"
@@ -1181,28 +1270,99 @@ mod tests {
         }
     }
 
+    /// A chain Gauss–Seidel gives up at every try waits twice as long before each retry (1,
+    /// 2, 4, 8, then 16 solves: `retry_after` = 1 and at most `MAX_RETRY_DOUBLINGS`
+    /// doublings), on its own (the whole problem) and among small components (Gauss–Seidel's
+    /// groups); every answer certified. (It was retried every `retry_after` solves: a crush
+    /// that stays pressed paid a vain sweep of the whole crush every 16 steps.)
+    #[test]
+    fn gauss_seidel_waits_twice_as_long_each_time_it_gives_the_same_component_up() {
+        let t = Target {
+            gap: 1e-6,
+            violation: 1e-9,
+        };
+        for triples in [0, 200] {
+            let (rows, w, b) = triples_and_chains(triples, 1, 400);
+            let p = ProjectionProblem {
+                w: &w,
+                jacobian: &rows,
+                b: &b,
+            };
+            let mut auto = AutoSolver::new(AutoSettings {
+                retry_after: 1,
+                ..AutoSettings::default()
+            })
+            .unwrap();
+            let mut sol = ProjectionSolution::default();
+            let (mut tries, mut streak) = (Vec::new(), 0);
+            for k in 0..60 {
+                // From zero multipliers each time (from the last answer Gauss–Seidel would
+                // finish at once).
+                sol.lambda.iter_mut().for_each(|l| *l = 0.0);
+                let rep = auto.solve(&p, t, &mut sol).unwrap();
+                assert!(
+                    rep.status.is_converged() && rep.gap <= t.gap && rep.violation <= t.violation,
+                    "{triples} triples, solve {k}: {rep:?}"
+                );
+                // The chain's rows are remembered with the streak of its give-ups.
+                let now = auto.given_up.iter().map(|g| g.streak).max().unwrap();
+                assert!(
+                    auto.given_up.len() >= 399,
+                    "solve {k}: the chain remembered"
+                );
+                if now != streak {
+                    assert_eq!(now, streak + 1, "solve {k}");
+                    tries.push(k);
+                    streak = now;
+                }
+            }
+            // The waits between tries: 1, 2, 4, 8, 16, 16 solves.
+            assert_eq!(tries, [0, 2, 5, 10, 19, 36, 53], "{triples} triples");
+        }
+    }
+
     /// Keys above 2⁵³ (a crowd's contact keys use all 64 bits) survive the trip through
-    /// the f64 memory, and the layouts of earlier builds still restore.
+    /// the f64 memory, with each row's wait and streak, and the layouts of earlier builds
+    /// still restore.
     #[test]
     fn the_memory_keeps_every_bit_of_the_keys_and_reads_the_old_form() {
         let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
         auto.last_change = 0.25;
-        auto.given_up = vec![(7, 0), ((1 << 53) + 1, 5), (u64::MAX - 2, 16)];
+        let given_up = |key, left, streak| GivenUp { key, left, streak };
+        auto.given_up = vec![
+            given_up(7, 0, 1),
+            given_up((1 << 53) + 1, 5, 3),
+            given_up(u64::MAX - 2, 16, 1),
+        ];
         let memory = auto.memory();
         // The layout mark, last_change, the rows given up, and each interior point's (new:
         // its head alone).
-        assert_eq!(memory.len(), 3 + 3 * 3 + 2 * (1 + 6));
+        assert_eq!(memory.len(), 3 + 4 * 3 + 2 * (1 + 6));
         let mut restored = AutoSolver::new(AutoSettings::default()).unwrap();
         restored.set_memory(&memory);
         assert_eq!(restored.given_up, auto.given_up);
         assert_eq!(restored.last_change, 0.25);
         assert_eq!(restored.memory(), memory);
-        // [last_change, rows given up…] of the previous layout.
-        let previous: Vec<f64> = std::iter::once(0.75)
-            .chain(memory[3..12].iter().copied())
+        // The rows in the earlier layouts' three numbers: each given up once.
+        let once: Vec<f64> = memory[3..15]
+            .chunks_exact(4)
+            .flat_map(|r| r[..3].to_vec())
             .collect();
+        let mut read_once = auto.given_up.clone();
+        read_once.iter_mut().for_each(|g| g.streak = 1);
+        // [−2, last_change, G, rows given up…, L₀, …] from before the wait doubled.
+        let layout_once: Vec<f64> = [MEMORY_LAYOUT_ONCE, 0.5, 3.0]
+            .into_iter()
+            .chain(once.iter().copied())
+            .chain(memory[15..].iter().copied())
+            .collect();
+        restored.set_memory(&layout_once);
+        assert_eq!(restored.given_up, read_once);
+        assert_eq!(restored.last_change, 0.5);
+        // [last_change, rows given up…] of the layout before.
+        let previous: Vec<f64> = std::iter::once(0.75).chain(once).collect();
         restored.set_memory(&previous);
-        assert_eq!(restored.given_up, auto.given_up);
+        assert_eq!(restored.given_up, read_once);
         assert_eq!(restored.last_change, 0.75);
         // [skip_from, skip_left, last_change] of the earlier form.
         restored.set_memory(&[120.0, 3.0, 0.5]);
