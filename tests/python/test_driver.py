@@ -222,6 +222,45 @@ def test_bench_measures_a_solver_setting_against_its_default(tmp_path):
         assert "people" not in proc.stdout, proc.stdout
 
 
+def test_bench_keeps_every_measured_step_in_a_csv(tmp_path):
+    """`moreau bench --steps-csv FILE`: one row per measured step of each size, in order, the
+    same steps the table sums up (its mean time and factorizations), each certified (ε within
+    its target); a file whose directory does not exist is refused by name before anything is
+    measured."""
+    import csv
+    out = tmp_path / "steps.csv"
+    proc = moreau("bench", "--sizes", "1000,2000", "--warmup", "20", "--steps", "6",
+                  "--compare-at", "0", "--kind", "auto", "--steps-csv", out, timeout=300)
+    with open(out, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["people", "step", "t", "ms", "ms_assemble", "ms_solve",
+                             "ms_analyse", "ms_factorize", "solver", "status", "iterations",
+                             "factorizations", "rows", "active", "eps", "eps_target",
+                             "violation"], rows[0]
+    # The table's rows: the size, then numbers (not the lines that name the size in words).
+    table = {int(w[0]): w for w in map(str.split, proc.stdout.splitlines())
+             if len(w) > 12 and w[0] in ("1000", "2000") and w[1] != "people:"}
+    for n in (1000, 2000):
+        mine = [r for r in rows if r["people"] == str(n)]
+        assert [int(r["step"]) for r in mine] == list(range(20, 26)), mine
+        t = [float(r["t"]) for r in mine]
+        assert all(abs(b - a - 0.05) < 1e-9 for a, b in zip(t, t[1:])), t
+        assert all(r["status"] == "converged" and r["solver"] for r in mine), mine
+        assert all(float(r["eps"]) <= float(r["eps_target"]) for r in mine), mine
+        assert all(int(r["active"]) <= int(r["rows"]) for r in mine), mine
+        # The table's mean ms a step (column 6) and factorizations a step (column 13).
+        mean_ms = sum(float(r["ms"]) for r in mine) / 6
+        fact = sum(int(r["factorizations"]) for r in mine) / 6
+        assert abs(mean_ms - float(table[n][5])) <= 0.006, (mean_ms, table[n])
+        assert abs(fact - float(table[n][12])) <= 0.051, (fact, table[n])
+    missing = tmp_path / "no-such-dir" / "steps.csv"
+    proc = moreau("bench", "--sizes", "1000", "--steps-csv", missing, check=False,
+                  timeout=120)
+    assert proc.returncode == 2, proc
+    assert "--steps-csv" in proc.stderr and "no-such-dir" in proc.stderr, proc.stderr
+    assert "people" not in proc.stdout, proc.stdout
+
+
 def test_bench_names_its_slowest_steps():
     """`moreau bench` says which steps make a mean above the median: three distinct steps,
     slowest first, none faster than the median, the first not faster than the mean."""

@@ -4,7 +4,8 @@
 //! per step the median time and its stages, iterations, certified ε and violation, at the
 //! accuracy `√ε ≤ 1e-3 r_min`, violation ≤ 1e-4 r_min; the fitted exponent of cost in N; and,
 //! at one size, the step's own (warm) projection against cold solves of the same projection
-//! by each solver asked for (Clarabel among them).
+//! by each solver asked for (Clarabel among them). Every measured step can be kept in a CSV
+//! file (`--steps-csv`), for a per-step look at where a mean comes from.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -81,6 +82,13 @@ pub struct BenchArgs {
     /// `own_reach_ratio = inf`), so that one build measures a setting against its default.
     #[arg(long)]
     solver_tables: Option<PathBuf>,
+    /// Write every measured step of every size to this CSV file (one row a step: `people`,
+    /// `step`, `t`, its stages in ms, `solver`, `status`, `iterations`, `factorizations`,
+    /// `rows`, `active`, `eps`, `eps_target`, `violation`), rewritten after each size, so
+    /// that a bench stopped part way keeps the sizes measured. Its directory must exist
+    /// (checked before any measurement); an existing file is replaced.
+    #[arg(long, value_name = "FILE")]
+    steps_csv: Option<PathBuf>,
     /// Internal: measure one size in this process and print its JSON row.
     #[arg(long, hide = true)]
     one: Option<usize>,
@@ -114,19 +122,102 @@ struct Row {
     solvers: Vec<(String, usize)>,
     /// The three slowest measured steps, slowest first.
     #[serde(default)]
-    slowest: Vec<SlowStep>,
+    slowest: Vec<MeasuredStep>,
+    /// Every measured step, in order.
+    #[serde(default)]
+    steps: Vec<MeasuredStep>,
     comparison: Option<Comparison>,
 }
 
-/// A measured step, to say where a mean far above the median comes from.
-#[derive(Debug, Serialize, Deserialize)]
-struct SlowStep {
+/// A measured step: what `--steps-csv` writes, and what says where a mean far above the
+/// median comes from.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct MeasuredStep {
     step: usize,
+    /// The time at its end (s).
+    t: f64,
     ms: f64,
+    ms_assemble: f64,
+    ms_solve: f64,
+    ms_analyse: f64,
+    ms_factorize: f64,
     solver: String,
+    status: String,
     iterations: usize,
     factorizations: usize,
     rows: usize,
+    active: usize,
+    eps: f64,
+    eps_target: f64,
+    violation: f64,
+}
+
+impl MeasuredStep {
+    fn new(r: &StepReport) -> Self {
+        Self {
+            step: r.step,
+            t: r.t,
+            ms: 1e3 * r.timings.total,
+            ms_assemble: 1e3 * r.timings.assemble,
+            ms_solve: 1e3 * r.timings.solve,
+            ms_analyse: 1e3 * r.timings.solve_analyse,
+            ms_factorize: 1e3 * r.timings.solve_factorize,
+            solver: r.solver.to_string(),
+            status: r.status.as_str().to_string(),
+            iterations: r.iterations,
+            factorizations: r.factorizations,
+            rows: r.assembled,
+            active: r.active,
+            eps: r.eps,
+            eps_target: r.eps_target,
+            violation: r.violation,
+        }
+    }
+}
+
+/// `x` in the shortest form that reads back the same `f64`: plain where that is short,
+/// scientific for the very small and very large (`1.3877787807814457e-19`, not eighteen zeros).
+fn number(x: f64) -> String {
+    if x == 0.0 || (1e-4..1e15).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+/// The CSV of `--steps-csv`: a header, then each row's steps.
+fn steps_csv(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "people,step,t,ms,ms_assemble,ms_solve,ms_analyse,ms_factorize,solver,status,\
+         iterations,factorizations,rows,active,eps,eps_target,violation\n",
+    );
+    for row in rows {
+        for s in &row.steps {
+            let x = [
+                s.t,
+                s.ms,
+                s.ms_assemble,
+                s.ms_solve,
+                s.ms_analyse,
+                s.ms_factorize,
+            ];
+            let [t, ms, assemble, solve, analyse, factorize] = x.map(number);
+            let [eps, eps_target, violation] = [s.eps, s.eps_target, s.violation].map(number);
+            out.push_str(&format!(
+                "{},{},{t},{ms},{assemble},{solve},{analyse},{factorize},{},{},{},{},{},{},\
+                 {eps},{eps_target},{violation}\n",
+                row.people,
+                s.step,
+                s.solver,
+                s.status,
+                s.iterations,
+                s.factorizations,
+                s.rows,
+                s.active,
+            ));
+        }
+    }
+    out
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -300,18 +391,8 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
     } else {
         None
     };
-    let mut slowest: Vec<SlowStep> = measured
-        .0
-        .iter()
-        .map(|r| SlowStep {
-            step: r.step,
-            ms: 1e3 * r.timings.total,
-            solver: r.solver.to_string(),
-            iterations: r.iterations,
-            factorizations: r.factorizations,
-            rows: r.assembled,
-        })
-        .collect();
+    let steps: Vec<MeasuredStep> = measured.0.iter().map(MeasuredStep::new).collect();
+    let mut slowest = steps.clone();
     slowest.sort_by(|a, b| b.ms.total_cmp(&a.ms));
     slowest.truncate(3);
     let (t, a, s) = (median(total), median(assemble), median(solve));
@@ -339,6 +420,7 @@ fn measure(args: &BenchArgs, n: usize) -> Result<Row> {
             .map(|&(s, n)| (s.to_string(), n))
             .collect(),
         slowest,
+        steps,
         comparison,
     })
 }
@@ -399,6 +481,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     }
     // Read here too, so that a bad file fails before any measurement.
     solver_tables(args.solver_tables.as_deref())?;
+    if let Some(path) = &args.steps_csv {
+        moreau_io::check_output(path, moreau_io::Overwrite::Allowed).context("--steps-csv")?;
+    }
     let exe = std::env::current_exe().context("locating the moreau binary")?;
     let mut rows: Vec<Row> = Vec::new();
     println!(
@@ -499,6 +584,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             row.setup_s
         );
         rows.push(row);
+        if let Some(path) = &args.steps_csv {
+            crate::run::write_whole(path, steps_csv(&rows).as_bytes())
+                .with_context(|| format!("writing --steps-csv '{}'", path.display()))?;
+        }
     }
     let measured: Vec<(f64, f64)> = rows
         .iter()
