@@ -340,9 +340,15 @@ pub struct InteriorPoint {
 /// been analysed or factorized since it was made (`analyses`, `factorizations`), and with the
 /// same rows active (`d`'s positive entries).
 ///
-/// What made it (`J`'s coefficients, `d`, and a hash of `J`'s structure) is part of the
-/// solver's memory, so that a restored solver makes the same factor again and goes on with
-/// the same bits as the original.
+/// Its last polish's start is kept with it too: a settled crush's multipliers change almost
+/// linearly from step to step, so the next polish on the same rows starts from their
+/// extrapolation, `2λ − λ_start`, and one multiplier update certifies where the caller's
+/// multipliers took two (the settled crush of 10⁵: first gap ~5·10⁻⁹ against 7.2·10⁻⁶ for a
+/// target of 6.5·10⁻⁶; benches/README.md, session 27).
+///
+/// What made it (`J`'s coefficients, `d`, and a hash of `J`'s structure) and that start are
+/// part of the solver's memory, so that a restored solver makes the same factor again and
+/// goes on with the same bits as the original.
 #[derive(Debug, Clone, PartialEq)]
 struct PolishFactor {
     analyses: usize,
@@ -354,26 +360,33 @@ struct PolishFactor {
     // crush of 10,000 once settled: its first solve's residual 13–20 times the right-hand
     // side), after `k` failures in a row the next `2ᵏ − 1` polishes factorize at once.
     reuse: BackOff,
+    // The caller's multipliers (above the floor) the last polish started from, and a hash of
+    // their rows' keys: the next polish on the same rows extrapolates from them.
+    start: Vec<f64>,
+    start_keys: u64,
+}
+
+/// FNV-1a over 64-bit words.
+fn fnv(words: impl IntoIterator<Item = u64>) -> u64 {
+    words.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, x| {
+        (h ^ x).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// A hash of `j`'s rows' keys, in order: whether two problems' rows are the same contacts.
+fn keys_hash(j: &ConstraintRows) -> u64 {
+    fnv(j.keys().iter().copied())
 }
 
 /// A hash of `j`'s structure (its dimension, row starts and columns): what decides whether
 /// the normal equations' analysis is redone.
 fn structure_hash(j: &ConstraintRows) -> u64 {
-    // FNV-1a over 64-bit words.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |x: u64| {
-        h ^= x;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    };
-    eat(j.dim() as u64);
-    eat(j.len() as u64);
-    for &s in j.row_starts() {
-        eat(s as u64);
-    }
-    for &c in j.columns() {
-        eat(c as u64);
-    }
-    h
+    let size = [j.dim() as u64, j.len() as u64];
+    let starts = j.row_starts().iter().map(|&s| s as u64);
+    fnv(size
+        .into_iter()
+        .chain(starts)
+        .chain(j.columns().iter().map(|&c| c as u64)))
 }
 
 /// An attempt that may lose (the polish, the kept iterate's start): after `k` losses in a
@@ -550,7 +563,8 @@ impl InteriorPoint {
     /// `polish_updates`.
     ///
     /// With `reuse`, the factorization of the last polish is taken instead of a new one where
-    /// it still fits ([`PolishFactor`]); the second value says whether it was.
+    /// it still fits ([`PolishFactor`]); the second value says whether it was. A certified
+    /// polish comes with the multiplier updates it took.
     fn polish(
         &mut self,
         p: &ProjectionProblem<'_>,
@@ -558,7 +572,7 @@ impl InteriorPoint {
         v: &mut [f64],
         lam: &mut [f64],
         reuse: bool,
-    ) -> (Option<Certificate>, bool) {
+    ) -> (Option<(Certificate, usize)>, bool) {
         let j = p.jacobian;
         let penalty = self.settings.polish_penalty;
         let floor = self.warm_floor;
@@ -600,6 +614,8 @@ impl InteriorPoint {
                 coefficients: Vec::new(),
                 structure: 0,
                 reuse: BackOff::default(),
+                start: Vec::new(),
+                start_keys: 0,
             });
             f.d.clone_from(&self.d);
             f.coefficients.clear();
@@ -607,6 +623,25 @@ impl InteriorPoint {
             (f.analyses, f.factorizations) = (c.analyses, c.factorizations);
             (f.structure, f.reuse) = (structure_hash(j), backoff);
             self.polish_factor = Some(f);
+        }
+        // Where the last polish's factorization fits (the last solve was that polish, on the
+        // same active rows), the first attempt on the rows it started on starts from the
+        // extrapolation of the caller's multipliers (see `PolishFactor`).
+        let keys = keys_hash(j);
+        if let Some(f) = self.polish_factor.as_mut() {
+            if fits && f.start_keys == keys && f.start.len() == lam.len() {
+                for (l, start) in lam.iter_mut().zip(&mut f.start) {
+                    let caller = *l;
+                    if caller > 0.0 {
+                        *l = (2.0 * caller - *start).max(0.0);
+                    }
+                    *start = caller;
+                }
+            } else {
+                f.start.clear();
+                f.start.extend_from_slice(lam);
+            }
+            f.start_keys = keys;
         }
         let polished = self.polish_updates(p, target, v, lam, reused);
         if reused && let Some(f) = self.polish_factor.as_mut() {
@@ -629,7 +664,8 @@ impl InteriorPoint {
         })
     }
 
-    /// The polish's multiplier updates with the factorization in hand (see [`Self::polish`]).
+    /// The polish's multiplier updates with the factorization in hand (see [`Self::polish`]):
+    /// the certificate and the updates taken.
     fn polish_updates(
         &mut self,
         p: &ProjectionProblem<'_>,
@@ -637,11 +673,11 @@ impl InteriorPoint {
         v: &mut [f64],
         lam: &mut [f64],
         reused: bool,
-    ) -> Option<Certificate> {
+    ) -> Option<(Certificate, usize)> {
         let j = p.jacobian;
         let m = p.rows();
         let mut last = f64::INFINITY;
-        for _ in 0..self.settings.polish_updates {
+        for update in 1..=self.settings.polish_updates {
             let wk = self.normal.workers();
             let d = &self.d;
             {
@@ -674,7 +710,7 @@ impl InteriorPoint {
             v.copy_from_slice(dv);
             let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
             if c.gap <= target.gap && c.violation <= target.violation {
-                return Some(c);
+                return Some((c, update));
             }
             if !(residual <= 0.5 * last) {
                 return None;
@@ -1171,14 +1207,15 @@ impl ProjectionSolver for InteriorPoint {
                 (polished, _) => polished,
             };
             self.polish_backoff.record(polished.is_some());
-            if let Some(cert) = polished {
+            if let Some((cert, updates)) = polished {
                 self.last_changes = Some(self.changes(lam, |i| lam[i] > 0.0));
+                // Its iterations: the multiplier updates (each a pair of triangular solves).
                 let mut report = SolveReport {
                     solver: self.name(),
                     status: SolveStatus::Converged,
                     gap: cert.gap,
                     violation: cert.violation,
-                    iterations: 1,
+                    iterations: updates,
                     active: cert.active,
                     ..SolveReport::default()
                 };
@@ -1244,9 +1281,11 @@ impl ProjectionSolver for InteriorPoint {
     /// and skips, (key_high, key_low, s, λ) of each row of the kept iterate…]`: what decides
     /// the next solve's polish and start (`-1` for none yet; each key in two 32-bit halves,
     /// exact in an f64). With the warm polish's factorization kept for the next settled
-    /// solves, what made it follows: `[−2, the six numbers above, K, the kept iterate's 4K
+    /// solves, what made it follows: `[−3, the six numbers above, K, the kept iterate's 4K
     /// numbers, M, d (M numbers), C, J's coefficients (C numbers), the structure's hash in
-    /// two 32-bit halves, its reuse's losses and skips]`.
+    /// two 32-bit halves, its reuse's losses and skips, the hash of the rows' keys in two
+    /// halves, S, the polish's start (S numbers)]` (session 26's layout, marked −2, ends
+    /// before the keys' hash; it is still read).
     fn memory(&self) -> Vec<f64> {
         let counts = self.normal.counts();
         let factor = self
@@ -1258,7 +1297,7 @@ impl ProjectionSolver for InteriorPoint {
         let mut memory = Vec::with_capacity(
             MEMORY_HEAD
                 + 4 * self.kept_iterate.len()
-                + factor.map_or(0, |f| 6 + f.d.len() + f.coefficients.len()),
+                + factor.map_or(0, |f| 10 + f.d.len() + f.coefficients.len() + f.start.len()),
         );
         if factor.is_some() {
             memory.push(POLISH_FACTOR_LAYOUT);
@@ -1287,7 +1326,11 @@ impl ProjectionSolver for InteriorPoint {
                 (f.structure as u32) as f64,
                 f.reuse.losses as f64,
                 f.reuse.skips as f64,
+                (f.start_keys >> 32) as f64,
+                (f.start_keys as u32) as f64,
+                f.start.len() as f64,
             ]);
+            memory.extend_from_slice(&f.start);
         }
         memory
     }
@@ -1302,8 +1345,12 @@ impl ProjectionSolver for InteriorPoint {
         (self.polish_factor, self.restored_polish_factor) = (None, None);
         // With a polish factorization: its layout mark, the head, the kept rows' count and
         // numbers, then the factorization's; without: the head and the kept rows' numbers.
-        let (head, rows, factor) = if memory.first() == Some(&POLISH_FACTOR_LAYOUT) {
-            let Some(parts) = split_polish_memory(&memory[1..]) else {
+        let layout = memory.first().copied();
+        let (head, rows, factor) = if layout == Some(POLISH_FACTOR_LAYOUT)
+            || layout == Some(POLISH_FACTOR_LAYOUT_UNSTARTED)
+        {
+            let with_start = layout == Some(POLISH_FACTOR_LAYOUT);
+            let Some(parts) = split_polish_memory(&memory[1..], with_start) else {
                 return;
             };
             parts
@@ -1351,18 +1398,31 @@ fn counted(memory: &[f64], per: usize) -> Option<(&[f64], &[f64])> {
 
 /// The parts of a memory in the layout with a polish factorization (after its mark): the
 /// head, the kept iterate's numbers and the factorization; `None` if it is not one.
-fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishFactor>)> {
+fn split_polish_memory(
+    memory: &[f64],
+    with_start: bool,
+) -> Option<(&[f64], &[f64], Option<PolishFactor>)> {
     let count = |x: &f64| (*x >= 0.0 && x.fract() == 0.0).then_some(*x as usize);
     let head = memory.get(..MEMORY_HEAD)?;
     let rest = &memory[MEMORY_HEAD..];
     let (rows, rest) = counted(rest, 4)?;
     let (d, rest) = counted(rest, 1)?;
     let (coefficients, rest) = counted(rest, 1)?;
-    let [high, low, losses, skips] = rest else {
-        return None;
-    };
     let half = |x: &f64| count(x).filter(|&x| x <= u32::MAX as usize);
-    let structure = ((half(high)? as u64) << 32) | half(low)? as u64;
+    let word = |high: &f64, low: &f64| Some(((half(high)? as u64) << 32) | half(low)? as u64);
+    let ([high, low, losses, skips], start, start_keys) = match rest {
+        [high, low, losses, skips] if !with_start => ([high, low, losses, skips], &[][..], 0),
+        [high, low, losses, skips, keys_high, keys_low, start @ ..] if with_start => {
+            let (start, rest) = counted(start, 1)?;
+            if !rest.is_empty() {
+                return None;
+            }
+            let keys = word(keys_high, keys_low)?;
+            ([high, low, losses, skips], start, keys)
+        }
+        _ => return None,
+    };
+    let structure = word(high, low)?;
     let reuse = BackOff {
         losses: (count(losses)? as u32).min(6),
         skips: count(skips)?,
@@ -1377,6 +1437,8 @@ fn split_polish_memory(memory: &[f64]) -> Option<(&[f64], &[f64], Option<PolishF
             coefficients: coefficients.to_vec(),
             structure,
             reuse,
+            start: start.to_vec(),
+            start_keys,
         }),
     ))
 }
@@ -1392,7 +1454,11 @@ const STALE_SOLVE_ROUNDS: usize = 4;
 
 /// The first number of [`InteriorPoint`]'s memory when it holds a polish factorization (the
 /// other layout begins with `last_changes`, at least −1).
-const POLISH_FACTOR_LAYOUT: f64 = -2.0;
+const POLISH_FACTOR_LAYOUT: f64 = -3.0;
+
+/// The same, from before the polish's start was kept with its factorization (read with no
+/// start: the next polish starts from the caller's multipliers).
+const POLISH_FACTOR_LAYOUT_UNSTARTED: f64 = -2.0;
 
 /// Numbers before the kept iterate's rows in [`InteriorPoint`]'s memory.
 const MEMORY_HEAD: usize = 6;
