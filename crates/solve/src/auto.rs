@@ -582,14 +582,22 @@ impl ProjectionSolver for AutoSolver {
         Ok(report)
     }
 
-    /// `[−3, last_change, G, (key_high, key_low, solves_left, streak) of each of the G rows
-    /// given up…, L₀, the first interior point's memory (L₀ numbers), L₁, the second's]`,
-    /// finite numbers (JSON has no infinity): −3 marks this layout, `last_change` is −1 before
-    /// the first solve, each key in two 32-bit halves (exact in an f64).
+    /// `[−3, last_change, P, P groups of rows given up, L₀, the first interior point's memory
+    /// (L₀ numbers), L₁, the second's]`, finite numbers (JSON has no infinity): −3 marks this
+    /// layout, `last_change` is −1 before the first solve; a group is `[solves_left, streak,
+    /// n, (key_high, key_low) of each of its n rows]`, the rows given up grouped by their wait
+    /// (one group a component, mostly: a settled crush's 3·10⁵ rows in two numbers each),
+    /// each key in two 32-bit halves (exact in an f64), the groups by wait and the keys in
+    /// order.
     fn memory(&self) -> Vec<f64> {
         let interiors = self.interiors.each_ref().map(|i| i.memory());
+        let mut by_wait = self.given_up.clone();
+        by_wait.sort_unstable_by_key(|g| (g.left, g.streak, g.key));
+        let groups = by_wait.chunk_by(|a, b| (a.left, a.streak) == (b.left, b.streak));
         let mut memory = Vec::with_capacity(
-            3 + 4 * self.given_up.len() + interiors.iter().map(|m| 1 + m.len()).sum::<usize>(),
+            3 + 3 * groups.clone().count()
+                + 2 * by_wait.len()
+                + interiors.iter().map(|m| 1 + m.len()).sum::<usize>(),
         );
         memory.push(MEMORY_LAYOUT);
         memory.push(if self.last_change.is_finite() {
@@ -597,14 +605,13 @@ impl ProjectionSolver for AutoSolver {
         } else {
             -1.0
         });
-        memory.push(self.given_up.len() as f64);
-        for g in &self.given_up {
-            memory.extend([
-                (g.key >> 32) as f64,
-                (g.key as u32) as f64,
-                g.left as f64,
-                g.streak as f64,
-            ]);
+        memory.push(groups.clone().count() as f64);
+        for group in groups {
+            let (left, streak) = (group[0].left, group[0].streak);
+            memory.extend([left as f64, streak as f64, group.len() as f64]);
+            for g in group {
+                memory.extend([(g.key >> 32) as f64, (g.key as u32) as f64]);
+            }
         }
         for m in &interiors {
             memory.push(m.len() as f64);
@@ -617,41 +624,55 @@ impl ProjectionSolver for AutoSolver {
     /// `[−2, last_change, G, (key_high, key_low, solves_left)…, L₀, …]` from before the wait
     /// doubled (each row given up once), and with the interior points as new `[last_change,
     /// (key_high, key_low, solves_left)…]` and `[skip_from, skip_left, last_change]` (from
-    /// before components were recognised by their rows); anything else leaves the solver as
-    /// new.
+    /// before components were recognised by their rows); anything else (a damaged count
+    /// among them) leaves the solver as new.
     fn set_memory(&mut self, memory: &[f64]) {
         self.given_up.clear();
         for interior in &mut self.interiors {
             interior.set_memory(&[]);
         }
-        // (The numbers of a row given up: 4 in this layout, 3 in the earlier ones.)
-        let (last_change, rows, width, interiors) = match memory {
-            [layout, last_change, given_up, rest @ ..]
-                if *layout == MEMORY_LAYOUT || *layout == MEMORY_LAYOUT_ONCE =>
-            {
-                let width = if *layout == MEMORY_LAYOUT { 4 } else { 3 };
-                // (`as` saturates; a damaged count finds no rows and restores nothing.)
-                let rows = (*given_up as usize).saturating_mul(width);
-                match (rest.get(..rows), rest.get(rows..)) {
-                    (Some(rows), Some(interiors)) => (*last_change, rows, width, interiors),
-                    _ => (-1.0, &[][..], 4, &[][..]),
+        let key = |high: f64, low: f64| ((high as u64) << 32) | low as u64;
+        let (last_change, interiors) = match memory {
+            [layout, last_change, groups, rest @ ..] if *layout == MEMORY_LAYOUT => {
+                match given_up_groups(*groups, rest, &mut self.given_up) {
+                    Some(interiors) => (*last_change, interiors),
+                    None => {
+                        self.given_up.clear();
+                        (-1.0, &[][..])
+                    }
                 }
             }
-            [_, _, last_change] => (*last_change, &[][..], 3, &[][..]),
-            [last_change, rows @ ..] if rows.len() % 3 == 0 => (*last_change, rows, 3, &[][..]),
-            _ => (-1.0, &[][..], 4, &[][..]),
+            [layout, last_change, given_up, rest @ ..] if *layout == MEMORY_LAYOUT_ONCE => {
+                // (`as` saturates; a damaged count finds no rows and restores nothing.)
+                let rows = (*given_up as usize).saturating_mul(3);
+                match (rest.get(..rows), rest.get(rows..)) {
+                    (Some(rows), Some(interiors)) => {
+                        self.given_up.extend(rows.chunks_exact(3).map(|r| GivenUp {
+                            key: key(r[0], r[1]),
+                            left: r[2] as u32,
+                            streak: 1,
+                        }));
+                        (*last_change, interiors)
+                    }
+                    _ => (-1.0, &[][..]),
+                }
+            }
+            [_, _, last_change] => (*last_change, &[][..]),
+            [last_change, rows @ ..] if rows.len() % 3 == 0 => {
+                self.given_up.extend(rows.chunks_exact(3).map(|r| GivenUp {
+                    key: key(r[0], r[1]),
+                    left: r[2] as u32,
+                    streak: 1,
+                }));
+                (*last_change, &[][..])
+            }
+            _ => (-1.0, &[][..]),
         };
         self.last_change = if last_change >= 0.0 {
             last_change
         } else {
             f64::INFINITY
         };
-        self.given_up
-            .extend(rows.chunks_exact(width).map(|r| GivenUp {
-                key: ((r[0] as u64) << 32) | r[1] as u64,
-                left: r[2] as u32,
-                streak: r.get(3).map_or(1, |&s| s as u32),
-            }));
         self.given_up.sort_unstable_by_key(|g| g.key);
         let mut rest = interiors;
         for interior in &mut self.interiors {
@@ -665,6 +686,30 @@ impl ProjectionSolver for AutoSolver {
             rest = &after[len as usize..];
         }
     }
+}
+
+/// Reads `groups` groups of rows given up (see [`AutoSolver::memory`]) from the front of
+/// `memory` into `into`; the rest, or `None` if a count is damaged or the memory ends first.
+fn given_up_groups<'a>(
+    groups: f64,
+    mut memory: &'a [f64],
+    into: &mut Vec<GivenUp>,
+) -> Option<&'a [f64]> {
+    let count = |x: f64| (x >= 0.0 && x.fract() == 0.0 && x <= u32::MAX as f64).then_some(x);
+    for _ in 0..count(groups)? as usize {
+        let [left, streak, n, rest @ ..] = memory else {
+            return None;
+        };
+        let (left, streak, n) = (count(*left)?, count(*streak)?, count(*n)? as usize);
+        let keys = rest.get(..n.checked_mul(2)?)?;
+        into.extend(keys.chunks_exact(2).map(|k| GivenUp {
+            key: ((k[0] as u64) << 32) | k[1] as u64,
+            left: left as u32,
+            streak: streak as u32,
+        }));
+        memory = &rest[2 * n..];
+    }
+    Some(memory)
 }
 
 /// The first number of [`AutoSolver`]'s memory in its current layout (earlier layouts began
@@ -1322,39 +1367,42 @@ mod tests {
     }
 
     /// Keys above 2⁵³ (a crowd's contact keys use all 64 bits) survive the trip through
-    /// the f64 memory, with each row's wait and streak, and the layouts of earlier builds
-    /// still restore.
+    /// the f64 memory, with each row's wait and streak (rows of the same wait in one group),
+    /// and the layouts of earlier builds still restore.
     #[test]
     fn the_memory_keeps_every_bit_of_the_keys_and_reads_the_old_form() {
         let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
         auto.last_change = 0.25;
         let given_up = |key, left, streak| GivenUp { key, left, streak };
         auto.given_up = vec![
-            given_up(7, 0, 1),
+            given_up(7, 16, 1),
             given_up((1 << 53) + 1, 5, 3),
             given_up(u64::MAX - 2, 16, 1),
         ];
         let memory = auto.memory();
-        // The layout mark, last_change, the rows given up, and each interior point's (new:
-        // its head alone).
-        assert_eq!(memory.len(), 3 + 4 * 3 + 2 * (1 + 6));
+        // The layout mark, last_change, two groups (wait 5, then 16) of one and two keys, and
+        // each interior point's memory (new: its head alone).
+        assert_eq!(memory.len(), 3 + (3 + 2) + (3 + 2 * 2) + 2 * (1 + 6));
+        assert_eq!(memory[2..5], [2.0, 5.0, 3.0]);
         let mut restored = AutoSolver::new(AutoSettings::default()).unwrap();
         restored.set_memory(&memory);
         assert_eq!(restored.given_up, auto.given_up);
         assert_eq!(restored.last_change, 0.25);
         assert_eq!(restored.memory(), memory);
         // The rows in the earlier layouts' three numbers: each given up once.
-        let once: Vec<f64> = memory[3..15]
-            .chunks_exact(4)
-            .flat_map(|r| r[..3].to_vec())
+        let once: Vec<f64> = auto
+            .given_up
+            .iter()
+            .flat_map(|g| [(g.key >> 32) as f64, (g.key as u32) as f64, g.left as f64])
             .collect();
         let mut read_once = auto.given_up.clone();
         read_once.iter_mut().for_each(|g| g.streak = 1);
         // [−2, last_change, G, rows given up…, L₀, …] from before the wait doubled.
+        let interiors = &memory[memory.len() - 2 * (1 + 6)..];
         let layout_once: Vec<f64> = [MEMORY_LAYOUT_ONCE, 0.5, 3.0]
             .into_iter()
             .chain(once.iter().copied())
-            .chain(memory[15..].iter().copied())
+            .chain(interiors.iter().copied())
             .collect();
         restored.set_memory(&layout_once);
         assert_eq!(restored.given_up, read_once);
@@ -1369,6 +1417,12 @@ mod tests {
         assert!(restored.given_up.is_empty());
         assert_eq!(restored.last_change, 0.5);
         restored.set_memory(&[-1.0]);
+        assert_eq!(restored.last_change, f64::INFINITY);
+        // A group's count of keys beyond the memory restores nothing.
+        let mut cut = memory.clone();
+        cut[5] = 1e9;
+        restored.set_memory(&cut);
+        assert!(restored.given_up.is_empty());
         assert_eq!(restored.last_change, f64::INFINITY);
         // A damaged count of rows given up restores nothing (and does not overflow).
         let mut damaged = memory.clone();
