@@ -142,6 +142,7 @@ struct AnalysisScratch {
     col: Vec<Index>,
     fill: Vec<Index>,
     entry_col: Vec<Index>,
+    joins: Vec<bool>,
     weight: Vec<u64>,
     frontier: Vec<usize>,
     split: Split,
@@ -176,6 +177,8 @@ impl BlockCholesky {
         head.resize(n, none);
         next.clear();
         next.resize(n, none);
+        self.row_ptr.clear();
+        self.row_ptr.resize(n + 1, 0);
         for k in 0..n {
             col.clear();
             self.mark[k] = k as Index;
@@ -199,6 +202,9 @@ impl BlockCholesky {
                 child = next[c];
             }
             col.sort_unstable();
+            for &r in col.iter() {
+                self.row_ptr[r as usize + 1] += 1;
+            }
             l.row.push(k as Index);
             l.row.extend_from_slice(col);
             l.ptr.push(l.row.len() as Index);
@@ -209,65 +215,63 @@ impl BlockCholesky {
             }
         }
         // Row lists: for each row k, the positions of its off-diagonal blocks in increasing
-        // column order (a counting sort of L's entries by row).
-        self.row_ptr.clear();
-        self.row_ptr.resize(n + 1, 0);
-        for k in 0..n {
-            for p in l.ptr[k] as usize + 1..l.ptr[k + 1] as usize {
-                self.row_ptr[l.row[p] as usize + 1] += 1;
-            }
-        }
+        // column order (a counting sort of L's entries by row, counted as the columns were
+        // made), and the runs of supernode columns in them (`row_group`).
         for k in 0..n {
             self.row_ptr[k + 1] += self.row_ptr[k];
         }
+        let entries = self.row_ptr[n] as usize;
         self.row_pos.clear();
-        self.row_pos.resize(self.row_ptr[n] as usize, 0);
+        self.row_pos.resize(entries, 0);
         self.row_end.clear();
-        self.row_end.resize(self.row_ptr[n] as usize, 0);
+        self.row_end.resize(entries, 0);
+        self.row_group.clear();
+        self.row_group.resize(entries, 0);
         // (The columns of the row lists' blocks only for a split's forward solve.)
         self.row_col.clear();
         let AnalysisScratch {
-            fill, entry_col, ..
+            fill,
+            entry_col,
+            joins,
+            ..
         } = &mut self.scratch;
+        // Column j and j + 1 are one supernode's when L(:, j) is j, then L(:, j + 1)'s rows:
+        // in a row list they are neighbours, and their rest from that row on is the same rows.
+        joins.clear();
+        joins.extend((0..n).map(|j| {
+            let c = l.col(j);
+            j + 1 < n && c.len() == l.col(j + 1).len() + 1 && l.row[c.start + 1] as usize == j + 1
+        }));
         fill.clear();
         fill.extend_from_slice(&self.row_ptr[..n]);
         entry_col.clear();
-        entry_col.resize(self.row_ptr[n] as usize, 0);
+        entry_col.resize(entries, 0);
+        // The entry where each row's current run starts.
+        let run = &mut self.mark;
         for k in 0..n {
-            for p in l.ptr[k] as usize + 1..l.ptr[k + 1] as usize {
+            let end = l.ptr[k + 1];
+            for p in l.ptr[k] as usize + 1..end as usize {
                 let r = l.row[p] as usize;
-                self.row_pos[fill[r] as usize] = p as Index;
-                self.row_end[fill[r] as usize] = l.ptr[k + 1];
-                entry_col[fill[r] as usize] = k as Index;
+                let e = fill[r] as usize;
                 fill[r] += 1;
+                self.row_pos[e] = p as Index;
+                self.row_end[e] = end;
+                entry_col[e] = k as Index;
+                let start = run[r] as usize;
+                if e > self.row_ptr[r] as usize
+                    && entry_col[e - 1] + 1 == k as Index
+                    && joins[k - 1]
+                    && (self.row_group[start] as usize) < MAX_GROUP
+                {
+                    self.row_group[start] += 1;
+                } else {
+                    run[r] = e as Index;
+                    self.row_group[e] = 1;
+                }
             }
         }
         if split {
             self.row_col.extend_from_slice(entry_col);
-        }
-        // Column j and j + 1 are one supernode's when L(:, j) is j, then L(:, j + 1)'s rows:
-        // in a row list they are neighbours, and their rest from that row on is the same rows.
-        let joins_next = |j: usize| {
-            let c = l.col(j);
-            j + 1 < n && c.len() == l.col(j + 1).len() + 1 && l.row[c.start + 1] as usize == j + 1
-        };
-        self.row_group.clear();
-        self.row_group.resize(self.row_ptr[n] as usize, 0);
-        for k in 0..n {
-            let entries = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
-            let mut e = entries.start;
-            while e < entries.end {
-                let mut w = 1;
-                while w < MAX_GROUP
-                    && e + w < entries.end
-                    && entry_col[e + w] == entry_col[e + w - 1] + 1
-                    && joins_next(entry_col[e + w - 1] as usize)
-                {
-                    w += 1;
-                }
-                self.row_group[e] = w as u8;
-                e += w;
-            }
         }
         self.values.clear();
         self.values.resize(self.l.row.len(), [0.0; 4]);
@@ -283,6 +287,12 @@ impl BlockCholesky {
         } else {
             self.work2 = Vec::new();
         }
+    }
+
+    /// The analysed pattern of `A`, whose storage a new pattern may take (the analysis is
+    /// then gone: analyse again before factorizing).
+    pub(crate) fn take_pattern(&mut self) -> BlockPattern {
+        std::mem::take(&mut self.a)
     }
 
     /// Whether the last analysis divided the columns for two threads.

@@ -143,6 +143,8 @@ struct NormalPattern {
     count: Vec<usize>,
     fill: Vec<Index>,
     row_groups: Vec<usize>,
+    // The entries of the pattern being built, as `[row, column]` (scratch).
+    pairs: Vec<[Index; 2]>,
 }
 
 /// Calls `f(col_a, col_b)` for the ordered pairs of entries of every row with `col_a ≥ col_b`,
@@ -201,19 +203,21 @@ fn column_groups(jt: &Transpose, group_of: &mut Vec<usize>) -> usize {
     groups
 }
 
-/// Columns `0..n`, each with its diagonal and the entries `visit` emits as `(row, column)`,
+/// Columns `0..n`, each with its diagonal and the entries `pairs` (as `[row, column]`),
 /// rows sorted and without repeats, into `ptr` (one more entry than columns) and `rows`.
-/// `visit` is called twice (a count, then a fill); `count` and `fill` are scratch.
+/// `count` and `fill` are scratch.
 fn sorted_columns(
     n: usize,
-    mut visit: impl FnMut(&mut dyn FnMut(usize, usize)),
+    pairs: &[[Index; 2]],
     (count, fill): (&mut Vec<usize>, &mut Vec<Index>),
     ptr: &mut Vec<Index>,
     rows: &mut Vec<Index>,
 ) {
     count.clear();
     count.resize(n, 1); // the diagonal
-    visit(&mut |_, c| count[c] += 1);
+    for &[_, c] in pairs {
+        count[c as usize] += 1;
+    }
     let mut total = 0;
     for c in count.iter_mut() {
         let k = *c;
@@ -226,10 +230,11 @@ fn sorted_columns(
         fill[count[c]] = c as Index;
         count[c] += 1;
     }
-    visit(&mut |r, c| {
-        fill[count[c]] = r as Index;
-        count[c] += 1;
-    });
+    for &[r, c] in pairs {
+        let k = &mut count[c as usize];
+        fill[*k] = r;
+        *k += 1;
+    }
     // count[c] is now the end of column c's bucket and the start of column c + 1's.
     ptr.clear();
     rows.clear();
@@ -274,28 +279,31 @@ impl NormalPattern {
         };
         // Without slots only the pattern is wanted: each row's distinct pairs of positions
         // (the diagonal is always in it), not every product.
-        let mut seen = std::mem::take(&mut self.row_groups);
+        let mut pairs = std::mem::take(&mut self.pairs);
+        pairs.clear();
+        let mut push = |r: usize, c: usize| pairs.push([r as Index, c as Index]);
+        if slots {
+            for_each_product(j, |ca, cb| {
+                let (r, c) = place(ca, cb);
+                push(r, c)
+            })
+        } else {
+            let group = |c: usize| at.map_or(c, |at| at[c]);
+            let mut seen = std::mem::take(&mut self.row_groups);
+            for_each_pair_of(j, group, &mut seen, |a, b| {
+                let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+                if upper { push(lo, hi) } else { push(hi, lo) }
+            });
+            self.row_groups = seen;
+        }
         sorted_columns(
             n,
-            |f| {
-                if slots {
-                    for_each_product(j, |ca, cb| {
-                        let (r, c) = place(ca, cb);
-                        f(r, c)
-                    })
-                } else {
-                    let group = |c: usize| at.map_or(c, |at| at[c]);
-                    for_each_pair_of(j, group, &mut seen, |a, b| {
-                        let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
-                        if upper { f(lo, hi) } else { f(hi, lo) }
-                    })
-                }
-            },
+            &pairs,
             (&mut self.count, &mut self.fill),
             &mut self.col_ptr,
             &mut self.row_idx,
         );
-        self.row_groups = seen;
+        self.pairs = pairs;
         self.value_len = self.row_idx.len();
         self.diag.clear();
         self.slots.clear();
@@ -333,7 +341,13 @@ impl NormalPattern {
     /// pattern, and each row's blocks with where its coefficients are (`row_entries`,
     /// `col_entries`). `None` when a row does not have exactly one coefficient at each
     /// unknown of the blocks it touches (a column repeated in a row).
-    fn build_blocks(&mut self, j: &ConstraintRows, at: &[usize], n: usize) -> Option<BlockPattern> {
+    fn build_blocks(
+        &mut self,
+        j: &ConstraintRows,
+        at: &[usize],
+        n: usize,
+        mut blocks: BlockPattern,
+    ) -> Option<BlockPattern> {
         debug_assert!(n.is_multiple_of(2));
         let nb = n / 2;
         self.n = n;
@@ -397,16 +411,23 @@ impl NormalPattern {
             }
         }
         // The off-diagonal blocks by column, behind each column's diagonal block.
-        let mut blocks = BlockPattern::default();
-        let mut seen = std::mem::take(&mut self.row_groups);
+        // (Each row's blocks are distinct in `row_entries`: its pairs of them.)
+        self.pairs.clear();
+        for w in self.row_entry_start.windows(2) {
+            let row = &self.row_entries[w[0] as usize..w[1] as usize];
+            for (k, a) in row.iter().enumerate() {
+                for b in &row[k + 1..] {
+                    self.pairs.push([a[0].max(b[0]), a[0].min(b[0])]);
+                }
+            }
+        }
         sorted_columns(
             nb,
-            |f| for_each_pair_of(j, |c| at[c] / 2, &mut seen, |a, b| f(a.max(b), a.min(b))),
+            &self.pairs,
             (&mut self.count, &mut self.fill),
             &mut blocks.ptr,
             &mut blocks.row,
         );
-        self.row_groups = seen;
         Some(blocks)
     }
 
@@ -862,7 +883,8 @@ impl NormalEquations {
         }
         let even = self.group_start.windows(2).all(|w| (w[1] - w[0]) % 2 == 0);
         let blocks = if !known_dense && even {
-            self.pattern.build_blocks(j, &self.perm_inv, n)
+            self.pattern
+                .build_blocks(j, &self.perm_inv, n, self.block.take_pattern())
         } else {
             None
         };
