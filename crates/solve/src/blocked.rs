@@ -295,6 +295,19 @@ impl BlockCholesky {
         std::mem::take(&mut self.a)
     }
 
+    /// The parent of block column `k` in the last analysis's elimination tree (`None` at a
+    /// root).
+    pub(crate) fn parent(&self, k: usize) -> Option<usize> {
+        let c = self.l.col(k);
+        (c.len() > 1).then(|| self.l.row[c.start + 1] as usize)
+    }
+
+    /// The block rows of column `k` of `L` (its diagonal first).
+    #[cfg(test)]
+    pub(crate) fn column(&self, k: usize) -> &[Index] {
+        &self.l.row[self.l.col(k)]
+    }
+
     /// Whether the last analysis divided the columns for two threads.
     pub(crate) fn is_split(&self) -> bool {
         self.split.is_some()

@@ -28,6 +28,7 @@ use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
 use crate::products::row_dot;
+use crate::reorder::find_from;
 use crate::workers::Workers;
 
 /// Settings of [`InteriorPoint`]; build them with [`InteriorPointSettings::builder`].
@@ -420,6 +421,7 @@ impl InteriorPoint {
     pub fn new(settings: InteriorPointSettings) -> Result<Self, SolveError> {
         settings.validate()?;
         let mut normal = NormalEquations::new(settings.parallelism)?;
+        normal.keep_orderings();
         if settings.split_factorization {
             normal.split_over_two_threads();
         }
@@ -1042,7 +1044,7 @@ impl InteriorPoint {
         // where the last one ended, galloping.
         let mut from = 0;
         for i in 0..m {
-            let at = find_from(kept, keys[i], &mut from);
+            let at = find_from(kept, keys[i], &mut from, |e| e.0);
             if let Some(&(_, s, l)) = at.map(|k| &kept[k]).filter(|e| inside(e.1) && inside(e.2)) {
                 (self.s[i], lam[i]) = (s, l);
                 found += 1;
@@ -1075,37 +1077,6 @@ impl InteriorPoint {
     fn max_step((primal, dual): (f64, f64)) -> f64 {
         primal.min(dual)
     }
-}
-
-/// The position of `key` in `kept` (sorted by key), searched from `from` on by galloping
-/// when the key before `from` is below `key` (else from the start), `from` then set past
-/// where the search ended: what a binary search over the whole finds (of a key kept twice,
-/// either, as there), in a few comparisons for keys that mostly increase.
-fn find_from(
-    kept: &[(ConstraintKey, f64, f64)],
-    key: ConstraintKey,
-    from: &mut usize,
-) -> Option<usize> {
-    // Every key before `from` is below `key` when the one just before it is.
-    let start = if *from > 0 && *from <= kept.len() && kept[*from - 1].0 < key {
-        *from
-    } else {
-        0
-    };
-    // Gallop: the first `start + 2^k − 1` whose key is at least `key` bounds the search.
-    let (mut lo, mut step) = (start, 1);
-    while lo + step <= kept.len() && kept[lo + step - 1].0 < key {
-        lo += step;
-        step *= 2;
-    }
-    let hi = (lo + step).min(kept.len());
-    let at = kept[lo..hi].binary_search_by_key(&key, |e| e.0);
-    let (found, end) = match at {
-        Ok(p) => (Some(lo + p), lo + p + 1),
-        Err(p) => (None, lo + p),
-    };
-    *from = end;
-    found
 }
 
 /// How far along `dx` the positive `x` may go, where that is less than all the way (`dx` and
@@ -1285,8 +1256,36 @@ impl ProjectionSolver for InteriorPoint {
     /// numbers, M, d (M numbers), C, J's coefficients (C numbers), the structure's hash in
     /// two 32-bit halves, its reuse's losses and skips, the hash of the rows' keys in two
     /// halves, S, the polish's start (S numbers)]` (session 26's layout, marked −2, ends
-    /// before the keys' hash; it is still read).
+    /// before the keys' hash; it is still read). Where the last analysis is kept for the
+    /// next ordering (crate::reorder), `[−4, its numbers]` comes first.
     fn memory(&self) -> Vec<f64> {
+        let mut memory = Vec::new();
+        if self.normal.has_kept_ordering() {
+            memory.push(ORDERING_LAYOUT);
+            self.normal.kept_memory(&mut memory);
+        }
+        self.append_memory(&mut memory);
+        memory
+    }
+
+    /// Takes what [`memory`](Self::memory) gave; anything else leaves the solver as new.
+    fn set_memory(&mut self, memory: &[f64]) {
+        let rest = if memory.first() == Some(&ORDERING_LAYOUT) {
+            self.normal.set_kept_memory(&memory[1..])
+        } else {
+            self.normal.set_kept_memory(&[]).map(|_| memory)
+        };
+        // (A memory that is not one leaves the solver as new, its kept analysis too.)
+        if !rest.is_some_and(|rest| self.set_rest_of_memory(rest)) {
+            self.set_rest_of_memory(&[]);
+            self.normal.set_kept_memory(&[]);
+        }
+    }
+}
+
+impl InteriorPoint {
+    /// [`ProjectionSolver::memory`] after the kept analysis, appended to `out`.
+    fn append_memory(&self, out: &mut Vec<f64>) {
         let counts = self.normal.counts();
         let factor = self
             .restored_polish_factor
@@ -1294,7 +1293,8 @@ impl ProjectionSolver for InteriorPoint {
             .or(self.polish_factor.as_ref().filter(|f| {
                 (f.analyses, f.factorizations) == (counts.analyses, counts.factorizations)
             }));
-        let mut memory = Vec::with_capacity(
+        let memory = out;
+        memory.reserve(
             MEMORY_HEAD
                 + 4 * self.kept_iterate.len()
                 + factor.map_or(0, |f| 10 + f.d.len() + f.coefficients.len() + f.start.len()),
@@ -1332,11 +1332,11 @@ impl ProjectionSolver for InteriorPoint {
             ]);
             memory.extend_from_slice(&f.start);
         }
-        memory
     }
 
-    /// Takes what [`memory`](Self::memory) gave; anything else leaves the solver as new.
-    fn set_memory(&mut self, memory: &[f64]) {
+    /// [`ProjectionSolver::set_memory`] after the kept analysis; false, with the solver's
+    /// history as new, when `memory` is not one.
+    fn set_rest_of_memory(&mut self, memory: &[f64]) -> bool {
         let count = |x: f64| (x >= 0.0 && x.fract() == 0.0).then_some(x as usize);
         self.last_changes = None;
         self.polish_backoff = BackOff::default();
@@ -1351,13 +1351,13 @@ impl ProjectionSolver for InteriorPoint {
         {
             let with_start = layout == Some(POLISH_FACTOR_LAYOUT);
             let Some(parts) = split_polish_memory(&memory[1..], with_start) else {
-                return;
+                return false;
             };
             parts
         } else {
             match (memory.get(..MEMORY_HEAD), memory.get(MEMORY_HEAD..)) {
                 (Some(head), Some(rows)) if rows.len() % 4 == 0 => (head, rows, None),
-                _ => return,
+                _ => return false,
             }
         };
         let (Some(pf), Some(ps), Some(wf), Some(ws)) = (
@@ -1366,7 +1366,7 @@ impl ProjectionSolver for InteriorPoint {
             count(head[4]),
             count(head[5]),
         ) else {
-            return;
+            return false;
         };
         self.last_changes = (head[0] >= 0.0).then_some(head[0]);
         self.polish_backoff = BackOff {
@@ -1384,6 +1384,7 @@ impl ProjectionSolver for InteriorPoint {
         );
         self.kept_iterate.sort_unstable_by_key(|e| e.0);
         self.restored_polish_factor = factor;
+        true
     }
 }
 
@@ -1460,6 +1461,10 @@ const POLISH_FACTOR_LAYOUT: f64 = -3.0;
 /// start: the next polish starts from the caller's multipliers).
 const POLISH_FACTOR_LAYOUT_UNSTARTED: f64 = -2.0;
 
+/// The first number of [`InteriorPoint`]'s memory when the last analysis is kept for the
+/// next ordering (followed by it, then by one of the other layouts).
+const ORDERING_LAYOUT: f64 = -4.0;
+
 /// Numbers before the kept iterate's rows in [`InteriorPoint`]'s memory.
 const MEMORY_HEAD: usize = 6;
 
@@ -1490,34 +1495,48 @@ mod tests {
         (rep, sol)
     }
 
-    /// The galloping search finds what a binary search over the whole finds, for queries
-    /// that increase, repeat, go back, miss, and run past either end.
+    /// Regression guard for the orderings kept from analysis to analysis (crate::reorder):
+    /// they depend on the analyses before, so the last one is part of the memory. Restored
+    /// from it mid-run, a solver answers a wandering crowd's projections bit for bit as the
+    /// original does; restored without it (its own ordering afresh), it does not.
     #[test]
-    fn a_search_from_the_last_position_finds_what_a_binary_search_finds() {
-        let mut rng = ChaCha8Rng::seed_from_u64(9);
-        for len in [0, 1, 2, 5, 64, 1000] {
-            let mut keys: Vec<u64> = (0..len)
-                .map(|_| rng.random_range(0..4 * len as u64 + 4))
-                .collect();
-            keys.sort_unstable();
-            keys.dedup();
-            let kept: Vec<(u64, f64, f64)> = keys.iter().map(|&k| (k, 1.0, 1.0)).collect();
-            let top = 4 * len as u64 + 8;
-            let mut from = 0;
-            for q in 0..3000 {
-                let key = match q % 4 {
-                    0 | 1 => (q as u64 / 2) % top,
-                    2 => rng.random_range(0..top),
-                    _ => top + q as u64,
-                };
-                let expected = kept.binary_search_by_key(&key, |e| e.0).ok();
-                assert_eq!(
-                    find_from(&kept, key, &mut from),
-                    expected,
-                    "len {len} key {key}"
-                );
-            }
+    fn a_restored_interior_point_orders_and_answers_as_the_original() {
+        let crowd = crate::reorder::wandering_crowd(150, 24, 5);
+        let target = Target {
+            gap: 1e-8,
+            violation: 1e-9,
+        };
+        let solve = |ip: &mut InteriorPoint, sol: &mut ProjectionSolution, k: usize| {
+            let (j, b, w) = &crowd[k];
+            let p = ProjectionProblem { w, jacobian: j, b };
+            let rep = ip.solve(&p, target, sol).unwrap();
+            assert!(rep.status.is_converged(), "step {k}: {rep:?}");
+        };
+        let mut original = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        let mut sol = ProjectionSolution::default();
+        for k in 0..6 {
+            solve(&mut original, &mut sol, k);
         }
+        let memory = original.memory();
+        assert_eq!(memory[0], ORDERING_LAYOUT);
+        let mut restored = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        restored.set_memory(&memory);
+        assert_eq!(restored.memory(), memory);
+        // The same memory without the kept analysis (the layout that follows it).
+        let mut rest = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
+        rest.set_memory(&memory);
+        rest.normal.set_kept_memory(&[]);
+        let (mut restored_sol, mut rest_sol) = (sol.clone(), sol.clone());
+        let mut differed = false;
+        for k in 6..crowd.len() {
+            solve(&mut original, &mut sol, k);
+            solve(&mut restored, &mut restored_sol, k);
+            solve(&mut rest, &mut rest_sol, k);
+            assert_eq!(sol, restored_sol, "step {k}");
+            assert_eq!(original.memory(), restored.memory(), "step {k}");
+            differed |= sol != rest_sol;
+        }
+        assert!(differed, "the kept analysis changed no answer");
     }
 
     #[test]

@@ -26,6 +26,7 @@ mod newton;
 mod normal;
 mod problem;
 mod products;
+mod reorder;
 mod supernodal;
 mod workers;
 

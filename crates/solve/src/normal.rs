@@ -36,6 +36,7 @@ use crate::error::SolveError;
 use crate::frontal::Multifrontal;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
+use crate::reorder::KeptOrdering;
 use crate::supernodal;
 use crate::workers::Workers;
 
@@ -511,6 +512,44 @@ impl std::fmt::Debug for Scratch {
     }
 }
 
+/// AMD's workspace and its size in bytes, grown as needed and kept from ordering to
+/// ordering.
+#[derive(Default)]
+struct AmdScratch(Option<(MemBuffer, usize)>);
+
+impl std::fmt::Debug for AmdScratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("AmdScratch")
+    }
+}
+
+impl AmdScratch {
+    /// The minimum-degree ordering of `graph` (its upper triangle, rows sorted, no repeats).
+    fn order(
+        &mut self,
+        perm: &mut [Index],
+        perm_inv: &mut [Index],
+        graph: &NormalPattern,
+    ) -> Result<(), SolveError> {
+        // (Bytes enough at any alignment.)
+        let bytes =
+            amd::order_scratch::<Index>(graph.n, graph.row_idx.len()).unaligned_bytes_required();
+        if self.0.as_ref().is_none_or(|m| m.1 < bytes) {
+            self.0 = Some((MemBuffer::new(StackReq::new::<u8>(bytes)), bytes));
+        }
+        let mem = &mut self.0.as_mut().expect("sized above").0;
+        amd::order(
+            perm,
+            perm_inv,
+            graph.symbolic(),
+            amd::Control::default(),
+            MemStack::new(mem),
+        )
+        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        Ok(())
+    }
+}
+
 /// Multiply–adds per factor entry above which faer's supernodal factorization is used
 /// instead of the 2×2-block one: where they cross on crushes since the blocks gather a
 /// supernode's updates (benches/README.md, session 23: the blocks 1.35× faster at 63
@@ -571,8 +610,14 @@ pub(crate) struct NormalEquations {
     h: Vec<f64>,
     l: Vec<f64>,
     mem: Scratch,
-    // AMD's workspace and its size in bytes, grown as needed
-    amd_mem: (Scratch, usize),
+    // AMD's workspace
+    amd_mem: AmdScratch,
+    // Whether the ordering starts from the last analysis's (crate::reorder), that analysis,
+    // and the ordering of the groups it found dirty.
+    keep_orderings: bool,
+    kept: KeptOrdering,
+    dirty_perm: Vec<Index>,
+    dirty_perm_inv: Vec<Index>,
     // The right-hand side in the factor's order.
     x: Vec<f64>,
     // The supernodal solve's buffer (a supernode's rows), and its two threads' scratch for
@@ -695,7 +740,11 @@ impl NormalEquations {
             h: Vec::new(),
             l: Vec::new(),
             mem: Scratch(MemBuffer::new(StackReq::EMPTY)),
-            amd_mem: (Scratch(MemBuffer::new(StackReq::EMPTY)), 0),
+            amd_mem: AmdScratch::default(),
+            keep_orderings: false,
+            kept: KeptOrdering::default(),
+            dirty_perm: Vec::new(),
+            dirty_perm_inv: Vec::new(),
             x: Vec::new(),
             solve_scratch: Vec::new(),
             split_solve_scratch: supernodal::SplitScratch::default(),
@@ -716,6 +765,35 @@ impl NormalEquations {
         if self.helper.is_none() {
             self.helper = Helper::shared();
         }
+    }
+
+    /// From the next analysis on, each ordering starts from the last analysis's where the
+    /// unknowns pair up (crate::reorder): the groups whose rows are the last analysis's keep
+    /// their places. The orderings then depend on the analyses before, which the caller must
+    /// keep with its state ([`Self::kept_memory`]).
+    pub(crate) fn keep_orderings(&mut self) {
+        self.keep_orderings = true;
+    }
+
+    /// The last analysis an ordering starts from ([`Self::keep_orderings`]), as numbers
+    /// appended to `out` (nothing when there is none).
+    pub(crate) fn kept_memory(&self, out: &mut Vec<f64>) {
+        self.kept.memory(out);
+    }
+
+    /// Whether there is a last analysis an ordering starts from.
+    pub(crate) fn has_kept_ordering(&self) -> bool {
+        self.kept.is_kept()
+    }
+
+    /// Takes what [`Self::kept_memory`] gave at the start of `memory` and returns the rest;
+    /// `None`, with nothing kept, when it is not one. With `memory` empty, nothing is kept.
+    pub(crate) fn set_kept_memory<'a>(&mut self, memory: &'a [f64]) -> Option<&'a [f64]> {
+        if memory.is_empty() {
+            self.kept.forget();
+            return Some(memory);
+        }
+        self.kept.set_memory(memory)
     }
 
     /// The workers the factorizations run on.
@@ -800,28 +878,62 @@ impl NormalEquations {
         // unknowns that appear in the same rows (a disk's x and y): a quarter of the entries.
         self.jt.build(j);
         let groups = column_groups(&self.jt, &mut self.group_of);
-        // The upper triangle, its rows sorted and without repeats: what faer's AMD makes of
-        // any input first (`order_maybe_unsorted`), so `order` takes it as it is.
-        self.natural
-            .build(j, Some((&self.group_of, groups)), true, false);
-        let nnz = self.natural.row_idx.len();
         self.group_perm.clear();
         self.group_perm.resize(groups, 0);
         self.group_perm_inv.clear();
         self.group_perm_inv.resize(groups, 0);
-        // (Bytes enough at any alignment; kept from analysis to analysis.)
-        let bytes = amd::order_scratch::<Index>(groups, nnz).unaligned_bytes_required();
-        if self.amd_mem.1 < bytes {
-            self.amd_mem = (Scratch(MemBuffer::new(StackReq::new::<u8>(bytes))), bytes);
+        // The groups whose rows are the last analysis's keep their places (crate::reorder);
+        // the rest are ordered on the graph they leave. When it is time for a fresh ordering,
+        // only rows that are all the last analysis's keep it (renumbered: what a solver
+        // restored from its memory, which has analysed nothing, finds where the original
+        // analysed nothing again).
+        let dirty = if self.keep_orderings && self.kept.is_kept() {
+            let most = if self.kept.usable() {
+                (KeptOrdering::MAX_DIRTY_SHARE * groups as f64) as usize
+            } else {
+                0
+            };
+            self.kept.dirty_graph(j, &self.group_of, groups, most)
+        } else {
+            None
+        };
+        let fresh = dirty.is_none();
+        if let Some(d) = dirty {
+            self.dirty_perm.clear();
+            self.dirty_perm.resize(d, 0);
+            self.dirty_perm_inv.clear();
+            self.dirty_perm_inv.resize(d, 0);
+            if d > 0 {
+                let graph = &mut self.natural;
+                sorted_columns(
+                    d,
+                    self.kept.pairs(),
+                    (&mut graph.count, &mut graph.fill),
+                    &mut graph.col_ptr,
+                    &mut graph.row_idx,
+                );
+                graph.n = d;
+                self.amd_mem
+                    .order(&mut self.dirty_perm, &mut self.dirty_perm_inv, graph)?;
+            }
+            self.kept.ordering(
+                &self.dirty_perm,
+                &mut self.group_perm,
+                &mut self.group_perm_inv,
+            );
+        } else {
+            // The upper triangle, its rows sorted and without repeats: what faer's AMD makes
+            // of any input first (`order_maybe_unsorted`), so `order` takes it as it is.
+            self.natural
+                .build(j, Some((&self.group_of, groups)), true, false);
+            self.amd_mem.order(
+                &mut self.group_perm,
+                &mut self.group_perm_inv,
+                &self.natural,
+            )?;
         }
-        amd::order(
-            &mut self.group_perm,
-            &mut self.group_perm_inv,
-            self.natural.symbolic(),
-            amd::Control::default(),
-            MemStack::new(&mut self.amd_mem.0.0),
-        )
-        .map_err(|e| SolveError::Factorization(format!("{e:?}")))?;
+        // (Kept again below where the analysis is one in 2×2 blocks.)
+        self.kept.forget();
         // A large pattern whose minimum-degree factor is dense (a crush: wide fronts) is also
         // ordered by nested dissection, and the ordering whose factor costs fewer multiply–adds
         // is kept. Its count is exact for the 2×2 blocks when every group is a pair.
@@ -891,6 +1003,16 @@ impl NormalEquations {
         if let Some(blocks) = blocks {
             let a_blocks = blocks.row.len();
             self.block.analyse(blocks, self.helper.is_some());
+            if self.keep_orderings && pairs {
+                let block = &self.block;
+                self.kept.keep(
+                    j,
+                    &self.group_of,
+                    &self.group_perm_inv,
+                    |k| block.parent(k),
+                    fresh,
+                );
+            }
             if self.block.is_split() {
                 self.split_choice.analysed();
             }
@@ -1297,6 +1419,96 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The orderings kept from analysis to analysis (crate::reorder) on a wandering crowd: the
+    /// groups found clean keep their places relative to each other and their old column of
+    /// `L` exactly (the same people in it), the dirty ones are ordered afresh, every ordering
+    /// is a permutation and solves the normal equations; every so often the ordering is a
+    /// fresh one.
+    #[test]
+    fn kept_orderings_give_the_clean_groups_their_old_fill_and_solve() {
+        let crowd = crate::reorder::wandering_crowd(150, 40, 7);
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
+        ne.keep_orderings();
+        // Each person's place and column of L (as people), from the last analysis.
+        let mut last: Option<(Vec<Index>, Vec<Vec<Index>>)> = None;
+        let (mut kept, mut fresh, mut clean) = (0, 0, 0);
+        for (step, (j, _, _)) in crowd.iter().enumerate() {
+            // (Steps whose rows are the last step's are not analysed again.)
+            let analysed = ne.analyse(j).unwrap();
+            assert!(ne.blocked, "step {step}");
+            let people = j.dim() / 2;
+            let mut sorted = ne.group_perm.clone();
+            sorted.sort_unstable();
+            assert!(sorted.iter().enumerate().all(|(k, &g)| g as usize == k));
+            let place = ne.group_perm_inv.clone();
+            let columns: Vec<Vec<Index>> = (0..people)
+                .map(|p| {
+                    let column = ne.block.column(place[p] as usize);
+                    let mut who: Vec<Index> =
+                        column.iter().map(|&r| ne.group_perm[r as usize]).collect();
+                    who.sort_unstable();
+                    who
+                })
+                .collect();
+            if !analysed {
+                assert_eq!(Some(&place), last.as_ref().map(|l| &l.0), "step {step}");
+            } else if ne.kept.since_fresh() == 0 {
+                fresh += 1;
+            } else {
+                kept += 1;
+                let (old_place, old_columns) =
+                    last.as_ref().expect("a kept ordering has a last one");
+                let dirty: std::collections::HashSet<Index> =
+                    ne.kept.dirty().iter().copied().collect();
+                let clean_people: Vec<usize> = (0..people)
+                    .filter(|&p| !dirty.contains(&(p as Index)))
+                    .collect();
+                clean += clean_people.len();
+                for &p in &clean_people {
+                    assert_eq!(
+                        columns[p], old_columns[p],
+                        "step {step}: person {p}'s column of L"
+                    );
+                    for &q in &clean_people {
+                        assert_eq!(
+                            place[p] < place[q],
+                            old_place[p] < old_place[q],
+                            "step {step}: people {p} and {q}"
+                        );
+                    }
+                }
+                // Clean first, in their old order; then the dirty ones.
+                assert!(
+                    clean_people
+                        .iter()
+                        .all(|&p| (place[p] as usize) < clean_people.len())
+                );
+            }
+            let d: Vec<f64> = (0..j.len()).map(|_| rng.random_range(0.0..1e3)).collect();
+            let b: Vec<f64> = (0..j.dim()).map(|_| rng.random_range(-1.0..1.0)).collect();
+            assert!(ne.factorize(j, 1.0, &d), "step {step}");
+            let mut x = b.clone();
+            ne.solve_in_place(&mut x);
+            for (r, row) in dense(j, 1.0, &d).iter().enumerate() {
+                let ax: f64 = row.iter().zip(&x).map(|(a, x)| a * x).sum();
+                assert!(
+                    (ax - b[r]).abs() <= 1e-8,
+                    "step {step} row {r}: {ax} against {}",
+                    b[r]
+                );
+            }
+            last = Some((place, columns));
+        }
+        // Most analyses start from the last one, a fresh one every `FRESH_EVERY`, and most
+        // people keep their places.
+        assert!(fresh >= 3 && kept >= 30, "{fresh} fresh, {kept} kept");
+        assert!(
+            clean >= kept * 150 / 2,
+            "{clean} clean over {kept} kept orderings"
+        );
     }
 
     #[test]

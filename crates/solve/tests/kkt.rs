@@ -1864,7 +1864,8 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
     // A damaged row of the kept iterate (its multiplier not a number) starts as a new row:
     // the start from the rest still pays, from zero multipliers as from the previous ones.
     let mut memory = kept.memory();
-    memory[6 + 3] = f64::NAN;
+    let ordering = after_kept_analysis(&memory);
+    memory[ordering + 6 + 3] = f64::NAN;
     let mut damaged = InteriorPoint::new(settings(1e9)).unwrap();
     damaged.set_memory(&memory);
     let its = run(&mut damaged, &mut ProjectionSolution::default(), 7);
@@ -1879,6 +1880,17 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
     assert!(fresh.memory().len() == 6, "{:?}", fresh.memory());
     let mut fresh_sol = ProjectionSolution::default();
     assert_eq!(run(&mut fresh, &mut fresh_sol, 0), cold_its[0]);
+}
+
+/// Where the interior point's memory goes on after its kept analysis (`[−4, since, P, P
+/// pairs, R, R quadruples]`, crate::reorder), 0 without one.
+fn after_kept_analysis(memory: &[f64]) -> usize {
+    if memory.first() != Some(&-4.0) {
+        return 0;
+    }
+    let places = memory[2] as usize;
+    let rows = memory[3 + 2 * places] as usize;
+    4 + 2 * places + 4 * rows
 }
 
 /// Regression: the polish's history (whether the last solve settled, its back-off) was not in
@@ -2017,7 +2029,9 @@ fn a_restored_interior_point_polishes_with_the_original_factorization() {
         "the start's count"
     );
     let mut unstarted = memory[..memory.len() - rows - 3].to_vec();
-    unstarted[0] = -2.0;
+    let ordering = after_kept_analysis(&unstarted);
+    assert_eq!(unstarted[ordering], -3.0);
+    unstarted[ordering] = -2.0;
     let mut older = InteriorPoint::new(InteriorPointSettings::default()).unwrap();
     older.set_memory(&unstarted);
     let older_report = solve(&mut older, &mut sol.clone(), 3);
@@ -2051,9 +2065,15 @@ fn a_restored_interior_point_polishes_with_the_original_factorization() {
     let mut head = fresh.memory();
     // The same memory without its factorization (the older layout): the next polish
     // factorizes the new `J`.
-    let kept = head[7] as usize;
-    head = head[1..8 + 4 * kept].to_vec();
-    head.remove(6);
+    let ordering = after_kept_analysis(&head);
+    let kept = head[ordering + 7] as usize;
+    let older: Vec<f64> = head[..ordering]
+        .iter()
+        .chain(&head[ordering + 1..ordering + 7])
+        .chain(&head[ordering + 8..ordering + 8 + 4 * kept])
+        .copied()
+        .collect();
+    head = older;
     other.set_memory(&head);
     let mut other_sol = fresh_sol.clone();
     let a = solve(&mut fresh, &mut fresh_sol, 3);
