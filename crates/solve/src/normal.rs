@@ -6,9 +6,10 @@
 //! factorization, triangular solves, and the time spent in each.
 //!
 //! What is separated: the *ordering* (AMD on one node per group of unknowns that share their
-//! rows, a person's x and y; on large patterns whose minimum-degree factor is dense, a
-//! crush's, also nested dissection ([`crate::dissection`]), keeping whichever factor costs
-//! fewer multiply–adds), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
+//! rows, a person's x and y, or, for the interior point, on only the groups whose rows
+//! changed since the last analysis, the others keeping their places ([`crate::reorder`]);
+//! on large patterns whose minimum-degree factor is dense, a crush's, also nested dissection
+//! ([`crate::dissection`]), keeping whichever factor costs fewer multiply–adds), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
 //! row's products land (in 2×2 blocks: each row's blocks and where its coefficients are, so
 //! that the factorization adds `J`'s rows into each column as it reaches it, with no
 //! assembled copy of the matrix), and the *symbolic* Cholesky — all three redone only when the

@@ -3,15 +3,19 @@
 //! their places, as whole subtrees of the last elimination tree.
 //!
 //! Why it is exact about fill: a group is *clean* when its rows (by key) are the last
-//! analysis's, and so is every descendant of it in the last elimination tree; the clean
-//! groups form whole subtrees, each touching only *dirty* groups outside it (an edge between
-//! two subtrees would have made one an ancestor of the other). Eliminated first, in their
-//! old order, the clean groups make exactly their old fill, and each subtree leaves one
-//! clique on the dirty groups around it. The dirty groups are then ordered by minimum degree
-//! on their own rows and those cliques: the graph that is left after the clean ones. Any
-//! ordering factorizes correctly (the pattern of `L` is analysed anew), so what this risks is
-//! fill, not answers; the caller orders everything afresh every so often.
-//! Measured in benches/README.md, session 29.
+//! analysis's and so are those of every descendant of it in the last elimination tree; the
+//! clean groups form whole subtrees, each touching only *dirty* groups outside it (an edge
+//! between two subtrees would have made one an ancestor of the other). Eliminated first, in
+//! their old order, the clean groups make exactly their old fill, and each subtree leaves
+//! one clique on the dirty groups around it. The dirty groups are then ordered by minimum
+//! degree on their own rows and those cliques: the graph that is left after the clean ones.
+//! Any ordering factorizes correctly (the pattern of `L` is analysed anew), so what this
+//! risks is fill, not answers: the fill drifts up from analysis to analysis, so all groups
+//! are ordered afresh every [`KeptOrdering::FRESH_EVERY`] analyses, and whenever more than
+//! [`KeptOrdering::MAX_DIRTY_SHARE`] of them are dirty (where keeping saves nothing). With
+//! nothing dirty, the ordering is the last one whenever it comes: what a solver restored
+//! from its memory, which has analysed nothing yet, must find where the original analysed
+//! nothing again. Measured in benches/README.md, session 29.
 
 use moreau_core::{ConstraintKey, ConstraintRows};
 
@@ -33,10 +37,11 @@ pub(crate) struct KeptOrdering {
     // Analyses since every group was last ordered afresh.
     since_fresh: usize,
     // Scratch: each new row's groups; each new group's old place and row count; each old
-    // place's new group (if clean), whether it is dirty and its subtree (numbered from the
-    // dirty groups' count on); each new group's index among the dirty ones; the graph's
-    // entries; the dirty groups; the (subtree, dirty group) pairs of rows, and the same by
-    // subtree; the last subtree each dirty group was seen around.
+    // place's new group (if clean), whether it is dirty and its subtree; each new group's
+    // index among the dirty ones; the graph's entries; the dirty groups; the (subtree, dirty
+    // group) pairs of rows, where each subtree's start among them sorted by subtree (and a
+    // copy advanced while they are sorted), them sorted; the last subtree each dirty group
+    // was seen around.
     row_groups: Vec<[Index; 2]>,
     place_of: Vec<Index>,
     rows_of: Vec<Index>,
@@ -49,7 +54,7 @@ pub(crate) struct KeptOrdering {
     around: Vec<[Index; 2]>,
     tree_start: Vec<Index>,
     tree_fill: Vec<Index>,
-    tree_places: Vec<Index>,
+    around_by_tree: Vec<Index>,
     mark: Vec<Index>,
 }
 
@@ -257,11 +262,11 @@ impl KeptOrdering {
         }
         self.tree_fill.clear();
         self.tree_fill.extend_from_slice(&self.tree_start[..trees]);
-        self.tree_places.clear();
-        self.tree_places.resize(self.around.len(), 0);
+        self.around_by_tree.clear();
+        self.around_by_tree.resize(self.around.len(), 0);
         for &[t, a] in &self.around {
             let at = &mut self.tree_fill[t as usize];
-            self.tree_places[*at as usize] = a;
+            self.around_by_tree[*at as usize] = a;
             *at += 1;
         }
         self.mark.clear();
@@ -270,14 +275,14 @@ impl KeptOrdering {
             let start = self.tree_start[t] as usize;
             let mut end = start;
             for k in start..self.tree_start[t + 1] as usize {
-                let a = self.tree_places[k];
+                let a = self.around_by_tree[k];
                 if self.mark[a as usize] != t as Index {
                     self.mark[a as usize] = t as Index;
-                    self.tree_places[end] = a;
+                    self.around_by_tree[end] = a;
                     end += 1;
                 }
             }
-            let clique = &self.tree_places[start..end];
+            let clique = &self.around_by_tree[start..end];
             for (k, &a) in clique.iter().enumerate() {
                 for &b in &clique[k + 1..] {
                     self.pairs.push([a.min(b), a.max(b)]);
