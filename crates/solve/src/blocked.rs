@@ -273,7 +273,8 @@ impl BlockCholesky {
         if split {
             self.row_col.extend_from_slice(entry_col);
         }
-        self.values.clear();
+        // (Every successful factorization writes every block of the factor, and nothing
+        // reads one before: the storage is sized, not cleared.)
         self.values.resize(self.l.row.len(), [0.0; 4]);
         self.work.clear();
         self.work.resize(n, [0.0; 4]);
