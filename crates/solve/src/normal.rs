@@ -37,7 +37,7 @@ use crate::error::SolveError;
 use crate::frontal::Multifrontal;
 use crate::problem::SolveReport;
 use crate::products::{Index, Transpose};
-use crate::reorder::KeptOrdering;
+use crate::reorder::{KeptOrdering, structure_hash};
 use crate::supernodal;
 use crate::workers::Workers;
 
@@ -771,27 +771,33 @@ impl NormalEquations {
     /// From the next analysis on, each ordering starts from the last analysis's where the
     /// unknowns pair up (crate::reorder): the groups whose rows are the last analysis's keep
     /// their places. The orderings then depend on the analyses before, which the caller must
-    /// keep with its state ([`Self::kept_memory`]).
+    /// keep with its state ([`Self::kept_memory`], [`Self::set_kept_memory`]).
     pub(crate) fn keep_orderings(&mut self) {
         self.keep_orderings = true;
     }
 
-    /// The last analysis an ordering starts from ([`Self::keep_orderings`]), as numbers
-    /// appended to `out` (nothing when there is none).
+    /// What the next ordering depends on besides `J` ([`Self::keep_orderings`]): the last
+    /// analysis's ordering, with a hash of its structure, and the analysis kept for the next
+    /// ordering, as numbers appended to `out` (`KeptOrdering::memory`).
     pub(crate) fn kept_memory(&self, out: &mut Vec<f64>) {
-        self.kept.memory(out);
+        let analysed = self.symbolic.is_some() || self.blocked;
+        let last = analysed.then(|| {
+            let hash = structure_hash(&self.j_row_start, &self.j_cols);
+            (hash, &self.group_perm[..])
+        });
+        self.kept.memory(last, out);
     }
 
-    /// Whether there is a last analysis an ordering starts from.
-    pub(crate) fn has_kept_ordering(&self) -> bool {
-        self.kept.is_kept()
+    /// Whether the orderings depend on the analyses before ([`Self::keep_orderings`]).
+    pub(crate) fn keeps_orderings(&self) -> bool {
+        self.keep_orderings
     }
 
     /// Takes what [`Self::kept_memory`] gave at the start of `memory` and returns the rest;
     /// `None`, with nothing kept, when it is not one. With `memory` empty, nothing is kept.
     pub(crate) fn set_kept_memory<'a>(&mut self, memory: &'a [f64]) -> Option<&'a [f64]> {
         if memory.is_empty() {
-            self.kept.forget();
+            self.kept = KeptOrdering::default();
             return Some(memory);
         }
         self.kept.set_memory(memory)
@@ -883,23 +889,27 @@ impl NormalEquations {
         self.group_perm.resize(groups, 0);
         self.group_perm_inv.clear();
         self.group_perm_inv.resize(groups, 0);
-        // The groups whose rows are the last analysis's keep their places (crate::reorder);
-        // the rest are ordered on the graph they leave. When it is time for a fresh ordering,
-        // only rows that are all the last analysis's keep it (renumbered: what a solver
-        // restored from its memory, which has analysed nothing, finds where the original
-        // analysed nothing again).
-        let dirty = if self.keep_orderings && self.kept.is_kept() {
-            let most = if self.kept.usable() {
-                (KeptOrdering::MAX_DIRTY_SHARE * groups as f64) as usize
-            } else {
-                0
-            };
+        // A solver restored from a memory orders the structure the original analysed last as
+        // the original did (which analysed nothing again); otherwise the groups whose rows are
+        // the last analysis's keep their places (crate::reorder) and the rest are ordered on
+        // the graph they leave, or all are ordered afresh.
+        let restored = self.kept.take_restored().filter(|(hash, order)| {
+            order.len() == groups && *hash == structure_hash(&self.j_row_start, &self.j_cols)
+        });
+        let reused = restored.is_some();
+        let dirty = if self.keep_orderings && !reused {
+            let most = (KeptOrdering::MAX_DIRTY_SHARE * groups as f64) as usize;
             self.kept.dirty_graph(j, &self.group_of, groups, most)
         } else {
             None
         };
         let fresh = dirty.is_none();
-        if let Some(d) = dirty {
+        if let Some((_, order)) = restored {
+            for (k, &g) in order.iter().enumerate() {
+                self.group_perm[k] = g;
+                self.group_perm_inv[g as usize] = k as Index;
+            }
+        } else if let Some(d) = dirty {
             self.dirty_perm.clear();
             self.dirty_perm.resize(d, 0);
             self.dirty_perm_inv.clear();
@@ -933,8 +943,11 @@ impl NormalEquations {
                 &self.natural,
             )?;
         }
-        // (Kept again below where the analysis is one in 2×2 blocks.)
-        self.kept.forget();
+        // (Kept again below where the analysis is one in 2×2 blocks; a restored ordering
+        // leaves the restored analysis as the original's.)
+        if !reused {
+            self.kept.forget();
+        }
         // A large pattern whose minimum-degree factor is dense (a crush: wide fronts) is also
         // ordered by nested dissection, and the ordering whose factor costs fewer multiply–adds
         // is kept. Its count is exact for the 2×2 blocks when every group is a pair.
@@ -944,7 +957,8 @@ impl NormalEquations {
                 .build(j, Some((&self.group_of, groups)), false, false);
             let natural = self.natural.symbolic();
             let (mut products, mut entries) = self.fill.count(natural, &self.group_perm_inv);
-            if products >= DISSECTION_MIN_PRODUCTS_PER_ENTRY * entries {
+            // (A restored ordering is the one the original chose.)
+            if !reused && products >= DISSECTION_MIN_PRODUCTS_PER_ENTRY * entries {
                 self.nd_perm.clear();
                 self.nd_perm.resize(groups, 0);
                 self.nd_perm_inv.clear();
@@ -1004,7 +1018,7 @@ impl NormalEquations {
         if let Some(blocks) = blocks {
             let a_blocks = blocks.row.len();
             self.block.analyse(blocks, self.helper.is_some());
-            if self.keep_orderings && pairs {
+            if self.keep_orderings && pairs && !reused {
                 let block = &self.block;
                 self.kept.keep(
                     j,
@@ -1429,7 +1443,7 @@ mod tests {
     /// fresh one.
     #[test]
     fn kept_orderings_give_the_clean_groups_their_old_fill_and_solve() {
-        let crowd = crate::reorder::wandering_crowd(150, 40, 7);
+        let crowd = crate::reorder::wandering_crowd(150, 40, 0.01, 7);
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         let mut ne = NormalEquations::new(Parallelism::SEQUENTIAL).unwrap();
         ne.keep_orderings();

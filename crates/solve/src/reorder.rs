@@ -12,10 +12,13 @@
 //! Any ordering factorizes correctly (the pattern of `L` is analysed anew), so what this
 //! risks is fill, not answers: the fill drifts up from analysis to analysis, so all groups
 //! are ordered afresh every [`KeptOrdering::FRESH_EVERY`] analyses, and whenever more than
-//! [`KeptOrdering::MAX_DIRTY_SHARE`] of them are dirty (where keeping saves nothing). With
-//! nothing dirty, the ordering is the last one whenever it comes: what a solver restored
-//! from its memory, which has analysed nothing yet, must find where the original analysed
-//! nothing again. Measured in benches/README.md, session 29.
+//! [`KeptOrdering::MAX_DIRTY_SHARE`] of them are dirty (where keeping saves nothing), then
+//! for a while without looking.
+//!
+//! The orderings then depend on the analyses before: all of that is in the memory
+//! ([`KeptOrdering::memory`]), with the last analysis's ordering and a hash of its structure,
+//! which a restored solver's first analysis takes as it is when `J` has that structure (the
+//! original analysed nothing again there). Measured in benches/README.md, session 29.
 
 use moreau_core::{ConstraintKey, ConstraintRows};
 
@@ -34,8 +37,16 @@ pub(crate) struct KeptOrdering {
     rows: Vec<(ConstraintKey, [Index; 2])>,
     count: Vec<Index>,
     parent: Vec<Index>,
-    // Analyses since every group was last ordered afresh.
+    // Analyses since every group was last ordered afresh, and analyses left before a kept
+    // ordering is tried again (after one with too many groups dirty).
     since_fresh: usize,
+    skip: usize,
+    // Whether `row_groups` are those of the analysis under way (found by `dirty_graph`).
+    grouped: bool,
+    // Read from a memory: the last analysis's ordering (the group at each place) and a hash
+    // of the structure of `J` it was made for, which the next analysis takes as it is if it
+    // is of that structure (where the original solver analysed nothing again).
+    restored: Option<(u64, Vec<Index>)>,
     // Scratch: each new row's groups; each new group's old place and row count; each old
     // place's new group (if clean), whether it is dirty and its subtree; each new group's
     // index among the dirty ones; the graph's entries; the dirty groups; the (subtree, dirty
@@ -90,8 +101,12 @@ impl KeptOrdering {
     /// With more than this share of the groups dirty, all are ordered afresh: the minimum
     /// degree of the dirty ones and the cliques costs about what a fresh one does, and the
     /// factor has more fill (the jammed 2,000 at half its groups dirty: 10 % more
-    /// multiply–adds for no time saved; benches/README.md, session 29).
+    /// multiply–adds for no time saved; benches/README.md, session 29) …
     pub(crate) const MAX_DIRTY_SHARE: f64 = 0.4;
+
+    /// … and so are they in this many analyses after, without finding the dirty ones (a
+    /// scene whose contacts change that much a step goes on doing so).
+    const SKIP_AFTER_TOO_DIRTY: usize = 8;
 
     /// Forgets the last analysis: the next ordering is a fresh one.
     pub(crate) fn forget(&mut self) {
@@ -113,22 +128,25 @@ impl KeptOrdering {
     }
 
     /// Whether there is a last analysis.
+    #[cfg(test)]
     pub(crate) fn is_kept(&self) -> bool {
         !self.parent.is_empty()
     }
 
-    /// Whether it is not yet time for a fresh ordering of the groups (see
-    /// [`Self::FRESH_EVERY`]) after the last analysis.
-    pub(crate) fn usable(&self) -> bool {
-        !self.parent.is_empty() && self.since_fresh + 1 < Self::FRESH_EVERY
+    /// The ordering read from a memory and the hash of the structure it was made for, once
+    /// (see [`Self::set_memory`]).
+    pub(crate) fn take_restored(&mut self) -> Option<(u64, Vec<Index>)> {
+        self.restored.take()
     }
 
     /// Finds the dirty groups of `j` (groups `group_of`, `groups` of them) against the last
     /// analysis, and the graph the minimum-degree ordering of them reads ([`Self::pairs`]:
     /// entries of its upper triangle, `[row, column]`, repeats allowed, no diagonal) on the
     /// dirty groups numbered `0..d`: their rows, and the clique each clean subtree leaves on
-    /// the dirty groups around it. `None` when the rows cannot be matched (a row of more than
-    /// two groups, or no last analysis) or more than `max_dirty` groups are dirty; else `d`.
+    /// the dirty groups around it. `None`, for a fresh ordering, when there is no last
+    /// analysis, when it is time for a fresh one ([`Self::FRESH_EVERY`], and
+    /// [`Self::SKIP_AFTER_TOO_DIRTY`] analyses after one with more than `max_dirty` groups
+    /// dirty) or the rows cannot be matched (a row of more than two groups); else `d`.
     pub(crate) fn dirty_graph(
         &mut self,
         j: &ConstraintRows,
@@ -136,9 +154,18 @@ impl KeptOrdering {
         groups: usize,
         max_dirty: usize,
     ) -> Option<usize> {
-        if self.parent.is_empty() || !groups_of_rows(j, group_of, &mut self.row_groups) {
+        self.grouped = false;
+        if self.skip > 0 {
+            self.skip -= 1;
             return None;
         }
+        if self.parent.is_empty() || self.since_fresh + 1 >= Self::FRESH_EVERY {
+            return None;
+        }
+        if !groups_of_rows(j, group_of, &mut self.row_groups) {
+            return None;
+        }
+        self.grouped = true;
         let places = self.parent.len();
         // Each new group's old place, by its rows found among the last analysis's, slot by
         // slot; a group whose rows disagree, or that has a row not found, is dirty (`NONE`).
@@ -226,6 +253,7 @@ impl KeptOrdering {
             }
         }
         if self.dirty.len() > max_dirty {
+            self.skip = Self::SKIP_AFTER_TOO_DIRTY;
             return None;
         }
         let d = self.dirty.len() as Index;
@@ -321,15 +349,14 @@ impl KeptOrdering {
         for (k, &g) in perm.iter().enumerate() {
             perm_inv[g as usize] = k as Index;
         }
-        // (With nothing dirty, the ordering is the last one: no step away from a fresh one.)
-        if !dirty_order.is_empty() {
-            self.since_fresh += 1;
-        }
+        self.since_fresh += 1;
     }
 
     /// Keeps the analysis just made of `j` (groups `group_of`, at places `place`), whose
     /// elimination tree's parent of place `k` is `parent(k)`; `fresh` when every group was
-    /// ordered afresh. Forgets it when a row touches more than two groups.
+    /// ordered afresh. Forgets it when a row touches more than two groups, and when the next
+    /// analysis will not look at it ([`Self::SKIP_AFTER_TOO_DIRTY`]). Call after
+    /// [`Self::dirty_graph`] of the same analysis (whose rows' groups it takes).
     pub(crate) fn keep(
         &mut self,
         j: &ConstraintRows,
@@ -338,7 +365,11 @@ impl KeptOrdering {
         parent: impl Fn(usize) -> Option<usize>,
         fresh: bool,
     ) {
-        if !groups_of_rows(j, group_of, &mut self.row_groups) {
+        if fresh {
+            self.since_fresh = 0;
+        }
+        let grouped = std::mem::take(&mut self.grouped);
+        if self.skip > 0 || !(grouped || groups_of_rows(j, group_of, &mut self.row_groups)) {
             self.forget();
             return;
         }
@@ -362,23 +393,27 @@ impl KeptOrdering {
         self.parent.clear();
         self.parent
             .extend((0..places).map(|k| parent(k).map_or(NONE, |q| q as Index)));
-        if fresh {
-            self.since_fresh = 0;
-        }
     }
 }
 
 impl KeptOrdering {
-    /// `[since_fresh, P, (rows, parent) of each of the P places, R, (key_high, key_low,
-    /// place₀, place₁) of each of the R rows]` (−1 for `NONE`; each key in two 32-bit halves,
-    /// exact in an f64), appended to `out`; nothing without a last analysis.
-    pub(crate) fn memory(&self, out: &mut Vec<f64>) {
-        if self.parent.is_empty() {
-            return;
-        }
+    /// `[since_fresh, skip, G, (structure_high, structure_low, the group at each of the G
+    /// places)?, P, (rows, parent) of each of the P places, R, (key_high, key_low, place₀,
+    /// place₁) of each of the R rows]` appended to `out` (−1 for `NONE`; keys and the hash in
+    /// two 32-bit halves, exact in an f64): `last`, the last analysis's structure's hash and
+    /// ordering (`G` = 0 without one), then the analysis kept for the next ordering (`P` =
+    /// `R` = 0 without one). An ordering read from a memory and not yet taken stands for the
+    /// last analysis's.
+    pub(crate) fn memory(&self, last: Option<(u64, &[Index])>, out: &mut Vec<f64>) {
         let number = |x: Index| if x == NONE { -1.0 } else { f64::from(x) };
-        out.reserve(3 + 2 * self.parent.len() + 4 * self.rows.len());
-        out.push(self.since_fresh as f64);
+        let last = self.restored.as_ref().map(|(h, o)| (*h, &o[..])).or(last);
+        let groups = last.map_or(0, |l| l.1.len());
+        out.reserve(8 + groups + 2 * self.parent.len() + 4 * self.rows.len());
+        out.extend([self.since_fresh as f64, self.skip as f64, groups as f64]);
+        if let Some((hash, order)) = last {
+            out.extend([(hash >> 32) as f64, (hash as u32) as f64]);
+            out.extend(order.iter().map(|&g| f64::from(g)));
+        }
         out.push(self.parent.len() as f64);
         for (&c, &q) in self.count.iter().zip(&self.parent) {
             out.extend([f64::from(c), number(q)]);
@@ -395,13 +430,14 @@ impl KeptOrdering {
     }
 
     /// Takes what [`Self::memory`] gave at the start of `memory`, and returns the rest;
-    /// `None`, with the last analysis forgotten, when it is not one (a parent not after its
-    /// child, a place out of range, a damaged count).
+    /// `None`, with everything forgotten, when it is not one (an ordering that is not a
+    /// permutation, a parent not after its child, a place out of range, a damaged count).
     pub(crate) fn set_memory<'a>(&mut self, memory: &'a [f64]) -> Option<&'a [f64]> {
         self.forget();
         let rest = self.read_memory(memory);
         if rest.is_none() {
             self.forget();
+            (self.since_fresh, self.skip, self.restored) = (0, 0, None);
         }
         rest
     }
@@ -418,7 +454,27 @@ impl KeptOrdering {
                     .map(|x| x as Index)
             }
         };
-        let (&since, memory) = memory.split_first()?;
+        let half = |x: f64| whole(x).map(|x| x as u64);
+        let (head, memory) = memory.split_at_checked(3)?;
+        let (since, skip, groups) = (whole(head[0])?, whole(head[1])?, whole(head[2])? as usize);
+        let memory = if groups > 0 {
+            let (numbers, memory) = memory.split_at_checked(groups.checked_add(2)?)?;
+            let hash = (half(numbers[0])? << 32) | half(numbers[1])?;
+            let mut seen = vec![false; groups];
+            let mut order = Vec::with_capacity(groups);
+            for &g in &numbers[2..] {
+                let g = index(g, groups).filter(|&g| g != NONE)?;
+                if std::mem::replace(&mut seen[g as usize], true) {
+                    return None;
+                }
+                order.push(g);
+            }
+            self.restored = Some((hash, order));
+            memory
+        } else {
+            self.restored = None;
+            memory
+        };
         let (&places, memory) = memory.split_first()?;
         let places = whole(places)? as usize;
         let (numbers, memory) = memory.split_at_checked(places.checked_mul(2)?)?;
@@ -434,14 +490,29 @@ impl KeptOrdering {
         let rows = whole(rows)? as usize;
         let (numbers, memory) = memory.split_at_checked(rows.checked_mul(4)?)?;
         for r in numbers.chunks_exact(4) {
-            let key = ((whole(r[0])? as u64) << 32) | whole(r[1])? as u64;
+            let key = (half(r[0])? << 32) | half(r[1])?;
             self.rows
                 .push((key, [index(r[2], places)?, index(r[3], places)?]));
         }
         self.rows.sort_unstable_by_key(|r| r.0);
-        self.since_fresh = whole(since)? as usize;
+        (self.since_fresh, self.skip) = (since as usize, skip as usize);
         Some(memory)
     }
+}
+
+/// A hash of a structure of `J` (its rows' starts and columns, as the last analysis keeps
+/// them): whether a restored solver's first analysis is of the structure the original
+/// analysed last.
+pub(crate) fn structure_hash(row_starts: &[Index], columns: &[Index]) -> u64 {
+    let words = row_starts.iter().chain(columns).map(|&x| u64::from(x));
+    fnv(std::iter::once(row_starts.len() as u64).chain(words))
+}
+
+/// FNV-1a over 64-bit words.
+pub(crate) fn fnv(words: impl IntoIterator<Item = u64>) -> u64 {
+    words.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, x| {
+        (h ^ x).wrapping_mul(0x0000_0100_0000_01b3)
+    })
 }
 
 /// The position of `key` among `kept`'s (sorted by `key_of`), searched from `from` on by
@@ -476,13 +547,15 @@ pub(crate) fn find_from<T>(
     found
 }
 
-/// A crowd of `people` disks of radius 0.5 wandering in a box toward its centre, `steps`
-/// steps of it: at each, the rows of the pairs closer than 1.2 (by key, lower person first)
-/// and one floor row per disk, the gaps `b` over a step of 0.1 s, and each disk's push `w`.
+/// A crowd of `people` disks of radius 0.5 wandering in a box toward its centre, each moving
+/// up to `jitter` either way a step, `steps` steps of it: at each, the rows of the pairs
+/// closer than 1.2 (by key, lower person first) and one floor row per disk, the gaps `b`
+/// over a step of 0.1 s, and each disk's push `w`.
 #[cfg(test)]
 pub(crate) fn wandering_crowd(
     people: usize,
     steps: usize,
+    jitter: f64,
     seed: u64,
 ) -> Vec<(ConstraintRows, Vec<f64>, Vec<f64>)> {
     use rand::{Rng, SeedableRng};
@@ -529,7 +602,7 @@ pub(crate) fn wandering_crowd(
             for x in &mut at {
                 let pull = [0.5 * side - x[0], 0.5 * side - x[1]];
                 for c in 0..2 {
-                    x[c] += 0.002 * pull[c] + rng.random_range(-0.01..0.01);
+                    x[c] += 0.002 * pull[c] + rng.random_range(-jitter..jitter);
                 }
             }
             (j, b, w)
@@ -601,10 +674,15 @@ mod tests {
     fn a_kept_analysis_survives_its_memory_and_a_damaged_one_is_forgotten() {
         let k = kept(&[(9, 0, Some(1)), (3, 1, Some(2)), (1 << 40, 2, None)], 3);
         let mut memory = vec![];
-        k.memory(&mut memory);
-        // since, P, 3 × (rows, parent), R, 3 × (key halves, places)
-        assert_eq!(memory.len(), 2 + 6 + 1 + 12);
-        assert_eq!(&memory[2..8], &[1.0, 1.0, 2.0, 2.0, 2.0, -1.0]);
+        k.memory(Some((0xABCD_0000_1234, &[2, 0, 1])), &mut memory);
+        // since, skip, G, hash halves, 3 groups, P, 3 × (rows, parent), R, 3 × (key
+        // halves, places)
+        assert_eq!(memory.len(), 3 + 2 + 3 + 1 + 6 + 1 + 12);
+        assert_eq!(
+            &memory[3..8],
+            &[0xABCD as f64, 0x1234 as f64, 2.0, 0.0, 1.0]
+        );
+        assert_eq!(&memory[9..15], &[1.0, 1.0, 2.0, 2.0, 2.0, -1.0]);
         let mut tail = memory.clone();
         tail.extend([7.0, 8.0]);
         let mut restored = KeptOrdering::default();
@@ -618,17 +696,34 @@ mod tests {
             ),
             (&k.rows, &k.count, &k.parent, k.since_fresh)
         );
+        // Until taken, the ordering read stands for the last analysis's.
         let mut again = vec![];
-        restored.memory(&mut again);
+        restored.memory(None, &mut again);
         assert_eq!(again, memory);
-        // A parent not after its child, a place beyond the places, a count cut short, a
-        // key not a whole number: forgotten, no panic.
-        for (at, value) in [(5, 0.0), (9 + 3, 3.0), (8, 9.0), (9 + 1, 0.5)] {
+        assert_eq!(
+            restored.take_restored(),
+            Some((0xABCD_0000_1234, vec![2, 0, 1]))
+        );
+        assert_eq!(restored.take_restored(), None);
+        // An ordering that is not a permutation, a parent not after its child, a place
+        // beyond the places, a count cut short, a key not a whole number: forgotten, no
+        // panic.
+        for (at, value) in [
+            (6, 2.0),
+            (7, 3.0),
+            (12, 0.0),
+            (16 + 3, 3.0),
+            (15, 9.0),
+            (16 + 1, 0.5),
+        ] {
             let mut damaged = memory.clone();
             damaged[at] = value;
             let mut r = kept(&[(1, 0, None)], 1);
             assert_eq!(r.set_memory(&damaged), None, "memory[{at}] = {value}");
-            assert!(!r.is_kept() && !r.usable(), "memory[{at}] = {value}");
+            assert!(
+                !r.is_kept() && r.take_restored().is_none(),
+                "memory[{at}] = {value}"
+            );
         }
         let mut r = KeptOrdering::default();
         assert_eq!(r.set_memory(&memory[..memory.len() - 1]), None);

@@ -1882,15 +1882,18 @@ fn the_kept_iterate_starts_the_next_solve_closer_and_survives_a_restore() {
     assert_eq!(run(&mut fresh, &mut fresh_sol, 0), cold_its[0]);
 }
 
-/// Where the interior point's memory goes on after its kept analysis (`[−4, since, P, P
-/// pairs, R, R quadruples]`, crate::reorder), 0 without one.
+/// Where the interior point's memory goes on after what its orderings depend on (`[−4,
+/// since, skip, G, (hash halves, G groups)?, P, P pairs, R, R quadruples]`, crate::reorder),
+/// 0 without it.
 fn after_kept_analysis(memory: &[f64]) -> usize {
     if memory.first() != Some(&-4.0) {
         return 0;
     }
-    let places = memory[2] as usize;
-    let rows = memory[3 + 2 * places] as usize;
-    4 + 2 * places + 4 * rows
+    let groups = memory[3] as usize;
+    let at = 4 + if groups > 0 { 2 + groups } else { 0 };
+    let places = memory[at] as usize;
+    let rows = memory[at + 1 + 2 * places] as usize;
+    at + 2 + 2 * places + 4 * rows
 }
 
 /// Regression: the polish's history (whether the last solve settled, its back-off) was not in
