@@ -9,13 +9,14 @@
 //! rows, a person's x and y, or, for the interior point, on only the groups whose rows
 //! changed since the last analysis, the others keeping their places ([`crate::reorder`]);
 //! on large patterns whose minimum-degree factor is dense, a crush's, also nested dissection
-//! ([`crate::dissection`]), keeping whichever factor costs fewer multiply–adds), the permuted *pattern* of `I + Jᵀ D J` with the slot where each
-//! row's products land (in 2×2 blocks: each row's blocks and where its coefficients are, so
-//! that the factorization adds `J`'s rows into each column as it reaches it, with no
-//! assembled copy of the matrix), and the *symbolic* Cholesky — all three redone only when the
-//! columns of `J`'s rows change — and the *numeric* factorization, as often as the caller
-//! asks. The matrix is `shift·I + Jᵀ D J` for any `D ≥ 0` and `shift > 0`: symmetric positive
-//! definite however redundant the rows are. Scratch memory is sized at each symbolic analysis.
+//! ([`crate::dissection`]), keeping whichever factor costs fewer multiply–adds), the
+//! permuted *pattern* of `I + Jᵀ D J` with the slot where each row's products land (in 2×2
+//! blocks: each row's blocks and where its coefficients are, so that the factorization adds
+//! `J`'s rows into each column as it reaches it, with no assembled copy of the matrix), and
+//! the *symbolic* Cholesky — all three redone only when the columns of `J`'s rows change —
+//! and the *numeric* factorization, as often as the caller asks. The matrix is
+//! `shift·I + Jᵀ D J` for any `D ≥ 0` and `shift > 0`: symmetric positive definite however
+//! redundant the rows are. Scratch memory is sized at each symbolic analysis.
 
 use std::time::Instant;
 

@@ -50,9 +50,9 @@ pub(crate) struct KeptOrdering {
     // Scratch: each new row's groups; each new group's old place and row count; each old
     // place's new group (if clean), whether it is dirty and its subtree; each new group's
     // index among the dirty ones; the graph's entries; the dirty groups; the (subtree, dirty
-    // group) pairs of rows, where each subtree's start among them sorted by subtree (and a
-    // copy advanced while they are sorted), them sorted; the last subtree each dirty group
-    // was seen around.
+    // group) pairs of the rows between them, then by subtree (a counting sort: each
+    // subtree's start, a cursor per subtree, the dirty groups in subtree order); the last
+    // subtree each dirty group was found around.
     row_groups: Vec<[Index; 2]>,
     place_of: Vec<Index>,
     rows_of: Vec<Index>,
