@@ -406,7 +406,10 @@ impl KeptOrdering {
     /// last analysis's.
     pub(crate) fn memory(&self, last: Option<(u64, &[Index])>, out: &mut Vec<f64>) {
         let number = |x: Index| if x == NONE { -1.0 } else { f64::from(x) };
-        let last = self.restored.as_ref().map(|(h, o)| (*h, &o[..])).or(last);
+        // (No groups, no ordering: the same whatever came before.)
+        let last = (self.restored.as_ref().map(|(h, o)| (*h, &o[..])))
+            .or(last)
+            .filter(|l| !l.1.is_empty());
         let groups = last.map_or(0, |l| l.1.len());
         out.reserve(8 + groups + 2 * self.parent.len() + 4 * self.rows.len());
         out.extend([self.since_fresh as f64, self.skip as f64, groups as f64]);
