@@ -459,6 +459,12 @@ impl Simulation {
         self.speed_factor = factor;
     }
 
+    /// The factor on every desired speed (1 unless [`set_speed_factor`](Self::set_speed_factor)
+    /// or a restored state changed it).
+    pub fn speed_factor(&self) -> f64 {
+        self.speed_factor
+    }
+
     /// The desired velocities at the current configuration, `[u0x, u0y, …]`, into `out`.
     pub fn desired_velocities(&mut self, out: &mut [f64]) {
         use moreau_core::Field;

@@ -266,3 +266,32 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
     let err = sim.restore(&newer).unwrap_err().to_string();
     assert!(err.contains("state.format"), "{err}");
 }
+
+/// The factor on the desired speeds is part of the state: a fresh simulation (factor 1)
+/// restored from a slowed run reads the slowed run's factor and goes on as it did.
+#[test]
+fn a_restored_state_keeps_the_speed_factor() {
+    let scene = room(2.0);
+    let slowed = |t: f64| {
+        let mut sim = Simulation::new(scene.clone()).unwrap();
+        sim.set_speed_factor(0.5);
+        sim.advance_to(t, &mut Log::default()).unwrap();
+        sim
+    };
+    let whole = slowed(2.0);
+    let saved = slowed(1.0).state();
+    let mut restored = Simulation::new(scene.clone()).unwrap();
+    assert_eq!(restored.speed_factor(), 1.0);
+    restored.restore(&saved).unwrap();
+    assert_eq!(restored.speed_factor(), 0.5);
+    restored.advance_to(2.0, &mut Log::default()).unwrap();
+    let bits = |q: &[f64]| q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(
+        bits(restored.frame().positions),
+        bits(whole.frame().positions)
+    );
+    // At full speed the same scene ends elsewhere: the factor was not lost on the way.
+    let mut full = Simulation::new(scene).unwrap();
+    full.advance_to(2.0, &mut Log::default()).unwrap();
+    assert_ne!(bits(full.frame().positions), bits(whole.frame().positions));
+}

@@ -407,8 +407,7 @@ impl PySimulation {
     /// The factor on every desired speed, from the next step on (1 at the start).
     #[getter]
     fn speed_factor(&self) -> PyResult<f64> {
-        let inner = self.lock()?;
-        Ok(inner.sim.state().speed_factor)
+        Ok(self.lock()?.sim.speed_factor())
     }
 
     /// Sets the factor on every desired speed, from the next step on. NaN, infinite and
