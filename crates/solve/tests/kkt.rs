@@ -2215,3 +2215,110 @@ fn a_crush_asked_below_its_rounding_floor_stops_there() {
     assert!(rep.iterations < 40, "{rep:?}");
     assert!(rep.gap < 1e-10 && rep.violation <= 1e-10, "{rep:?}");
 }
+
+/// A solver's memory comes back from a saved run's file, i.e. from the user: damaged at any
+/// place in any way (not a number, infinite, negative, fractional, huge, a count one off) or
+/// cut short anywhere, the interior point and `auto` take what they can read and forget the
+/// rest: never a panic, and every answer after it converged and certified to the target,
+/// on the structure the memory was made on (where a kept ordering and factorization are
+/// taken) and on the next one.
+#[test]
+fn a_solvers_memory_damaged_anywhere_is_forgotten_or_used_never_a_panic() {
+    let (w, rows, b) = crush(10, 0.995);
+    let moves: Vec<[f64; 2]> = (0..100)
+        .map(|i| {
+            [
+                1e-3 * ((i * 7 % 11) as f64 - 5.0),
+                1e-3 * ((i * 5 % 13) as f64 - 6.0),
+            ]
+        })
+        .collect();
+    let (_, moved_rows, moved_b) = crush_moved(10, 0.995, &moves);
+    let t = Target {
+        gap: 1e-8,
+        violation: 1e-9,
+    };
+    let push = |k: usize| -> Vec<f64> { w.iter().map(|x| (1.0 + 0.02 * k as f64) * x).collect() };
+    type Make = fn() -> Box<dyn ProjectionSolver>;
+    let kinds: [(&str, Make); 2] = [
+        ("interior", || {
+            Box::new(InteriorPoint::new(InteriorPointSettings::default()).unwrap())
+        }),
+        ("auto", || {
+            Box::new(AutoSolver::new(AutoSettings::default()).unwrap())
+        }),
+    ];
+    for (name, make) in kinds {
+        // A memory with everything in it: a kept iterate, a kept analysis and ordering, a
+        // settled crush's polish with its factorization and start.
+        let mut solver = make();
+        let mut sol = ProjectionSolution::default();
+        for k in 0..4 {
+            let w = push(k);
+            let p = ProjectionProblem {
+                w: &w,
+                jacobian: &rows,
+                b: &b,
+            };
+            let rep = solver.solve(&p, t, &mut sol).unwrap();
+            assert_eq!(
+                rep.status,
+                SolveStatus::Converged,
+                "{name} push {k}: {rep:?}"
+            );
+        }
+        let memory = solver.memory();
+        assert!(memory.len() > 1000, "{name}: {} numbers", memory.len());
+        let (w4, w5) = (push(4), push(5));
+        let next = [
+            ProjectionProblem {
+                w: &w4,
+                jacobian: &rows,
+                b: &b,
+            },
+            ProjectionProblem {
+                w: &w5,
+                jacobian: &moved_rows,
+                b: &moved_b,
+            },
+        ];
+        let restored_runs = |memory: &[f64], what: &str| {
+            let mut restored = make();
+            restored.set_memory(memory);
+            let mut s = sol.clone();
+            for (k, p) in next.iter().enumerate() {
+                let rep = restored.solve(p, t, &mut s).unwrap();
+                let case = format!("{name}, {what}, solve {k}");
+                assert_eq!(rep.status, SolveStatus::Converged, "{case}: {rep:?}");
+                check_report(p, t, &case, &s, &rep);
+            }
+        };
+        restored_runs(&memory, "as saved");
+        let mut rng = ChaCha8Rng::seed_from_u64(30);
+        let len = memory.len();
+        // The head (layouts, counts) everywhere, the body at places drawn at random.
+        let mut places: Vec<usize> = (0..len.min(48)).collect();
+        places.extend((0..600).map(|_| rng.random_range(0..len)));
+        for &at in &places {
+            let was = memory[at];
+            for bad in [
+                f64::NAN,
+                f64::INFINITY,
+                -1.0,
+                -7.0,
+                0.5,
+                1e300,
+                4_294_967_296.0,
+                was + 1.0,
+                was - 1.0,
+            ] {
+                let mut damaged = memory.clone();
+                damaged[at] = bad;
+                restored_runs(&damaged, &format!("number {at} ({was}) set to {bad}"));
+            }
+        }
+        for cut in (0..len).step_by(len / 40 + 1) {
+            restored_runs(&memory[..cut], &format!("cut to {cut} numbers"));
+        }
+    }
+}
