@@ -62,6 +62,22 @@ pub struct CellGrid {
     sort: PairSort,
 }
 
+/// The side of the grid's cells: `cell`, or larger where `(span₀/c + 1)(span₁/c + 1)` cells of
+/// that side would exceed `budget`, then the smallest side within it (the positive root of
+/// that quadratic in `1/c`, in the form that neither cancels nor overflows: a crowd spread
+/// over a long thin strip, or people far apart, get at most about `budget` cells, not one
+/// side's worth of them squared).
+fn cell_within_budget(cell: f64, span: [f64; 2], budget: f64) -> f64 {
+    let cells = |c: f64| (span[0] / c + 1.0) * (span[1] / c + 1.0);
+    if cells(cell) <= budget {
+        return cell;
+    }
+    // (s₀s₁) x² + (s₀ + s₁) x − (budget − 1) = 0 for x = 1/c.
+    let (sum, product, room) = (span[0] + span[1], span[0] * span[1], budget - 1.0);
+    let x = 2.0 * room / (sum + (sum * sum + 4.0 * product * room).sqrt());
+    cell.max(1.0 / x)
+}
+
 impl BroadPhase for CellGrid {
     fn name(&self) -> &'static str {
         "grid"
@@ -81,12 +97,12 @@ impl BroadPhase for CellGrid {
             }
         }
         // Pairs within the margin are at most one cell apart; cap the cell count at ~4N.
-        let mut cell = (2.0 * rmax + margin.max(0.0)).max(1e-12);
         let span = [(hi[0] - lo[0]).max(0.0), (hi[1] - lo[1]).max(0.0)];
-        let budget = (4 * n + 16) as f64;
-        if (span[0] / cell + 1.0) * (span[1] / cell + 1.0) > budget {
-            cell = cell.max(((span[0] + cell) * (span[1] + cell) / budget).sqrt());
-        }
+        let cell = cell_within_budget(
+            (2.0 * rmax + margin.max(0.0)).max(1e-12),
+            span,
+            (4 * n + 16) as f64,
+        );
         let nx = (span[0] / cell) as usize + 1;
         let ny = (span[1] / cell) as usize + 1;
         // Counting sort of the disks by cell.

@@ -1012,8 +1012,19 @@ impl Simulation {
         if let Err((field, value, reason)) = self.events.check(&state.inflow, &state.people) {
             return refuse(field, value, reason);
         }
-        if !(state.time.is_finite() && state.speed_factor.is_finite()) {
-            return refuse("time", state.time.to_string(), "must be finite".into());
+        if !(state.time.is_finite() && state.time >= 0.0) {
+            return refuse(
+                "time",
+                state.time.to_string(),
+                "must be finite and ≥ 0 (a run starts at 0)".into(),
+            );
+        }
+        if !(state.speed_factor.is_finite() && state.speed_factor >= 0.0) {
+            return refuse(
+                "speed_factor",
+                state.speed_factor.to_string(),
+                "must be finite and ≥ 0".into(),
+            );
         }
         let mut stepping = self.stepping.clone();
         stepping.restore(&state.stepping)?;

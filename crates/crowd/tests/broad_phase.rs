@@ -149,3 +149,37 @@ fn the_grid_on_threads_finds_the_same_pairs() {
         }
     }
 }
+
+/// Regression: a person very far from the rest (a damaged saved state put one at 10³⁰⁶ m)
+/// made the grid's cap on its cell count size one side by the other's span: the cell count
+/// overflowed and the grid indexed out of its cells (a panic). Far apart, or spread along a
+/// strip a million times longer than wide, the grid finds the brute-force pairs.
+#[test]
+fn a_person_far_from_the_rest_does_not_overflow_the_grid() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let crowd = |rng: &mut ChaCha8Rng, n: usize, len: f64| -> Vec<f64> {
+        (0..n)
+            .flat_map(|_| [rng.random_range(0.0..len), rng.random_range(0.0..2.0)])
+            .collect()
+    };
+    let mut cases = Vec::new();
+    for far in [1e306, -1e306, 1e154, 1e30] {
+        let mut pos = crowd(&mut rng, 200, 20.0);
+        pos[10] = far;
+        cases.push(pos);
+    }
+    let mut both = crowd(&mut rng, 200, 20.0);
+    (both[10], both[11], both[20], both[21]) = (1e300, -1e300, -1e300, 1e300);
+    cases.push(both);
+    cases.push(crowd(&mut rng, 300, 2e6));
+    for (k, pos) in cases.iter().enumerate() {
+        let radius = vec![0.25; pos.len() / 2];
+        let (mut a, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+        BruteForce.pairs(pos, &radius, 0.1, &mut a);
+        CellGrid::default().pairs(pos, &radius, 0.1, &mut b);
+        TreeBroadPhase::default().pairs(pos, &radius, 0.1, &mut c);
+        assert_eq!(a, b, "grid, case {k}");
+        assert_eq!(a, c, "tree, case {k}");
+        assert!(k == 5 || !a.is_empty(), "case {k} has pairs to find");
+    }
+}

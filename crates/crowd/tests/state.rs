@@ -261,6 +261,23 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
         err.contains("state.inflow") && err.contains("1 sources"),
         "{err}"
     );
+    // Regression: a speed factor that is not a number was refused as `state.time` (with the
+    // time's value), and a negative one, or a time before the run's start, was taken (from
+    // t = −65,536 s the run stepped for minutes to reach the next frame).
+    for (field, forge) in [
+        (
+            "state.speed_factor = NaN",
+            (|s: &mut SimState| s.speed_factor = f64::NAN) as fn(&mut SimState),
+        ),
+        ("state.speed_factor = -0.5", |s| s.speed_factor = -0.5),
+        ("state.time = -65536", |s| s.time = -65536.0),
+        ("state.time = inf", |s| s.time = f64::INFINITY),
+    ] {
+        let mut forged = state.clone();
+        forge(&mut forged);
+        let err = sim.restore(&forged).unwrap_err().to_string();
+        assert!(err.contains(field), "{field}: {err}");
+    }
     let mut newer = state.clone();
     newer.format += 1;
     let err = sim.restore(&newer).unwrap_err().to_string();
@@ -294,4 +311,42 @@ fn a_restored_state_keeps_the_speed_factor() {
     let mut full = Simulation::new(scene).unwrap();
     full.advance_to(2.0, &mut Log::default()).unwrap();
     assert_ne!(bits(full.frame().positions), bits(whole.frame().positions));
+}
+
+/// A saved state is a file the user hands back: with any byte of it damaged (flipped,
+/// zeroed, set to the largest exponents), it is refused with the field and value named (when
+/// read, restored or stepped), or it runs; never a panic. At least some damaged states must be refused, and the undamaged one
+/// must run, or the test proves nothing.
+#[test]
+fn a_state_damaged_at_any_byte_is_refused_or_runs_never_a_panic() {
+    use rand::{Rng, SeedableRng};
+    let scene = room(1.2);
+    let mut sim = Simulation::new(scene.clone()).unwrap();
+    sim.advance_to(1.0, &mut ()).unwrap();
+    let bytes = sim.state().to_bytes();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
+    let mut places: Vec<usize> = (0..bytes.len().min(64)).collect();
+    places.extend((0..300).map(|_| rng.random_range(0..bytes.len())));
+    let (mut refused, mut ran) = (0, 0);
+    for &at in &places {
+        for bad in [bytes[at] ^ 0xff, 0x00, 0x7f, 0xff, bytes[at] ^ 0x01] {
+            let mut damaged = bytes.clone();
+            damaged[at] = bad;
+            let outcome = std::panic::catch_unwind(|| {
+                let state = SimState::from_bytes(&damaged).map_err(|e| e.to_string())?;
+                let mut again = Simulation::new(scene.clone()).unwrap();
+                again.restore(&state).map_err(|e| e.to_string())?;
+                again.advance_to(1.2, &mut ()).map_err(|e| e.to_string())
+            });
+            match outcome {
+                Ok(Ok(())) => ran += 1,
+                Ok(Err(why)) => {
+                    assert!(!why.is_empty(), "byte {at} set to {bad}: an empty error");
+                    refused += 1;
+                }
+                Err(_) => panic!("byte {at} of {} set to {bad:#04x}: a panic", bytes.len()),
+            }
+        }
+    }
+    assert!(refused > 0 && ran > 0, "{refused} refused, {ran} ran");
 }
