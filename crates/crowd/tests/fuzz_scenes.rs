@@ -1,6 +1,6 @@
-//! A fuzzer of scene files (proptest): mutated scenes go through the parser, validation and
-//! `Simulation::new` and five steps, which must answer every one with a value or an error, never a panic
-//! or an abort, and quickly. The seeds are `tests/fuzz-corpus/*.toml` (valid scenes and every
+//! A fuzzer of scene files (proptest): mutated scenes go through the parser, validation,
+//! `Simulation::new` and five steps, which must answer every one with a value or an error,
+//! never a panic or an abort, and quickly. The seeds are `tests/fuzz-corpus/*.toml` (valid scenes and every
 //! input that once crashed); the mutations set numbers to extremes (0, −1, NaN, ±∞, 1e±308,
 //! 5e-324, …), drop and retype keys, move polygon vertices, and cut or splice the text.
 //! Failing cases are kept in `fuzz_scenes.proptest-regressions` (replayed first).
