@@ -315,38 +315,57 @@ fn a_restored_state_keeps_the_speed_factor() {
 
 /// A saved state is a file the user hands back: with any byte of it damaged (flipped,
 /// zeroed, set to the largest exponents), it is refused with the field and value named (when
-/// read, restored or stepped), or it runs; never a panic. At least some damaged states must be refused, and the undamaged one
-/// must run, or the test proves nothing.
+/// read, restored or stepped), or it runs; never a panic. The paper's room mid-run, and a
+/// gate mid-inflow with its queue held (inflow and release state). At least some damaged
+/// states must be refused, and some must run, or the test proves nothing. (Every byte of
+/// both, `MOREAU_STATE_FUZZ_ALL=1`: no panic in session 30.)
 #[test]
 fn a_state_damaged_at_any_byte_is_refused_or_runs_never_a_panic() {
     use rand::{Rng, SeedableRng};
-    let scene = room(1.2);
-    let mut sim = Simulation::new(scene.clone()).unwrap();
-    sim.advance_to(1.0, &mut ()).unwrap();
-    let bytes = sim.state().to_bytes();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
-    let mut places: Vec<usize> = (0..bytes.len().min(64)).collect();
-    places.extend((0..300).map(|_| rng.random_range(0..bytes.len())));
-    let (mut refused, mut ran) = (0, 0);
-    for &at in &places {
-        for bad in [bytes[at] ^ 0xff, 0x00, 0x7f, 0xff, bytes[at] ^ 0x01] {
-            let mut damaged = bytes.clone();
-            damaged[at] = bad;
-            let outcome = std::panic::catch_unwind(|| {
-                let state = SimState::from_bytes(&damaged).map_err(|e| e.to_string())?;
-                let mut again = Simulation::new(scene.clone()).unwrap();
-                again.restore(&state).map_err(|e| e.to_string())?;
-                again.advance_to(1.2, &mut ()).map_err(|e| e.to_string())
-            });
-            match outcome {
-                Ok(Ok(())) => ran += 1,
-                Ok(Err(why)) => {
-                    assert!(!why.is_empty(), "byte {at} set to {bad}: an empty error");
-                    refused += 1;
+    let all = std::env::var_os("MOREAU_STATE_FUZZ_ALL").is_some();
+    for (scene, (t_save, t_end)) in [
+        (room(1.2), (1.0, 1.2)),
+        (gate_with_a_queue(2.0), (1.0, 1.3)),
+    ] {
+        let mut sim = Simulation::new(scene.clone()).unwrap();
+        sim.advance_to(t_save, &mut ()).unwrap();
+        let bytes = sim.state().to_bytes();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
+        let mut places: Vec<usize> = (0..bytes.len().min(64)).collect();
+        if all {
+            places.extend(64..bytes.len());
+        } else {
+            places.extend((0..300).map(|_| rng.random_range(0..bytes.len())));
+        }
+        let (mut refused, mut ran) = (0, 0);
+        for &at in &places {
+            for bad in [bytes[at] ^ 0xff, 0x00, 0x7f, 0xff, bytes[at] ^ 0x01] {
+                let mut damaged = bytes.clone();
+                damaged[at] = bad;
+                let outcome = std::panic::catch_unwind(|| {
+                    let state = SimState::from_bytes(&damaged).map_err(|e| e.to_string())?;
+                    let mut again = Simulation::new(scene.clone()).unwrap();
+                    again.restore(&state).map_err(|e| e.to_string())?;
+                    again.advance_to(t_end, &mut ()).map_err(|e| e.to_string())
+                });
+                let name = &scene.name;
+                match outcome {
+                    Ok(Ok(())) => ran += 1,
+                    Ok(Err(why)) => {
+                        assert!(!why.is_empty(), "{name}: byte {at} set to {bad}: no reason");
+                        refused += 1;
+                    }
+                    Err(_) => panic!(
+                        "{name}: byte {at} of {} set to {bad:#04x}: a panic",
+                        bytes.len()
+                    ),
                 }
-                Err(_) => panic!("byte {at} of {} set to {bad:#04x}: a panic", bytes.len()),
             }
         }
+        assert!(
+            refused > 0 && ran > 0,
+            "{}: {refused} refused, {ran} ran",
+            scene.name
+        );
     }
-    assert!(refused > 0 && ran > 0, "{refused} refused, {ran} ran");
 }
