@@ -1,0 +1,348 @@
+//! Random sequences of FMI 3 calls with hostile arguments, as a careless master makes them
+//! (steps before initialization, times that go back, NaN and 1e308 values, unknown value
+//! references, wrong array lengths, states taken, set, freed, serialized and read back
+//! damaged, resets and terminations at any point): every call answers with a status, never a
+//! crash or an abort of the host, every refused call leaves a log line, and each instance is
+//! freed cleanly at the end. The FMU runs inside the master's process (fmpy's Python): a
+//! panic that escaped it, or memory it corrupted, would take the host down.
+//!
+//! Deterministic sequences (seeded by their number) for `MOREAU_FUZZ_SECONDS` (default 10 s).
+// The FMI entry points are a C ABI: raw pointers, as a host passes them.
+#![allow(unsafe_code)]
+
+use std::cell::RefCell;
+use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use moreau_fmu::fmi3;
+use moreau_fmu::model::vr;
+
+/// A small deterministic generator (SplitMix64): the crate has no random-number dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn seed(seed: u64) -> Self {
+        Self(seed)
+    }
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    /// Uniform in `0..n` (`n > 0`).
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    /// Uniform in `[lo, hi)`.
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn chance(&mut self, p: f64) -> bool {
+        self.uniform(0.0, 1.0) < p
+    }
+}
+
+const OK: c_int = 0;
+const WARNING: c_int = 1;
+const DISCARD: c_int = 2;
+const ERROR: c_int = 3;
+
+unsafe extern "C" fn log3(env: *mut c_void, _: c_int, _: *const c_char, message: *const c_char) {
+    // SAFETY: `env` is the sequence's log, alive as long as the instance; `message` a
+    // NUL-terminated string of the FMU's.
+    unsafe {
+        let lines = &*(env as *const RefCell<Vec<String>>);
+        lines
+            .borrow_mut()
+            .push(CStr::from_ptr(message).to_string_lossy().into_owned());
+    }
+}
+
+fn scenes() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data"))
+}
+
+/// A number a careless master might pass.
+fn hostile(rng: &mut Rng) -> f64 {
+    const SPECIAL: [f64; 14] = [
+        0.0,
+        -0.0,
+        -1.0,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e308,
+        -1e308,
+        5e-324,
+        1e-300,
+        0.05,
+        0.1,
+        0.5,
+        1.0,
+    ];
+    match rng.below(3) {
+        0 => SPECIAL[rng.below(SPECIAL.len())],
+        1 => rng.uniform(-2.0, 3.0),
+        _ => rng.uniform(0.0, 0.4),
+    }
+}
+
+/// A value reference: the model's, the moving body's, or none of them.
+fn reference(rng: &mut Rng) -> u32 {
+    const REFS: [u32; 20] = [
+        vr::SCENE,
+        vr::STEP,
+        vr::EPS_KAPPA,
+        vr::DESIRED_SPEED_FACTOR,
+        vr::N_PEOPLE,
+        vr::SPEED_FACTOR,
+        vr::DOOR_OPEN,
+        vr::PEOPLE_INSIDE,
+        vr::PEOPLE_EVACUATED,
+        vr::MEAN_SPEED,
+        vr::MIN_GAP,
+        vr::EPS,
+        vr::INTERNAL_STEPS,
+        vr::POSITIONS,
+        vr::RADII,
+        vr::MOVING,
+        vr::MOVING + 1,
+        0,
+        999,
+        u32::MAX,
+    ];
+    REFS[rng.below(REFS.len())]
+}
+
+/// One instance driven by `calls` random calls (most sequences first set a scene and
+/// initialize, as a master would, then go astray); adds the calls answered OK, by kind, to
+/// `answered`.
+fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
+    let mut rng = Rng::seed(seed);
+    let log = Box::new(RefCell::new(Vec::<String>::new()));
+    let token = CString::new(*fmi3::TOKEN).unwrap();
+    let c = fmi3::fmi3InstantiateCoSimulation(
+        c"fuzz".as_ptr(),
+        token.as_ptr(),
+        std::ptr::null(),
+        false,
+        rng.chance(0.5),
+        false,
+        false,
+        std::ptr::null(),
+        0,
+        &*log as *const RefCell<Vec<String>> as *mut c_void,
+        Some(log3),
+        std::ptr::null(),
+    );
+    assert!(!c.is_null(), "seed {seed}: not instantiated");
+    let scenes = scenes();
+    let scene_names = [
+        scenes.join("fmu/corridor-door.toml"),
+        scenes.join("scenes/room-60.toml"),
+        scenes.join("scenes/no-such-scene.toml"),
+        scenes.join("fmu"),
+    ];
+    let mut states: Vec<*mut c_void> = Vec::new();
+    let mut saved: Vec<Vec<u8>> = Vec::new();
+    let mut t = 0.0;
+    let proper = rng.chance(0.8);
+    for call in 0..calls {
+        let before = log.borrow().len();
+        let what = match call {
+            0 if proper => 0,
+            1 if proper => 1,
+            2 if proper => 2,
+            _ => rng.below(KINDS),
+        };
+        // SAFETY (every call below): the instance is live; each array holds as many values
+        // as its length says; each state pointer is a live state of this instance.
+        let status = unsafe {
+            match what {
+                0 => {
+                    let text = match if call == 0 {
+                        rng.below(2)
+                    } else {
+                        rng.below(5)
+                    } {
+                        4 => CString::new("\u{1}garbage").unwrap(),
+                        k => CString::new(scene_names[k].display().to_string()).unwrap(),
+                    };
+                    let p = text.as_ptr();
+                    fmi3::fmi3SetString(c, &vr::SCENE, 1, &p, 1)
+                }
+                1 => {
+                    t = if rng.chance(0.8) {
+                        0.0
+                    } else {
+                        hostile(&mut rng)
+                    };
+                    let stop = hostile(&mut rng);
+                    fmi3::fmi3EnterInitializationMode(
+                        c,
+                        rng.chance(0.5),
+                        hostile(&mut rng),
+                        t,
+                        rng.chance(0.3),
+                        stop,
+                    )
+                }
+                2 => fmi3::fmi3ExitInitializationMode(c),
+                3 | 4 | 5 => {
+                    let at = if rng.chance(0.85) {
+                        t
+                    } else {
+                        hostile(&mut rng)
+                    };
+                    let h = if rng.chance(0.8) {
+                        [0.05, 0.1, 0.25][rng.below(3)]
+                    } else {
+                        hostile(&mut rng)
+                    };
+                    let (mut event, mut terminate, mut early, mut last) =
+                        (false, false, false, 0.0);
+                    let status = fmi3::fmi3DoStep(
+                        c,
+                        at,
+                        h,
+                        true,
+                        &mut event,
+                        &mut terminate,
+                        &mut early,
+                        &mut last,
+                    );
+                    if status == OK {
+                        t = at + h;
+                    }
+                    status
+                }
+                6 | 7 => {
+                    let r = reference(&mut rng);
+                    let n = rng.below(3);
+                    let values: Vec<f64> = (0..n).map(|_| hostile(&mut rng)).collect();
+                    fmi3::fmi3SetFloat64(c, &r, 1, values.as_ptr(), n)
+                }
+                8 => {
+                    let refs: Vec<u32> = (0..rng.below(4)).map(|_| reference(&mut rng)).collect();
+                    let mut out = vec![0.0; rng.below(200)];
+                    fmi3::fmi3GetFloat64(c, refs.as_ptr(), refs.len(), out.as_mut_ptr(), out.len())
+                }
+                9 => {
+                    let r = reference(&mut rng);
+                    let mut out = vec![0; rng.below(3)];
+                    fmi3::fmi3GetInt32(c, &r, 1, out.as_mut_ptr(), out.len())
+                }
+                10 => {
+                    let mut state = std::ptr::null_mut();
+                    let status = fmi3::fmi3GetFMUState(c, &mut state);
+                    if status == OK {
+                        states.push(state);
+                    }
+                    status
+                }
+                11 if !states.is_empty() => {
+                    let s = states[rng.below(states.len())];
+                    fmi3::fmi3SetFMUState(c, s)
+                }
+                12 if !states.is_empty() => {
+                    let mut s = states.swap_remove(rng.below(states.len()));
+                    fmi3::fmi3FreeFMUState(c, &mut s)
+                }
+                13 if !states.is_empty() => {
+                    let s = states[rng.below(states.len())];
+                    let mut size = 0;
+                    let status = fmi3::fmi3SerializedFMUStateSize(c, s, &mut size);
+                    if status != OK {
+                        status
+                    } else {
+                        let mut bytes = vec![0u8; size];
+                        let status = fmi3::fmi3SerializeFMUState(c, s, bytes.as_mut_ptr(), size);
+                        if status == OK {
+                            saved.push(bytes);
+                        }
+                        status
+                    }
+                }
+                14 if !saved.is_empty() => {
+                    let mut bytes = saved[rng.below(saved.len())].clone();
+                    match rng.below(3) {
+                        0 => {}
+                        1 => {
+                            for _ in 0..1 + rng.below(3) {
+                                let at = rng.below(bytes.len());
+                                bytes[at] = rng.next() as u8;
+                            }
+                        }
+                        _ => bytes.truncate(rng.below(bytes.len())),
+                    }
+                    let mut state = std::ptr::null_mut();
+                    let status =
+                        fmi3::fmi3DeserializeFMUState(c, bytes.as_ptr(), bytes.len(), &mut state);
+                    if status == OK {
+                        states.push(state);
+                    }
+                    status
+                }
+                15 => {
+                    t = 0.0;
+                    fmi3::fmi3Reset(c)
+                }
+                16 => fmi3::fmi3Terminate(c),
+                _ => fmi3::fmi3EnterConfigurationMode(c),
+            }
+        };
+        assert!(
+            [OK, WARNING, DISCARD, ERROR].contains(&status),
+            "seed {seed}, call {call} ({what}): status {status}"
+        );
+        if status == ERROR {
+            assert!(
+                log.borrow().len() > before,
+                "seed {seed}, call {call} ({what}): refused without a log line"
+            );
+        } else if status == OK {
+            answered[what] += 1;
+        }
+    }
+    for mut s in states {
+        // SAFETY: live states of this instance, each freed once.
+        let status = unsafe { fmi3::fmi3FreeFMUState(c, &mut s) };
+        assert_eq!(status, OK, "seed {seed}: freeing a state");
+    }
+    // SAFETY: the live instance, freed once; its log outlives it.
+    unsafe { fmi3::fmi3FreeInstance(c) };
+    drop(log);
+}
+
+/// The kinds of call a sequence draws from (see `sequence`).
+const KINDS: usize = 17;
+
+#[test]
+fn random_call_sequences_get_a_status_and_a_log_line_never_a_crash() {
+    let seconds: u64 = std::env::var("MOREAU_FUZZ_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(10);
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    let (mut sequences, mut answered) = (0u64, [0; KINDS]);
+    while sequences < 8 || Instant::now() < deadline {
+        sequence(sequences, 60, &mut answered);
+        sequences += 1;
+    }
+    println!("{sequences} sequences of 60 calls; answered OK, by kind: {answered:?}");
+    // Not all refused: the sequences step, and take, set, serialize and read back states.
+    for (kind, what) in [
+        (3, "steps"),
+        (10, "states taken"),
+        (11, "states set"),
+        (14, "states read back"),
+    ] {
+        assert!(
+            answered[kind] > 0,
+            "no {what} in {sequences} sequences: {answered:?}"
+        );
+    }
+}
