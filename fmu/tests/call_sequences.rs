@@ -191,7 +191,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     )
                 }
                 2 => fmi3::fmi3ExitInitializationMode(c),
-                3 | 4 | 5 => {
+                3..=5 => {
                     let at = if rng.chance(0.85) {
                         t
                     } else {
