@@ -1,12 +1,14 @@
-//! Random sequences of FMI 3 calls with hostile arguments, as a careless master makes them
-//! (steps before initialization, times that go back, NaN and 1e308 values, unknown value
-//! references, wrong array lengths, states taken, set, freed, serialized and read back
+//! Random sequences of FMI 2 and FMI 3 calls with hostile arguments, as a careless master
+//! makes them (steps before initialization, times that go back, NaN and 1e308 values, unknown
+//! value references, wrong array lengths, states taken, set, freed, serialized and read back
 //! damaged, resets and terminations at any point): every call answers with a status, never a
-//! crash or an abort of the host, every refused call leaves a log line, and each instance is
-//! freed cleanly at the end. The FMU runs inside the master's process (fmpy's Python): a
-//! panic that escaped it, or memory it corrupted, would take the host down.
+//! crash or an abort of the host nor a panic (FATAL), every refused FMI 3 call leaves a log
+//! line (FMI 2's logger is variadic, which a Rust test cannot be), and each instance is freed
+//! cleanly at the end. The FMU runs inside the master's process (fmpy's Python): a panic that
+//! escaped it, or memory it corrupted, would take the host down.
 //!
-//! Deterministic sequences (seeded by their number) for `MOREAU_FUZZ_SECONDS` (default 10 s).
+//! Deterministic sequences (seeded by their number; even ones FMI 3, odd ones FMI 2) for
+//! `MOREAU_FUZZ_SECONDS` (default 10 s).
 // The FMI entry points are a C ABI: raw pointers, as a host passes them.
 #![allow(unsafe_code)]
 
@@ -15,8 +17,8 @@ use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use moreau_fmu::fmi3;
 use moreau_fmu::model::vr;
+use moreau_fmu::{fmi2, fmi3};
 
 /// A small deterministic generator (SplitMix64): the crate has no random-number dependency.
 struct Rng(u64);
@@ -117,28 +119,276 @@ fn reference(rng: &mut Rng) -> u32 {
     REFS[rng.below(REFS.len())]
 }
 
+/// `fmi2CallbackFunctions` as a host lays it out. No logger: an FMI 2 logger is variadic, which
+/// stable Rust cannot define (FMI 3's sequences check the log lines).
+#[repr(C)]
+struct Callbacks2 {
+    logger: *const c_void,
+    allocate_memory: *const c_void,
+    free_memory: *const c_void,
+    step_finished: *const c_void,
+    component_environment: *mut c_void,
+}
+
+/// The calls of a sequence in FMI 2 or FMI 3 (`c` the instance).
+///
+/// # Safety (every method)
+/// `c` is a live instance of this FMI version; each state a live state of it.
+#[derive(Clone, Copy)]
+struct Api {
+    v3: bool,
+    c: *mut c_void,
+}
+
+#[allow(clippy::too_many_arguments)]
+impl Api {
+    unsafe fn set_scene(self, text: &CStr) -> c_int {
+        let p = text.as_ptr();
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3SetString(self.c, &vr::SCENE, 1, &p, 1)
+            } else {
+                fmi2::fmi2SetString(self.c, &vr::SCENE, 1, &p)
+            }
+        }
+    }
+    fn enter_initialization(self, tol: Option<f64>, start: f64, stop: Option<f64>) -> c_int {
+        let (tol_defined, tol) = (tol.is_some(), tol.unwrap_or(0.0));
+        let (stop_defined, stop) = (stop.is_some(), stop.unwrap_or(0.0));
+        if self.v3 {
+            fmi3::fmi3EnterInitializationMode(self.c, tol_defined, tol, start, stop_defined, stop)
+        } else {
+            let status = fmi2::fmi2SetupExperiment(
+                self.c,
+                c_int::from(tol_defined),
+                tol,
+                start,
+                c_int::from(stop_defined),
+                stop,
+            );
+            if status != OK {
+                return status;
+            }
+            fmi2::fmi2EnterInitializationMode(self.c)
+        }
+    }
+    fn exit_initialization(self) -> c_int {
+        if self.v3 {
+            fmi3::fmi3ExitInitializationMode(self.c)
+        } else {
+            fmi2::fmi2ExitInitializationMode(self.c)
+        }
+    }
+    unsafe fn do_step(self, t: f64, h: f64) -> c_int {
+        if self.v3 {
+            let (mut event, mut terminate, mut early, mut last) = (false, false, false, 0.0);
+            unsafe {
+                fmi3::fmi3DoStep(
+                    self.c,
+                    t,
+                    h,
+                    true,
+                    &mut event,
+                    &mut terminate,
+                    &mut early,
+                    &mut last,
+                )
+            }
+        } else {
+            fmi2::fmi2DoStep(self.c, t, h, 1)
+        }
+    }
+    /// `values` to reference `r` (FMI 3: one reference and all the values; FMI 2: the
+    /// reference once for each value).
+    unsafe fn set_real(self, r: u32, values: &[f64]) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3SetFloat64(self.c, &r, 1, values.as_ptr(), values.len())
+            } else {
+                let refs = vec![r; values.len()];
+                fmi2::fmi2SetReal(self.c, refs.as_ptr(), refs.len(), values.as_ptr())
+            }
+        }
+    }
+    /// FMI 3: `out` of any length; FMI 2: one value a reference.
+    unsafe fn get_real(self, refs: &[u32], out: &mut Vec<f64>) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3GetFloat64(
+                    self.c,
+                    refs.as_ptr(),
+                    refs.len(),
+                    out.as_mut_ptr(),
+                    out.len(),
+                )
+            } else {
+                out.resize(refs.len(), 0.0);
+                fmi2::fmi2GetReal(self.c, refs.as_ptr(), refs.len(), out.as_mut_ptr())
+            }
+        }
+    }
+    unsafe fn get_integer(self, refs: &[u32], out: &mut Vec<i32>) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3GetInt32(
+                    self.c,
+                    refs.as_ptr(),
+                    refs.len(),
+                    out.as_mut_ptr(),
+                    out.len(),
+                )
+            } else {
+                out.resize(refs.len(), 0);
+                fmi2::fmi2GetInteger(self.c, refs.as_ptr(), refs.len(), out.as_mut_ptr())
+            }
+        }
+    }
+    unsafe fn get_state(self, state: &mut *mut c_void) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3GetFMUState(self.c, state)
+            } else {
+                fmi2::fmi2GetFMUstate(self.c, state)
+            }
+        }
+    }
+    unsafe fn set_state(self, state: *mut c_void) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3SetFMUState(self.c, state)
+            } else {
+                fmi2::fmi2SetFMUstate(self.c, state)
+            }
+        }
+    }
+    unsafe fn free_state(self, state: &mut *mut c_void) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3FreeFMUState(self.c, state)
+            } else {
+                fmi2::fmi2FreeFMUstate(self.c, state)
+            }
+        }
+    }
+    /// The state's bytes, or the status that refused them.
+    unsafe fn serialize(self, state: *mut c_void) -> Result<Vec<u8>, c_int> {
+        let mut size = 0;
+        unsafe {
+            let status = if self.v3 {
+                fmi3::fmi3SerializedFMUStateSize(self.c, state, &mut size)
+            } else {
+                fmi2::fmi2SerializedFMUstateSize(self.c, state, &mut size)
+            };
+            if status != OK {
+                return Err(status);
+            }
+            let mut bytes = vec![0u8; size];
+            let status = if self.v3 {
+                fmi3::fmi3SerializeFMUState(self.c, state, bytes.as_mut_ptr(), size)
+            } else {
+                fmi2::fmi2SerializeFMUstate(self.c, state, bytes.as_mut_ptr() as *mut c_char, size)
+            };
+            if status == OK { Ok(bytes) } else { Err(status) }
+        }
+    }
+    unsafe fn deserialize(self, bytes: &[u8], state: &mut *mut c_void) -> c_int {
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3DeserializeFMUState(self.c, bytes.as_ptr(), bytes.len(), state)
+            } else {
+                fmi2::fmi2DeSerializeFMUstate(
+                    self.c,
+                    bytes.as_ptr() as *const c_char,
+                    bytes.len(),
+                    state,
+                )
+            }
+        }
+    }
+    fn reset(self) -> c_int {
+        if self.v3 {
+            fmi3::fmi3Reset(self.c)
+        } else {
+            fmi2::fmi2Reset(self.c)
+        }
+    }
+    fn terminate(self) -> c_int {
+        if self.v3 {
+            fmi3::fmi3Terminate(self.c)
+        } else {
+            fmi2::fmi2Terminate(self.c)
+        }
+    }
+    /// FMI 3: enter configuration mode; FMI 2: ask for the last successful time.
+    unsafe fn other(self) -> c_int {
+        if self.v3 {
+            fmi3::fmi3EnterConfigurationMode(self.c)
+        } else {
+            let mut last = 0.0;
+            // (fmi2LastSuccessfulTime = 2)
+            unsafe { fmi2::fmi2GetRealStatus(self.c, 2, &mut last) }
+        }
+    }
+    fn free(self) {
+        // SAFETY: see the type; freed once, by the caller's last use.
+        unsafe {
+            if self.v3 {
+                fmi3::fmi3FreeInstance(self.c)
+            } else {
+                fmi2::fmi2FreeInstance(self.c)
+            }
+        }
+    }
+}
+
 /// One instance driven by `calls` random calls (most sequences first set a scene and
 /// initialize, as a master would, then go astray); adds the calls answered OK, by kind, to
 /// `answered`.
 fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
     let mut rng = Rng::seed(seed);
     let log = Box::new(RefCell::new(Vec::<String>::new()));
-    let token = CString::new(*fmi3::TOKEN).unwrap();
-    let c = fmi3::fmi3InstantiateCoSimulation(
-        c"fuzz".as_ptr(),
-        token.as_ptr(),
-        std::ptr::null(),
-        false,
-        rng.chance(0.5),
-        false,
-        false,
-        std::ptr::null(),
-        0,
-        &*log as *const RefCell<Vec<String>> as *mut c_void,
-        Some(log3),
-        std::ptr::null(),
-    );
+    let v3 = seed.is_multiple_of(2);
+    let c = if v3 {
+        let token = CString::new(*fmi3::TOKEN).unwrap();
+        fmi3::fmi3InstantiateCoSimulation(
+            c"fuzz".as_ptr(),
+            token.as_ptr(),
+            std::ptr::null(),
+            false,
+            rng.chance(0.5),
+            false,
+            false,
+            std::ptr::null(),
+            0,
+            &*log as *const RefCell<Vec<String>> as *mut c_void,
+            Some(log3),
+            std::ptr::null(),
+        )
+    } else {
+        let guid = CString::new(*fmi2::GUID).unwrap();
+        let callbacks = Callbacks2 {
+            logger: std::ptr::null(),
+            allocate_memory: std::ptr::null(),
+            free_memory: std::ptr::null(),
+            step_finished: std::ptr::null(),
+            component_environment: std::ptr::null_mut(),
+        };
+        // SAFETY: the strings and the callbacks (laid out as fmi2CallbackFunctions) live
+        // through the call.
+        unsafe {
+            fmi2::fmi2Instantiate(
+                c"fuzz".as_ptr(),
+                1,
+                guid.as_ptr(),
+                std::ptr::null(),
+                &callbacks as *const Callbacks2 as *const fmi2::CallbackFunctions,
+                0,
+                c_int::from(rng.chance(0.5)),
+            )
+        }
+    };
     assert!(!c.is_null(), "seed {seed}: not instantiated");
+    let api = Api { v3, c };
     let scenes = scenes();
     let scene_names = [
         scenes.join("fmu/corridor-door.toml"),
@@ -171,8 +421,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                         4 => CString::new("\u{1}garbage").unwrap(),
                         k => CString::new(scene_names[k].display().to_string()).unwrap(),
                     };
-                    let p = text.as_ptr();
-                    fmi3::fmi3SetString(c, &vr::SCENE, 1, &p, 1)
+                    api.set_scene(&text)
                 }
                 1 => {
                     t = if rng.chance(0.8) {
@@ -180,17 +429,11 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     } else {
                         hostile(&mut rng)
                     };
-                    let stop = hostile(&mut rng);
-                    fmi3::fmi3EnterInitializationMode(
-                        c,
-                        rng.chance(0.5),
-                        hostile(&mut rng),
-                        t,
-                        rng.chance(0.3),
-                        stop,
-                    )
+                    let tol = rng.chance(0.5).then(|| hostile(&mut rng));
+                    let stop = rng.chance(0.3).then(|| hostile(&mut rng));
+                    api.enter_initialization(tol, t, stop)
                 }
-                2 => fmi3::fmi3ExitInitializationMode(c),
+                2 => api.exit_initialization(),
                 3..=5 => {
                     let at = if rng.chance(0.85) {
                         t
@@ -202,18 +445,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     } else {
                         hostile(&mut rng)
                     };
-                    let (mut event, mut terminate, mut early, mut last) =
-                        (false, false, false, 0.0);
-                    let status = fmi3::fmi3DoStep(
-                        c,
-                        at,
-                        h,
-                        true,
-                        &mut event,
-                        &mut terminate,
-                        &mut early,
-                        &mut last,
-                    );
+                    let status = api.do_step(at, h);
                     if status == OK {
                         t = at + h;
                     }
@@ -223,21 +455,21 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     let r = reference(&mut rng);
                     let n = rng.below(3);
                     let values: Vec<f64> = (0..n).map(|_| hostile(&mut rng)).collect();
-                    fmi3::fmi3SetFloat64(c, &r, 1, values.as_ptr(), n)
+                    api.set_real(r, &values)
                 }
                 8 => {
                     let refs: Vec<u32> = (0..rng.below(4)).map(|_| reference(&mut rng)).collect();
                     let mut out = vec![0.0; rng.below(200)];
-                    fmi3::fmi3GetFloat64(c, refs.as_ptr(), refs.len(), out.as_mut_ptr(), out.len())
+                    api.get_real(&refs, &mut out)
                 }
                 9 => {
-                    let r = reference(&mut rng);
+                    let refs: Vec<u32> = (0..rng.below(3)).map(|_| reference(&mut rng)).collect();
                     let mut out = vec![0; rng.below(3)];
-                    fmi3::fmi3GetInt32(c, &r, 1, out.as_mut_ptr(), out.len())
+                    api.get_integer(&refs, &mut out)
                 }
                 10 => {
                     let mut state = std::ptr::null_mut();
-                    let status = fmi3::fmi3GetFMUState(c, &mut state);
+                    let status = api.get_state(&mut state);
                     if status == OK {
                         states.push(state);
                     }
@@ -245,25 +477,20 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                 }
                 11 if !states.is_empty() => {
                     let s = states[rng.below(states.len())];
-                    fmi3::fmi3SetFMUState(c, s)
+                    api.set_state(s)
                 }
                 12 if !states.is_empty() => {
                     let mut s = states.swap_remove(rng.below(states.len()));
-                    fmi3::fmi3FreeFMUState(c, &mut s)
+                    api.free_state(&mut s)
                 }
                 13 if !states.is_empty() => {
                     let s = states[rng.below(states.len())];
-                    let mut size = 0;
-                    let status = fmi3::fmi3SerializedFMUStateSize(c, s, &mut size);
-                    if status != OK {
-                        status
-                    } else {
-                        let mut bytes = vec![0u8; size];
-                        let status = fmi3::fmi3SerializeFMUState(c, s, bytes.as_mut_ptr(), size);
-                        if status == OK {
+                    match api.serialize(s) {
+                        Ok(bytes) => {
                             saved.push(bytes);
+                            OK
                         }
-                        status
+                        Err(status) => status,
                     }
                 }
                 14 if !saved.is_empty() => {
@@ -279,8 +506,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                         _ => bytes.truncate(rng.below(bytes.len())),
                     }
                     let mut state = std::ptr::null_mut();
-                    let status =
-                        fmi3::fmi3DeserializeFMUState(c, bytes.as_ptr(), bytes.len(), &mut state);
+                    let status = api.deserialize(&bytes, &mut state);
                     if status == OK {
                         states.push(state);
                     }
@@ -288,17 +514,17 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                 }
                 15 => {
                     t = 0.0;
-                    fmi3::fmi3Reset(c)
+                    api.reset()
                 }
-                16 => fmi3::fmi3Terminate(c),
-                _ => fmi3::fmi3EnterConfigurationMode(c),
+                16 => api.terminate(),
+                _ => api.other(),
             }
         };
         assert!(
             [OK, WARNING, DISCARD, ERROR].contains(&status),
             "seed {seed}, call {call} ({what}): status {status}"
         );
-        if status == ERROR {
+        if status == ERROR && v3 {
             assert!(
                 log.borrow().len() > before,
                 "seed {seed}, call {call} ({what}): refused without a log line"
@@ -309,11 +535,11 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
     }
     for mut s in states {
         // SAFETY: live states of this instance, each freed once.
-        let status = unsafe { fmi3::fmi3FreeFMUState(c, &mut s) };
+        let status = unsafe { api.free_state(&mut s) };
         assert_eq!(status, OK, "seed {seed}: freeing a state");
     }
-    // SAFETY: the live instance, freed once; its log outlives it.
-    unsafe { fmi3::fmi3FreeInstance(c) };
+    // (Its log outlives it.)
+    api.free();
     drop(log);
 }
 
