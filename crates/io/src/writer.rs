@@ -798,6 +798,34 @@ impl RunWriter {
         } else {
             None
         };
+        // Each mark counts rows written before the state was saved: a mark beyond its
+        // dataset's rows is a damaged file, refused before anything is cut back.
+        let mut beyond = vec![
+            ("people", marks.people, PEOPLE_ID, people_id.size()),
+            ("frames", marks.frames, FRAME_TIME, frame_time.size()),
+            ("steps", marks.steps, STEPS, steps.size()),
+            ("exits", marks.exits, EXITS, exits.size()),
+            (
+                "trajectory_rows",
+                marks.trajectory_rows,
+                TRAJECTORY,
+                trajectory.size(),
+            ),
+        ];
+        if let Some((rows, _)) = &contacts {
+            beyond.push(("contact_rows", marks.contact_rows, CONTACTS, rows.size()));
+        }
+        if let Some((mark, value, dataset, rows)) =
+            beyond.into_iter().find(|&(_, value, _, rows)| value > rows)
+        {
+            return Err(IoError::Layout {
+                path: partial,
+                what: format!(
+                    "the saved state's mark '{STATE}/{mark}' = {value} is beyond the {rows} \
+                     rows of '{dataset}' (a damaged file: nothing was changed)"
+                ),
+            });
+        }
         // The people of the saved frame (rows of people who entered after it are dropped).
         let n = marks.people;
         if n > header.radii.len() {

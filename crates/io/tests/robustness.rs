@@ -417,3 +417,63 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
     assert!(f.positions(0).unwrap()[4..].iter().all(|x| x.is_nan()));
     assert_eq!(f.trajectory().unwrap().len(), 2 + 3 + 4 + 5 + 6);
 }
+
+/// Regression: the saved state's marks (how many rows each dataset had when the state was
+/// saved) were taken as they were, so a damaged mark beyond its dataset's rows made resuming
+/// grow the dataset with empty rows instead of cutting it back. Now it is refused, naming the
+/// mark, its value and the dataset, and the file keeps every frame it had.
+#[test]
+fn a_saved_states_mark_beyond_its_dataset_is_refused_and_changes_nothing() {
+    let (n, path) = (3, scratch("damaged-mark.h5"));
+    {
+        let mut w = RunWriter::create(&path, &header(n, true), Overwrite::Never).unwrap();
+        for k in 0..3 {
+            write_frame(&mut w, k, n).unwrap();
+            w.save_state(b"state").unwrap();
+        }
+        write_frame(&mut w, 3, n).unwrap();
+        std::mem::forget(w);
+    }
+    let _ = std::fs::remove_file(moreau_io::lock_path(&path));
+    let partial = partial_path(&path);
+    // (As the writer opens it: the killed writer's handle is still open in this process.)
+    let open_rw = || {
+        let mut b = hdf5::File::with_options();
+        b.with_fapl(|p| p.file_locking(false));
+        b.open_rw(&partial).unwrap()
+    };
+    for (mark, value, dataset) in [
+        ("frames", 99u64, "frames/time"),
+        ("trajectory_rows", 1_000_000, "trajectory"),
+        ("contact_rows", 7_000, "contacts"),
+    ] {
+        let before = {
+            let f = open_rw();
+            let attr = f.group("state").unwrap().attr(mark).unwrap();
+            let before: u64 = attr.read_scalar().unwrap();
+            attr.write_scalar(&value).unwrap();
+            before
+        };
+        let err = RunWriter::resume(&path, Overwrite::Never)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(&format!("'state/{mark}' = {value}")) && err.contains(dataset),
+            "{err}"
+        );
+        let f = RunFile::open(&partial).unwrap();
+        assert_eq!(f.frame_times().unwrap().len(), 4, "{mark}: frames kept");
+        assert_eq!(f.trajectory().unwrap().len(), 4 * n, "{mark}: rows kept");
+        drop(f);
+        let f = open_rw();
+        f.group("state")
+            .unwrap()
+            .attr(mark)
+            .unwrap()
+            .write_scalar(&before)
+            .unwrap();
+    }
+    // Undamaged, it resumes.
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    assert_eq!(r.writer.frames(), 3);
+}
