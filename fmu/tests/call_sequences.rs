@@ -13,12 +13,14 @@
 #![allow(unsafe_code)]
 
 use std::cell::RefCell;
-use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::ffi::{CString, c_void};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use moreau_fmu::model::vr;
-use moreau_fmu::{fmi2, fmi3};
+
+mod support;
+use support::{DISCARD, ERROR, OK, WARNING};
 
 /// A small deterministic generator (SplitMix64): the crate has no random-number dependency.
 struct Rng(u64);
@@ -44,22 +46,6 @@ impl Rng {
     }
     fn chance(&mut self, p: f64) -> bool {
         self.uniform(0.0, 1.0) < p
-    }
-}
-
-const OK: c_int = 0;
-const WARNING: c_int = 1;
-const DISCARD: c_int = 2;
-const ERROR: c_int = 3;
-
-unsafe extern "C" fn log3(env: *mut c_void, _: c_int, _: *const c_char, message: *const c_char) {
-    // SAFETY: `env` is the sequence's log, alive as long as the instance; `message` a
-    // NUL-terminated string of the FMU's.
-    unsafe {
-        let lines = &*(env as *const RefCell<Vec<String>>);
-        lines
-            .borrow_mut()
-            .push(CStr::from_ptr(message).to_string_lossy().into_owned());
     }
 }
 
@@ -119,228 +105,6 @@ fn reference(rng: &mut Rng) -> u32 {
     REFS[rng.below(REFS.len())]
 }
 
-/// `fmi2CallbackFunctions` as a host lays it out. No logger: an FMI 2 logger is variadic, which
-/// stable Rust cannot define (FMI 3's sequences check the log lines).
-#[repr(C)]
-struct Callbacks2 {
-    logger: *const c_void,
-    allocate_memory: *const c_void,
-    free_memory: *const c_void,
-    step_finished: *const c_void,
-    component_environment: *mut c_void,
-}
-
-/// The calls of a sequence in FMI 2 or FMI 3 (`c` the instance).
-///
-/// # Safety (every method)
-/// `c` is a live instance of this FMI version; each state a live state of it.
-#[derive(Clone, Copy)]
-struct Api {
-    v3: bool,
-    c: *mut c_void,
-}
-
-#[allow(clippy::too_many_arguments)]
-impl Api {
-    unsafe fn set_scene(self, text: &CStr) -> c_int {
-        let p = text.as_ptr();
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3SetString(self.c, &vr::SCENE, 1, &p, 1)
-            } else {
-                fmi2::fmi2SetString(self.c, &vr::SCENE, 1, &p)
-            }
-        }
-    }
-    fn enter_initialization(self, tol: Option<f64>, start: f64, stop: Option<f64>) -> c_int {
-        let (tol_defined, tol) = (tol.is_some(), tol.unwrap_or(0.0));
-        let (stop_defined, stop) = (stop.is_some(), stop.unwrap_or(0.0));
-        if self.v3 {
-            fmi3::fmi3EnterInitializationMode(self.c, tol_defined, tol, start, stop_defined, stop)
-        } else {
-            let status = fmi2::fmi2SetupExperiment(
-                self.c,
-                c_int::from(tol_defined),
-                tol,
-                start,
-                c_int::from(stop_defined),
-                stop,
-            );
-            if status != OK {
-                return status;
-            }
-            fmi2::fmi2EnterInitializationMode(self.c)
-        }
-    }
-    fn exit_initialization(self) -> c_int {
-        if self.v3 {
-            fmi3::fmi3ExitInitializationMode(self.c)
-        } else {
-            fmi2::fmi2ExitInitializationMode(self.c)
-        }
-    }
-    unsafe fn do_step(self, t: f64, h: f64) -> c_int {
-        if self.v3 {
-            let (mut event, mut terminate, mut early, mut last) = (false, false, false, 0.0);
-            unsafe {
-                fmi3::fmi3DoStep(
-                    self.c,
-                    t,
-                    h,
-                    true,
-                    &mut event,
-                    &mut terminate,
-                    &mut early,
-                    &mut last,
-                )
-            }
-        } else {
-            fmi2::fmi2DoStep(self.c, t, h, 1)
-        }
-    }
-    /// `values` to reference `r` (FMI 3: one reference and all the values; FMI 2: the
-    /// reference once for each value).
-    unsafe fn set_real(self, r: u32, values: &[f64]) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3SetFloat64(self.c, &r, 1, values.as_ptr(), values.len())
-            } else {
-                let refs = vec![r; values.len()];
-                fmi2::fmi2SetReal(self.c, refs.as_ptr(), refs.len(), values.as_ptr())
-            }
-        }
-    }
-    /// FMI 3: `out` of any length; FMI 2: one value a reference.
-    unsafe fn get_real(self, refs: &[u32], out: &mut Vec<f64>) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3GetFloat64(
-                    self.c,
-                    refs.as_ptr(),
-                    refs.len(),
-                    out.as_mut_ptr(),
-                    out.len(),
-                )
-            } else {
-                out.resize(refs.len(), 0.0);
-                fmi2::fmi2GetReal(self.c, refs.as_ptr(), refs.len(), out.as_mut_ptr())
-            }
-        }
-    }
-    unsafe fn get_integer(self, refs: &[u32], out: &mut Vec<i32>) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3GetInt32(
-                    self.c,
-                    refs.as_ptr(),
-                    refs.len(),
-                    out.as_mut_ptr(),
-                    out.len(),
-                )
-            } else {
-                out.resize(refs.len(), 0);
-                fmi2::fmi2GetInteger(self.c, refs.as_ptr(), refs.len(), out.as_mut_ptr())
-            }
-        }
-    }
-    unsafe fn get_state(self, state: &mut *mut c_void) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3GetFMUState(self.c, state)
-            } else {
-                fmi2::fmi2GetFMUstate(self.c, state)
-            }
-        }
-    }
-    unsafe fn set_state(self, state: *mut c_void) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3SetFMUState(self.c, state)
-            } else {
-                fmi2::fmi2SetFMUstate(self.c, state)
-            }
-        }
-    }
-    unsafe fn free_state(self, state: &mut *mut c_void) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3FreeFMUState(self.c, state)
-            } else {
-                fmi2::fmi2FreeFMUstate(self.c, state)
-            }
-        }
-    }
-    /// The state's bytes, or the status that refused them.
-    unsafe fn serialize(self, state: *mut c_void) -> Result<Vec<u8>, c_int> {
-        let mut size = 0;
-        unsafe {
-            let status = if self.v3 {
-                fmi3::fmi3SerializedFMUStateSize(self.c, state, &mut size)
-            } else {
-                fmi2::fmi2SerializedFMUstateSize(self.c, state, &mut size)
-            };
-            if status != OK {
-                return Err(status);
-            }
-            let mut bytes = vec![0u8; size];
-            let status = if self.v3 {
-                fmi3::fmi3SerializeFMUState(self.c, state, bytes.as_mut_ptr(), size)
-            } else {
-                fmi2::fmi2SerializeFMUstate(self.c, state, bytes.as_mut_ptr() as *mut c_char, size)
-            };
-            if status == OK { Ok(bytes) } else { Err(status) }
-        }
-    }
-    unsafe fn deserialize(self, bytes: &[u8], state: &mut *mut c_void) -> c_int {
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3DeserializeFMUState(self.c, bytes.as_ptr(), bytes.len(), state)
-            } else {
-                fmi2::fmi2DeSerializeFMUstate(
-                    self.c,
-                    bytes.as_ptr() as *const c_char,
-                    bytes.len(),
-                    state,
-                )
-            }
-        }
-    }
-    fn reset(self) -> c_int {
-        if self.v3 {
-            fmi3::fmi3Reset(self.c)
-        } else {
-            fmi2::fmi2Reset(self.c)
-        }
-    }
-    fn terminate(self) -> c_int {
-        if self.v3 {
-            fmi3::fmi3Terminate(self.c)
-        } else {
-            fmi2::fmi2Terminate(self.c)
-        }
-    }
-    /// FMI 3: enter configuration mode; FMI 2: ask for the last successful time.
-    unsafe fn other(self) -> c_int {
-        if self.v3 {
-            fmi3::fmi3EnterConfigurationMode(self.c)
-        } else {
-            let mut last = 0.0;
-            // (fmi2LastSuccessfulTime = 2)
-            unsafe { fmi2::fmi2GetRealStatus(self.c, 2, &mut last) }
-        }
-    }
-    fn free(self) {
-        // SAFETY: see the type; freed once, by the caller's last use.
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3FreeInstance(self.c)
-            } else {
-                fmi2::fmi2FreeInstance(self.c)
-            }
-        }
-    }
-}
-
 /// One instance driven by `calls` random calls (most sequences first set a scene and
 /// initialize, as a master would, then go astray); adds the calls answered OK, by kind, to
 /// `answered`.
@@ -348,47 +112,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
     let mut rng = Rng::seed(seed);
     let log = Box::new(RefCell::new(Vec::<String>::new()));
     let v3 = seed.is_multiple_of(2);
-    let c = if v3 {
-        let token = CString::new(*fmi3::TOKEN).unwrap();
-        fmi3::fmi3InstantiateCoSimulation(
-            c"fuzz".as_ptr(),
-            token.as_ptr(),
-            std::ptr::null(),
-            false,
-            rng.chance(0.5),
-            false,
-            false,
-            std::ptr::null(),
-            0,
-            &*log as *const RefCell<Vec<String>> as *mut c_void,
-            Some(log3),
-            std::ptr::null(),
-        )
-    } else {
-        let guid = CString::new(*fmi2::GUID).unwrap();
-        let callbacks = Callbacks2 {
-            logger: std::ptr::null(),
-            allocate_memory: std::ptr::null(),
-            free_memory: std::ptr::null(),
-            step_finished: std::ptr::null(),
-            component_environment: std::ptr::null_mut(),
-        };
-        // SAFETY: the strings and the callbacks (laid out as fmi2CallbackFunctions) live
-        // through the call.
-        unsafe {
-            fmi2::fmi2Instantiate(
-                c"fuzz".as_ptr(),
-                1,
-                guid.as_ptr(),
-                std::ptr::null(),
-                &callbacks as *const Callbacks2 as *const fmi2::CallbackFunctions,
-                0,
-                c_int::from(rng.chance(0.5)),
-            )
-        }
-    };
-    assert!(!c.is_null(), "seed {seed}: not instantiated");
-    let api = Api { v3, c };
+    let api = support::instantiate(v3, &log, rng.chance(0.5));
     let scenes = scenes();
     let scene_names = [
         scenes.join("fmu/corridor-door.toml"),

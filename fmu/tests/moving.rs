@@ -8,16 +8,17 @@
 #![allow(unsafe_code)]
 
 use std::cell::RefCell;
-use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::ffi::{CString, c_int, c_void};
 use std::path::PathBuf;
 
 use moreau_crowd::{Scene, Simulation};
+use moreau_fmu::fmi3;
 use moreau_fmu::model::vr;
 use moreau_fmu::runtime::Instance;
-use moreau_fmu::{fmi2, fmi3};
 
-const OK: c_int = 0;
-const ERROR: c_int = 3;
+mod support;
+use support::{Api, ERROR, OK};
+
 /// The door's input: the scene's first (and only) moving body.
 const DOOR: u32 = vr::MOVING;
 /// Where the panel closes the corridor (x, m), and the people's radius.
@@ -34,41 +35,9 @@ fn corridor() -> PathBuf {
     ))
 }
 
-/// `fmi2CallbackFunctions` as a host lays it out. No logger: an FMI 2 logger is variadic, which
-/// stable Rust cannot define (the log lines are checked through FMI 3).
-#[repr(C)]
-struct Callbacks2 {
-    logger: *const c_void,
-    allocate_memory: *const c_void,
-    free_memory: *const c_void,
-    step_finished: *const c_void,
-    component_environment: *mut c_void,
-}
-
-const NO_CALLBACKS: Callbacks2 = Callbacks2 {
-    logger: std::ptr::null(),
-    allocate_memory: std::ptr::null(),
-    free_memory: std::ptr::null(),
-    step_finished: std::ptr::null(),
-    component_environment: std::ptr::null_mut(),
-};
-
-/// The FMI 3 logger: the message into the `RefCell<Vec<String>>` behind `env`.
-unsafe extern "C" fn log3(env: *mut c_void, _: c_int, _: *const c_char, message: *const c_char) {
-    // SAFETY: `env` is the log of the `Fmu` that instantiated, alive as long as the instance;
-    // `message` a NUL-terminated string of the FMU's.
-    unsafe {
-        let lines = &*(env as *const RefCell<Vec<String>>);
-        lines
-            .borrow_mut()
-            .push(CStr::from_ptr(message).to_string_lossy().into_owned());
-    }
-}
-
-/// One FMU instance driven through the C API of FMI 2 or FMI 3.
+/// One instance driven through the C API of FMI 2 or FMI 3, every call expected to succeed.
 struct Fmu {
-    v3: bool,
-    c: *mut c_void,
+    api: Api,
     log: Box<RefCell<Vec<String>>>,
 }
 
@@ -76,54 +45,12 @@ impl Fmu {
     /// Instantiated on `scene` (state Instantiated).
     fn instantiate(v3: bool, scene: Option<&str>) -> Self {
         let log = Box::new(RefCell::new(Vec::new()));
-        let name = c"moving";
-        let c = if v3 {
-            let token = CString::new(*fmi3::TOKEN).unwrap();
-            fmi3::fmi3InstantiateCoSimulation(
-                name.as_ptr(),
-                token.as_ptr(),
-                std::ptr::null(),
-                false,
-                false,
-                false,
-                false,
-                std::ptr::null(),
-                0,
-                &*log as *const RefCell<Vec<String>> as *mut c_void,
-                Some(log3),
-                std::ptr::null(),
-            )
-        } else {
-            let guid = CString::new(*fmi2::GUID).unwrap();
-            let callbacks = NO_CALLBACKS;
-            // SAFETY: the strings and the callbacks (laid out as fmi2CallbackFunctions) live
-            // through the call.
-            unsafe {
-                fmi2::fmi2Instantiate(
-                    name.as_ptr(),
-                    1,
-                    guid.as_ptr(),
-                    std::ptr::null(),
-                    &callbacks as *const Callbacks2 as *const fmi2::CallbackFunctions,
-                    0,
-                    0,
-                )
-            }
-        };
-        assert!(!c.is_null());
-        let fmu = Self { v3, c, log };
+        let api = support::instantiate(v3, &log, false);
+        let fmu = Self { api, log };
         if let Some(scene) = scene {
             let text = CString::new(scene).unwrap();
-            let p = text.as_ptr();
-            // SAFETY: one reference, one string, alive through the call.
-            let status = unsafe {
-                if v3 {
-                    fmi3::fmi3SetString(fmu.c, &vr::SCENE, 1, &p, 1)
-                } else {
-                    fmi2::fmi2SetString(fmu.c, &vr::SCENE, 1, &p)
-                }
-            };
-            fmu.ok(status);
+            // SAFETY: the live instance; one string, alive through the call.
+            fmu.ok(unsafe { fmu.api.set_scene(&text) });
         }
         fmu
     }
@@ -136,19 +63,8 @@ impl Fmu {
     }
 
     fn initialize(&mut self) {
-        let status = if self.v3 {
-            fmi3::fmi3EnterInitializationMode(self.c, false, 0.0, 0.0, false, 0.0)
-        } else {
-            self.ok(fmi2::fmi2SetupExperiment(self.c, 0, 0.0, 0.0, 0, 0.0));
-            fmi2::fmi2EnterInitializationMode(self.c)
-        };
-        self.ok(status);
-        let status = if self.v3 {
-            fmi3::fmi3ExitInitializationMode(self.c)
-        } else {
-            fmi2::fmi2ExitInitializationMode(self.c)
-        };
-        self.ok(status);
+        self.ok(self.api.enter_initialization(None, 0.0, None));
+        self.ok(self.api.exit_initialization());
     }
 
     fn ok(&self, status: c_int) {
@@ -156,14 +72,8 @@ impl Fmu {
     }
 
     fn set_real(&mut self, r: u32, x: f64) -> c_int {
-        // SAFETY: one reference, one value.
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3SetFloat64(self.c, &r, 1, &x, 1)
-            } else {
-                fmi2::fmi2SetReal(self.c, &r, 1, &x)
-            }
-        }
+        // SAFETY: the live instance; one reference, one value.
+        unsafe { self.api.set_real(r, &[x]) }
     }
 
     fn set_ok(&mut self, r: u32, x: f64) {
@@ -172,62 +82,33 @@ impl Fmu {
     }
 
     fn get_real(&mut self, r: u32) -> f64 {
-        let mut x = f64::NAN;
-        // SAFETY: one reference, room for one value.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3GetFloat64(self.c, &r, 1, &mut x, 1)
-            } else {
-                fmi2::fmi2GetReal(self.c, &r, 1, &mut x)
-            }
-        };
+        let mut x = vec![f64::NAN];
+        // SAFETY: the live instance; one reference, room for one value.
+        let status = unsafe { self.api.get_real(&[r], &mut x) };
         self.ok(status);
-        x
+        x[0]
     }
 
     fn get_integer(&mut self, r: u32) -> i32 {
-        let mut x = -1;
-        // SAFETY: one reference, room for one value.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3GetInt32(self.c, &r, 1, &mut x, 1)
-            } else {
-                fmi2::fmi2GetInteger(self.c, &r, 1, &mut x)
-            }
-        };
+        let mut x = vec![-1];
+        // SAFETY: the live instance; one reference, room for one value.
+        let status = unsafe { self.api.get_integer(&[r], &mut x) };
         self.ok(status);
-        x
+        x[0]
     }
 
     fn do_step(&mut self, t: f64, h: f64) {
-        let status = if self.v3 {
-            let (mut event, mut terminate, mut early, mut last) = (false, false, false, 0.0);
-            // SAFETY: one value behind each out-pointer.
-            unsafe {
-                fmi3::fmi3DoStep(
-                    self.c,
-                    t,
-                    h,
-                    true,
-                    &mut event,
-                    &mut terminate,
-                    &mut early,
-                    &mut last,
-                )
-            }
-        } else {
-            fmi2::fmi2DoStep(self.c, t, h, 1)
-        };
+        // SAFETY: the live instance.
+        let status = unsafe { self.api.do_step(t, h) };
         self.ok(status);
     }
 
     /// The FMI 3 positions `[n_people][2]` by person id (NaN once gone).
     fn positions(&mut self) -> Vec<f64> {
-        assert!(self.v3);
+        assert!(self.api.v3);
         let mut q = vec![0.0; 2 * PEOPLE];
-        // SAFETY: one reference, room for its 2 × n_people values.
-        let status =
-            unsafe { fmi3::fmi3GetFloat64(self.c, &vr::POSITIONS, 1, q.as_mut_ptr(), q.len()) };
+        // SAFETY: the live instance; one reference, room for its 2 × n_people values.
+        let status = unsafe { self.api.get_real(&[vr::POSITIONS], &mut q) };
         self.ok(status);
         q
     }
@@ -239,7 +120,7 @@ impl Fmu {
             evacuated: self.get_integer(vr::PEOPLE_EVACUATED),
             steps: self.get_integer(vr::INTERNAL_STEPS),
             min_gap: self.get_real(vr::MIN_GAP).to_bits(),
-            positions: if self.v3 {
+            positions: if self.api.v3 {
                 bits(&self.positions())
             } else {
                 Vec::new()
@@ -249,86 +130,37 @@ impl Fmu {
 
     fn get_state(&mut self) -> *mut c_void {
         let mut state = std::ptr::null_mut();
-        // SAFETY: a null slot of ours: the FMU puts a new state there.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3GetFMUState(self.c, &mut state)
-            } else {
-                fmi2::fmi2GetFMUstate(self.c, &mut state)
-            }
-        };
+        // SAFETY: the live instance; a null slot of ours: the FMU puts a new state there.
+        let status = unsafe { self.api.get_state(&mut state) };
         self.ok(status);
         state
     }
 
     fn set_state(&mut self, state: *mut c_void) {
         // SAFETY: a live state of this FMU.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3SetFMUState(self.c, state)
-            } else {
-                fmi2::fmi2SetFMUstate(self.c, state)
-            }
-        };
+        let status = unsafe { self.api.set_state(state) };
         self.ok(status);
     }
 
     fn serialize(&mut self, state: *mut c_void) -> Vec<u8> {
-        let mut size = 0usize;
-        // SAFETY: a live state; a buffer of the size the FMU said.
-        unsafe {
-            if self.v3 {
-                self.ok(fmi3::fmi3SerializedFMUStateSize(self.c, state, &mut size));
-                let mut bytes = vec![0u8; size];
-                self.ok(fmi3::fmi3SerializeFMUState(
-                    self.c,
-                    state,
-                    bytes.as_mut_ptr(),
-                    size,
-                ));
-                bytes
-            } else {
-                self.ok(fmi2::fmi2SerializedFMUstateSize(self.c, state, &mut size));
-                let mut bytes = vec![0u8; size];
-                self.ok(fmi2::fmi2SerializeFMUstate(
-                    self.c,
-                    state,
-                    bytes.as_mut_ptr() as *mut c_char,
-                    size,
-                ));
-                bytes
-            }
-        }
+        // SAFETY: a live state of this FMU.
+        unsafe { self.api.serialize(state) }.unwrap_or_else(|status| {
+            self.ok(status);
+            unreachable!()
+        })
     }
 
     fn deserialize(&mut self, bytes: &[u8]) -> *mut c_void {
         let mut state = std::ptr::null_mut();
-        // SAFETY: the bytes; a null slot of ours.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3DeserializeFMUState(self.c, bytes.as_ptr(), bytes.len(), &mut state)
-            } else {
-                fmi2::fmi2DeSerializeFMUstate(
-                    self.c,
-                    bytes.as_ptr() as *const c_char,
-                    bytes.len(),
-                    &mut state,
-                )
-            }
-        };
+        // SAFETY: the live instance; the bytes; a null slot of ours.
+        let status = unsafe { self.api.deserialize(bytes, &mut state) };
         self.ok(status);
         state
     }
 
     fn free_state(&mut self, mut state: *mut c_void) {
         // SAFETY: a live state of this FMU; freed once.
-        let status = unsafe {
-            if self.v3 {
-                fmi3::fmi3FreeFMUState(self.c, &mut state)
-            } else {
-                fmi2::fmi2FreeFMUstate(self.c, &mut state)
-            }
-        };
+        let status = unsafe { self.api.free_state(&mut state) };
         self.ok(status);
     }
 
@@ -339,14 +171,8 @@ impl Fmu {
 
 impl Drop for Fmu {
     fn drop(&mut self) {
-        // SAFETY: the instance this value made, freed once.
-        unsafe {
-            if self.v3 {
-                fmi3::fmi3FreeInstance(self.c)
-            } else {
-                fmi2::fmi2FreeInstance(self.c)
-            }
-        }
+        // The instance this value made, freed once.
+        self.api.free();
     }
 }
 
@@ -626,7 +452,7 @@ fn bad_values_are_refused_with_a_log_line_naming_the_input_and_the_value() {
     let mut i = 0;
     // SAFETY: one reference, room for one value.
     assert_eq!(
-        unsafe { fmi3::fmi3GetInt32(fmu.c, &DOOR, 1, &mut i, 1) },
+        unsafe { fmi3::fmi3GetInt32(fmu.api.c, &DOOR, 1, &mut i, 1) },
         ERROR
     );
     assert!(
@@ -641,7 +467,7 @@ fn bad_values_are_refused_with_a_log_line_naming_the_input_and_the_value() {
     fmu.do_step(2.0 * H, H);
     assert_eq!(fmu.get_real(DOOR), 0.5);
     // After terminate, inputs are no longer settable (FMI 2 §4.2.4, FMI 3 §4.2).
-    fmu.ok(fmi3::fmi3Terminate(fmu.c));
+    fmu.ok(fmi3::fmi3Terminate(fmu.api.c));
     assert_eq!(fmu.set_real(DOOR, 1.0), ERROR);
     assert!(
         fmu.last_log()
@@ -654,7 +480,7 @@ fn bad_values_are_refused_with_a_log_line_naming_the_input_and_the_value() {
     // In configuration mode only structural parameters are settable; in Instantiated and
     // initialization mode inputs are.
     let mut fmu = Fmu::instantiate(true, Some(&corridor().display().to_string()));
-    fmu.ok(fmi3::fmi3EnterConfigurationMode(fmu.c));
+    fmu.ok(fmi3::fmi3EnterConfigurationMode(fmu.api.c));
     assert_eq!(fmu.set_real(DOOR, 1.0), ERROR);
     assert!(
         fmu.last_log()
@@ -662,7 +488,7 @@ fn bad_values_are_refused_with_a_log_line_naming_the_input_and_the_value() {
         "{}",
         fmu.last_log()
     );
-    fmu.ok(fmi3::fmi3ExitConfigurationMode(fmu.c));
+    fmu.ok(fmi3::fmi3ExitConfigurationMode(fmu.api.c));
     fmu.set_ok(DOOR, 0.25);
 
     // The room has no moving body.
