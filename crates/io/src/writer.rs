@@ -803,6 +803,13 @@ impl RunWriter {
         let mut beyond = vec![
             ("people", marks.people, PEOPLE_ID, people_id.size()),
             ("frames", marks.frames, FRAME_TIME, frame_time.size()),
+            ("frames", marks.frames, FRAME_COUNT, frame_count.size()),
+            (
+                "frames",
+                marks.frames,
+                FRAME_POSITIONS,
+                positions.shape().first().copied().unwrap_or(0),
+            ),
             ("steps", marks.steps, STEPS, steps.size()),
             ("exits", marks.exits, EXITS, exits.size()),
             (
