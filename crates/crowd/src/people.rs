@@ -232,6 +232,21 @@ impl People {
         if let Some(i) = self.position.iter().position(|x| !x.is_finite()) {
             return Err(format!("non-finite position of person index {}", i / 2));
         }
+        // The rules a scene's groups follow (finite radii > 0, finite speeds ≥ 0).
+        if let Some((i, r)) =
+            (self.radius.iter().enumerate()).find(|(_, r)| !(r.is_finite() && **r > 0.0))
+        {
+            return Err(format!(
+                "radius {r} of person index {i}: must be finite and > 0"
+            ));
+        }
+        if let Some((i, v)) =
+            (self.speed.iter().enumerate()).find(|(_, v)| !(v.is_finite() && **v >= 0.0))
+        {
+            return Err(format!(
+                "desired speed {v} of person index {i}: must be finite and ≥ 0"
+            ));
+        }
         Ok(())
     }
 }

@@ -278,6 +278,26 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
         let err = sim.restore(&forged).unwrap_err().to_string();
         assert!(err.contains(field), "{field}: {err}");
     }
+    // Regression: a person's radius or desired speed not a number, zero or negative, was
+    // taken (the steps then failed, or went on with a person of no size).
+    let people = |radius: f64, speed: f64| {
+        let mut forged: serde_json::Value = serde_json::to_value(&state).unwrap();
+        forged["people"]["radius"][3] = serde_json::json!(radius);
+        forged["people"]["speed"][5] = serde_json::json!(speed);
+        serde_json::from_value::<SimState>(forged).unwrap()
+    };
+    for (forged, what) in [
+        (people(0.0, 1.0), "radius 0 of person index 3"),
+        (people(-0.2, 1.0), "radius -0.2 of person index 3"),
+        (people(0.25, -1.0), "desired speed -1 of person index 5"),
+    ] {
+        let err = sim.restore(&forged).unwrap_err().to_string();
+        assert!(
+            err.contains("state.people") && err.contains(what),
+            "{what}: {err}"
+        );
+    }
+    assert!(sim.restore(&people(0.25, 1.0)).is_ok());
     let mut newer = state.clone();
     newer.format += 1;
     let err = sim.restore(&newer).unwrap_err().to_string();
