@@ -2253,6 +2253,7 @@ fn a_solvers_memory_damaged_anywhere_is_forgotten_or_used_never_a_panic() {
         // settled crush's polish with its factorization and start.
         let mut solver = make();
         let mut sol = ProjectionSolution::default();
+        let mut last = SolveReport::default();
         for k in 0..4 {
             let w = push(k);
             let p = ProjectionProblem {
@@ -2266,7 +2267,10 @@ fn a_solvers_memory_damaged_anywhere_is_forgotten_or_used_never_a_panic() {
                 SolveStatus::Converged,
                 "{name} push {k}: {rep:?}"
             );
+            last = rep;
         }
+        // (The last push was polished with the factorization kept from the one before.)
+        assert_eq!((last.iterations, last.factorizations), (1, 0), "{name}: {last:?}");
         let memory = solver.memory();
         assert!(memory.len() > 1000, "{name}: {} numbers", memory.len());
         let (w4, w5) = (push(4), push(5));
