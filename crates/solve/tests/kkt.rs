@@ -2270,7 +2270,11 @@ fn a_solvers_memory_damaged_anywhere_is_forgotten_or_used_never_a_panic() {
             last = rep;
         }
         // (The last push was polished with the factorization kept from the one before.)
-        assert_eq!((last.iterations, last.factorizations), (1, 0), "{name}: {last:?}");
+        assert_eq!(
+            (last.iterations, last.factorizations),
+            (1, 0),
+            "{name}: {last:?}"
+        );
         let memory = solver.memory();
         assert!(memory.len() > 1000, "{name}: {} numbers", memory.len());
         let (w4, w5) = (push(4), push(5));
