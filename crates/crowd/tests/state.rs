@@ -334,8 +334,9 @@ fn a_restored_state_keeps_the_speed_factor() {
 }
 
 /// A saved state is a file the user hands back: with any byte of it damaged (flipped,
-/// zeroed, set to the largest exponents), it is refused with the field and value named (when
-/// read, restored or stepped), or it runs; never a panic. The paper's room mid-run, and a
+/// zeroed, set to the largest exponents), it is refused with a reason (when read or
+/// restored: the field and value named; when stepped: the step's error), or it runs; never a
+/// panic. The paper's room mid-run, and a
 /// gate mid-inflow with its queue held (inflow and release state). At least some damaged
 /// states must be refused, and some must run, or the test proves nothing. (Every byte of
 /// both, `MOREAU_STATE_FUZZ_ALL=1`: no panic in session 30.)
