@@ -232,6 +232,16 @@ impl People {
         if let Some(i) = self.position.iter().position(|x| !x.is_finite()) {
             return Err(format!("non-finite position of person index {}", i / 2));
         }
+        // The bound a scene's coordinates follow: beyond it a step's distances lose every
+        // digit of a person's size, and its contact data overflow.
+        let far = crate::scene::limits::MAX_COORDINATE;
+        if let Some((i, x)) = (self.position.iter().enumerate()).find(|(_, x)| x.abs() > far) {
+            return Err(format!(
+                "position coordinate {x:e} of person index {}: must be within ±{far:e} m \
+                 (the limit of a scene)",
+                i / 2
+            ));
+        }
         // The rules a scene's groups follow (finite radii > 0, finite speeds ≥ 0).
         if let Some((i, r)) =
             (self.radius.iter().enumerate()).find(|(_, r)| !(r.is_finite() && **r > 0.0))

@@ -298,6 +298,16 @@ fn a_state_of_another_scene_or_damaged_bytes_is_refused_and_changes_nothing() {
         );
     }
     assert!(sim.restore(&people(0.25, 1.0)).is_ok());
+    // Regression: a person 10³⁰⁰ m away was taken, and the next step failed on a
+    // non-finite right-hand side instead of the restore naming the person.
+    let mut forged: serde_json::Value = serde_json::to_value(&state).unwrap();
+    forged["people"]["position"][9] = serde_json::json!(-1e300);
+    let forged: SimState = serde_json::from_value(forged).unwrap();
+    let err = sim.restore(&forged).unwrap_err().to_string();
+    assert!(
+        err.contains("state.people") && err.contains("-1e300 of person index 4"),
+        "{err}"
+    );
     let mut newer = state.clone();
     newer.format += 1;
     let err = sim.restore(&newer).unwrap_err().to_string();
