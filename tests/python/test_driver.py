@@ -124,6 +124,14 @@ def test_help_is_complete():
     for flag in ("--output", "--force", "--from", "--quiet", "--summary-json", "Exit codes"):
         assert flag in run_help, flag
     assert moreau("--version").stdout.startswith("moreau ")
+    # Regression: clap turns `{n}` in a help text into a line break, and `bench --help`
+    # read "(`" then "` in the path: the crowd size)" for its saved states' placeholder.
+    bench_help = moreau("bench", "--help").stdout
+    assert "(`{size}` in the path: the crowd size)" in bench_help
+    for command in ("run", "inspect", "view", "converge", "tradeoff", "bench", "example81",
+                    "example82"):
+        shown = moreau(command, "--help").stdout
+        assert "(`\n" not in shown and "`{n}`" not in shown, command
 
 
 def test_usage_errors_exit_2():
@@ -171,7 +179,9 @@ def test_bench_measures_the_same_steps_from_a_saved_state(tmp_path):
     that before/after comparisons need not depend on where a warm-up ends; a state saved
     from another scene (another solver) is refused by name, and nothing is written then."""
     import json
-    state = tmp_path / "jam-{n}.state"
+    state = tmp_path / "jam-{size}.state"
+    # `{n}`, the placeholder's first name, still works (clap's help cannot show it).
+    state_n = tmp_path / "jam-{n}.state"
 
     def row(*args, check=True):
         proc = moreau("bench", "--one", "1000", "--steps", "6", "--compare-at", "0", *args,
@@ -180,7 +190,7 @@ def test_bench_measures_the_same_steps_from_a_saved_state(tmp_path):
 
     saved = row("--warmup", "40", "--kind", "auto", "--save-state", state)
     assert (tmp_path / "jam-1000.state").is_file()
-    again = row("--kind", "auto", "--from-state", state)
+    again = row("--kind", "auto", "--from-state", state_n)
     keys = ("rows_per_step", "active_per_step", "iterations", "factorizations", "max_eps",
             "max_violation")
     assert {k: saved[k] for k in keys} == {k: again[k] for k in keys}

@@ -68,11 +68,11 @@ pub struct BenchArgs {
     /// Threads for the projection (0: every core).
     #[arg(long, default_value_t = 1)]
     threads: usize,
-    /// After the warm-up, save the simulation's state here (`{n}` in the path: the crowd
+    /// After the warm-up, save the simulation's state here (`{size}` in the path: the crowd
     /// size), so that later measurements can start from the very same jam.
     #[arg(long)]
     save_state: Option<PathBuf>,
-    /// Start from this saved state (`{n}`: the crowd size) instead of the warm-up: a
+    /// Start from this saved state (`{size}`: the crowd size) instead of the warm-up: a
     /// `--save-state` of the same scene, size, density and solver. Before/after comparisons
     /// then measure the same steps, not states a few steps apart.
     #[arg(long, conflicts_with = "save_state")]
@@ -316,9 +316,15 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// `path` with `{n}` replaced by the crowd size.
+/// `path` with `{size}` replaced by the crowd size, and `{n}` (the first name of the
+/// placeholder, which clap's help cannot show: it turns it into a line break).
 fn for_size(path: &Path, n: usize) -> PathBuf {
-    PathBuf::from(path.to_string_lossy().replace("{n}", &n.to_string()))
+    let n = n.to_string();
+    PathBuf::from(
+        (path.to_string_lossy())
+            .replace("{size}", &n)
+            .replace("{n}", &n),
+    )
 }
 
 /// Keeps every step report.
