@@ -139,6 +139,17 @@ def test_usage_errors_exit_2():
     assert moreau("frobnicate", check=False).returncode == 2
 
 
+def test_bench_refuses_an_empty_crowd_or_no_steps_by_the_flags_name():
+    """Regression: `bench --sizes 0` failed in its measurement with a scene error about a
+    self-crossing polygon (the hall of no one), and `--steps 0` with "invalid type: null,
+    expected f64" (the mean of no steps); both are refused now, naming the flag and value."""
+    for args, flag in ((("--sizes", "1000,0"), "'0' for '--sizes"),
+                       (("--steps", "0"), "'0' for '--steps")):
+        proc = moreau("bench", *args, "--compare-at", "0", check=False)
+        assert proc.returncode == 2 and flag in proc.stderr, proc.stderr
+        assert "must be at least 1" in proc.stderr and proc.stdout == "", proc.stdout
+
+
 def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
     """SIGKILL at random moments (some during a frame's write): the file always opens and is
     a whole number of frames."""

@@ -35,7 +35,7 @@ pub enum BenchScene {
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
     /// Crowd sizes.
-    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000")]
+    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000", value_parser = crate::at_least_one)]
     sizes: Vec<usize>,
     /// The crowd.
     #[arg(long, value_enum, default_value_t = BenchScene::Hall)]
@@ -48,7 +48,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 100)]
     warmup: usize,
     /// Steps measured (200 with --warmup 0: a whole evacuation, free flow then jam).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::at_least_one)]
     steps: usize,
     /// At this size (0: never), after the measured steps, one more step, then its projection
     /// again from cold (a new solver, zero multipliers) by each of --compare.
@@ -90,7 +90,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "FILE")]
     steps_csv: Option<PathBuf>,
     /// Internal: measure one size in this process and print its JSON row.
-    #[arg(long, hide = true)]
+    #[arg(long, hide = true, value_parser = crate::at_least_one)]
     one: Option<usize>,
 }
 

@@ -218,6 +218,15 @@ pub fn positive(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A count of at least one (crowd sizes, measured steps).
+pub fn at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("not a whole number: {e}")),
+    }
+}
+
 /// An error with its causes, each said once (a cause whose text its parent already quotes,
 /// as the OS's and HDF5's often are, is not repeated).
 pub fn error_text(e: &anyhow::Error) -> String {
