@@ -182,6 +182,22 @@ def test_example81_with_t_end_1e9_ran_for_hours():
     assert "--t-end" in proc.stderr and "limit" in proc.stderr
 
 
+def test_the_examples_refuse_bad_numbers_by_flag_not_in_a_step_or_as_an_unknown_argument():
+    """Regression: `example81 --b nan` failed in its first step ("non-finite field"),
+    `--a inf` as an uncertified projection, `--x0 -1` as "unexpected argument '-1'", and
+    `--h 1e-300` printed h with three hundred digits."""
+    for args, said in [
+        (("example81", "--b", "nan"), "--b must be finite, got NaN"),
+        (("example81", "--a", "inf"), "--a must be finite and > 0, got inf"),
+        (("example81", "--x0", "-1"), "--x0 must be finite and in C = [0, ∞), got -1.0"),
+        (("example81", "--h", "1e-300"), "with --h 1e-300: the finest run"),
+        (("example82", "--t-end", "-1"), "--t-end must be finite and > 0, got -1.0"),
+    ]:
+        proc = moreau(*args, check=False, timeout=60)
+        assert proc.returncode == 2 and said in proc.stderr, (args, proc.stderr)
+        assert proc.stdout == "", (args, proc.stdout)
+
+
 def test_os_and_hdf5_error_text_was_printed_twice(tmp_path):
     proc = moreau("run", tmp_path / "missing.toml", check=False)
     assert proc.returncode == 2

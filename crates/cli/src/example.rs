@@ -15,21 +15,29 @@ fn exact_8_1(a: f64, b: f64, x0: f64, t: f64) -> f64 {
 }
 
 pub fn example_8_1(a: f64, b: f64, x0: f64, h0: f64, t_end: f64) -> Result<()> {
-    anyhow::ensure!(a > 0.0, "a must be > 0, got {a}");
-    anyhow::ensure!(x0 >= 0.0, "x0 must be in C = [0, ∞), got {x0}");
+    // Numbers shown by `{:?}`: 1e-300, not three hundred digits.
+    anyhow::ensure!(
+        a > 0.0 && a.is_finite(),
+        "--a must be finite and > 0, got {a:?}"
+    );
+    anyhow::ensure!(b.is_finite(), "--b must be finite, got {b:?}");
+    anyhow::ensure!(
+        x0 >= 0.0 && x0.is_finite(),
+        "--x0 must be finite and in C = [0, ∞), got {x0:?}"
+    );
     anyhow::ensure!(
         h0 > 0.0 && h0.is_finite(),
-        "--h must be finite and > 0, got {h0}"
+        "--h must be finite and > 0, got {h0:?}"
     );
     anyhow::ensure!(
         t_end > 0.0 && t_end.is_finite(),
-        "--t-end must be finite and > 0, got {t_end}"
+        "--t-end must be finite and > 0, got {t_end:?}"
     );
     // The table halves h six times: its finest run takes 64 t_end / h steps.
     let steps = 64.0 * t_end / h0;
     anyhow::ensure!(
         steps <= moreau_integrate::MAX_STEPS,
-        "--t-end {t_end} with --h {h0}: the finest run of the table (h / 64) would take \
+        "--t-end {t_end:?} with --h {h0:?}: the finest run of the table (h / 64) would take \
          {steps:.3e} steps, more than the limit of {:e} steps a run",
         moreau_integrate::MAX_STEPS
     );
@@ -128,10 +136,13 @@ fn run_8_2(
 /// halving steps: one work–precision table and plot (DESIGN §6).
 pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
     use moreau_integrate::Selection;
-    anyhow::ensure!(h0 > 0.0 && h0.is_finite(), "--h must be > 0, got {h0}");
+    anyhow::ensure!(
+        h0 > 0.0 && h0.is_finite(),
+        "--h must be finite and > 0, got {h0:?}"
+    );
     anyhow::ensure!(
         t_end > 0.0 && t_end.is_finite(),
-        "--t-end must be > 0, got {t_end}"
+        "--t-end must be finite and > 0, got {t_end:?}"
     );
     let levels = 7;
     let fine = 2usize.pow(levels + 2);

@@ -97,10 +97,10 @@ enum Command {
     /// semi-implicit prox, error and wall time for halving steps (work–precision table and SVG).
     Example82 {
         /// The largest step; the table halves it six times.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = 0.1, allow_hyphen_values = true)]
         h: f64,
         /// The horizon.
-        #[arg(long, default_value_t = 5.0)]
+        #[arg(long, default_value_t = 5.0, allow_hyphen_values = true)]
         t_end: f64,
         /// Directory for example82.md and example82.svg.
         #[arg(short, long, default_value = "out/example82")]
@@ -110,19 +110,19 @@ enum Command {
     /// closed form for halving steps and the observed order.
     Example81 {
         /// The decay rate a > 0.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
         a: f64,
         /// The forcing b (b < 0 makes the boundary invariant).
         #[arg(long, default_value_t = -1.0, allow_hyphen_values = true)]
         b: f64,
         /// The initial state x0 ≥ 0.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
         x0: f64,
         /// The largest step; the table halves it six times.
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = 0.1, allow_hyphen_values = true)]
         h: f64,
         /// The horizon.
-        #[arg(long, default_value_t = 3.0)]
+        #[arg(long, default_value_t = 3.0, allow_hyphen_values = true)]
         t_end: f64,
     },
 }
