@@ -198,6 +198,27 @@ def test_the_examples_refuse_bad_numbers_by_flag_not_in_a_step_or_as_an_unknown_
         assert proc.stdout == "", (args, proc.stdout)
 
 
+def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
+    """Regression: `converge --samples 0` and `--eps-kappa -1` ran the reference run (minutes
+    on a large scene) before refusing, `--h-min 0` failed after it on "step 0 does not
+    divide", `--steps nan` said "every step must be larger than --h-min", `--steps -0.1`
+    was an "unexpected argument '-0'"; `tradeoff` took a tolerance of 0 and 0 samples."""
+    scene = ROOT / "data" / "scenes" / "room-60.toml"
+    for args, said in [
+        (("converge", "--samples", "0"), "'0' for '--samples <SAMPLES>': must be at least 1"),
+        (("converge", "--eps-kappa", "-1"), "'-1' for '--eps-kappa <EPS_KAPPA>'"),
+        (("converge", "--h-min", "0"), "'0' for '--h-min <H_MIN>'"),
+        (("converge", "--steps", "0.1,nan"), "'nan' for '--steps <STEPS>'"),
+        (("converge", "--steps", "0.1,-0.1"), "'-0.1' for '--steps <STEPS>'"),
+        (("tradeoff", "--tols", "0.1,0"), "'0' for '--tols <TOLS>'"),
+        (("tradeoff", "--samples", "0"), "'0' for '--samples <SAMPLES>'"),
+    ]:
+        out = tmp_path / "out"
+        proc = moreau(args[0], scene, *args[1:], "-o", out, check=False, timeout=60)
+        assert proc.returncode == 2 and said in proc.stderr, (args, proc.stderr)
+        assert "reference run" not in proc.stdout + proc.stderr and not out.exists(), args
+
+
 def test_os_and_hdf5_error_text_was_printed_twice(tmp_path):
     proc = moreau("run", tmp_path / "missing.toml", check=False)
     assert proc.returncode == 2

@@ -35,20 +35,27 @@ pub struct ConvergeArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "0.02,0.025,0.04,0.05,0.0625,0.08,0.1,0.2,0.5"
+        default_value = "0.02,0.025,0.04,0.05,0.0625,0.08,0.1,0.2,0.5",
+        value_parser = crate::positive,
+        allow_hyphen_values = true
     )]
     steps: Vec<f64>,
     /// The step of the reference run (s).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(
+        long,
+        default_value_t = 0.01,
+        value_parser = crate::positive,
+        allow_hyphen_values = true
+    )]
     h_min: f64,
     /// Compare at t_i = i T / samples, i = 1..samples (every step must divide T / samples).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = crate::at_least_one)]
     samples: usize,
     /// Override the horizon T of the scene (s).
-    #[arg(long, value_parser = crate::positive)]
+    #[arg(long, value_parser = crate::positive, allow_hyphen_values = true)]
     horizon: Option<f64>,
     /// Override κ in ε_k = κ μ³ (default: the scene's).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::positive, allow_hyphen_values = true)]
     eps_kappa: Option<f64>,
     /// Directory for converge.json, converge.md and converge.svg.
     #[arg(short, long, default_value = "out/converge")]

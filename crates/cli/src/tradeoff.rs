@@ -20,22 +20,45 @@ pub struct TradeoffArgs {
     /// The scene (its exits must keep everyone, `action = "continue"`).
     scene: PathBuf,
     /// The step of the reference run (s), with ε_k = 1e-5 μ³.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(
+        long,
+        default_value_t = 0.01,
+        value_parser = crate::positive,
+        allow_hyphen_values = true
+    )]
     reference_step: f64,
     /// Fixed steps to measure (s), with the scene's solver.
-    #[arg(long, value_delimiter = ',', default_value = "0.02,0.05,0.1,0.2")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.02,0.05,0.1,0.2",
+        value_parser = crate::positive,
+        allow_hyphen_values = true
+    )]
     steps: Vec<f64>,
     /// Adaptive tolerances to measure (m), with each error estimate.
-    #[arg(long, value_delimiter = ',', default_value = "0.1,0.03,0.01,0.003")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.1,0.03,0.01,0.003",
+        value_parser = crate::positive,
+        allow_hyphen_values = true
+    )]
     tols: Vec<f64>,
     /// Fixed steps to measure with Clarabel as the only solver (s).
-    #[arg(long, value_delimiter = ',', default_value = "0.05,0.1")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.05,0.1",
+        value_parser = crate::positive,
+        allow_hyphen_values = true
+    )]
     clarabel_steps: Vec<f64>,
     /// Compare at t_i = i T / samples.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = crate::at_least_one)]
     samples: usize,
     /// Override the horizon T of the scene (s).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::positive, allow_hyphen_values = true)]
     horizon: Option<f64>,
     /// Directory for tradeoff.json, tradeoff.md and tradeoff.svg.
     #[arg(short, long, default_value = "out/tradeoff")]
