@@ -184,6 +184,23 @@ def test_kills_at_random_moments_always_leave_a_readable_file(tmp_path):
         assert len(run.positions) == len(run.time)
 
 
+def test_bench_compares_with_clarabel_at_the_same_gap_and_says_after_which_steps():
+    """The cold comparison's line says which step it projects again (the warm ratio moved
+    20–26× with the window on one thread: benches/README.md, session 31), and Clarabel's
+    cold answer reaches the same target gap as the warm step's."""
+    import re
+    out = moreau("bench", "--sizes", "1000", "--warmup", "10", "--steps", "3", "--compare-at",
+                 "1000", "--kind", "auto", timeout=300).stdout
+    head = re.search(r"1000 people, one projection to gap ≤ (\S+), the step after the 3 "
+                     r"measured .*\(warm\) \S+ ms .* gap (\S+)\)", out)
+    assert head, out
+    target, warm_gap = float(head[1].rstrip(",")), float(head[2])
+    cold = re.search(r"cold clarabel +\S+ ms +\d+ it +gap (\S+) +converged .*× the warm step",
+                     out)
+    assert cold, out
+    assert warm_gap <= target and float(cold[1]) <= target, (warm_gap, cold[1], target)
+
+
 def test_bench_measures_the_same_steps_from_a_saved_state(tmp_path):
     """`moreau bench --save-state` after the warm-up, then `--from-state` instead of it: the
     same steps are measured (rows, iterations, factorizations and certified ε identical), so

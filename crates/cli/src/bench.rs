@@ -632,8 +632,16 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
         if let Some(c) = &row.comparison {
             println!(
-                "{} people, one projection to gap ≤ {:.2e}: the step's own (warm) {:.1} ms by {} ({} iterations, gap {:.2e})",
-                row.people, c.target_gap, c.warm_ms, c.warm_solver, c.warm_iterations, c.warm_gap
+                "{} people, one projection to gap ≤ {:.2e}, the step after the {} measured (the \
+                 warm ratio moves with that window): the step's own (warm) {:.1} ms by {} ({} \
+                 iterations, gap {:.2e})",
+                row.people,
+                c.target_gap,
+                args.steps,
+                c.warm_ms,
+                c.warm_solver,
+                c.warm_iterations,
+                c.warm_gap
             );
             for k in &c.cold {
                 println!(
