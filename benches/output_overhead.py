@@ -27,7 +27,7 @@ def ms_per_step(scene: pathlib.Path, out: pathlib.Path | None) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("scene", nargs="?", type=pathlib.Path,
                         default=ROOT / "data" / "scenes" / "room-150.toml")
     parser.add_argument("--repeat", type=int, default=5)

@@ -124,7 +124,7 @@ def assemble(out: pathlib.Path) -> pathlib.Path:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("write", help="write the reference files from the native driver")
     a = sub.add_parser("assemble", help="copy the tree and the built FMUs into DIR")

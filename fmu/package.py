@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Builds the FMUs of moreau: `python3 fmu/package.py` (from anywhere) runs the release build
-of the FMU library and writes
+of the FMU library and writes its FMI 2 and FMI 3 FMUs into target/fmu/:
 
     target/fmu/moreau-crowd-fmi2.fmu   (FMI 2.0 co-simulation, binaries/linux64/)
     target/fmu/moreau-crowd-fmi3.fmu   (FMI 3.0 co-simulation, binaries/x86_64-linux/)
@@ -133,7 +133,7 @@ def package(version: str, library: pathlib.Path, out: pathlib.Path,
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--fmi", choices=["2", "3", "all"], default="all")
     parser.add_argument("--out", type=pathlib.Path, default=ROOT / "target" / "fmu")
     parser.add_argument("--no-build", action="store_true", help="use the library as built")

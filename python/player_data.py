@@ -159,7 +159,7 @@ def write_html(run_path, out_path, max_values: int = MAX_VALUES) -> pathlib.Path
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("run", type=pathlib.Path, help="the run file (HDF5)")
     parser.add_argument("-o", "--out", type=pathlib.Path, help="the HTML (default: RUN.html)")
     parser.add_argument("--max-values", type=int, default=MAX_VALUES,

@@ -283,7 +283,7 @@ def load_or_explain(path: pathlib.Path):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("run", type=pathlib.Path, help="the run file (HDF5)")
     parser.add_argument("-o", "--out", type=pathlib.Path,
                         help="output directory (default: <run>-plots next to the file)")

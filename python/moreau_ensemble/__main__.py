@@ -12,7 +12,8 @@ from .sweep import load_sweep
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m moreau_ensemble", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m moreau_ensemble",
+                                description=" ".join(__doc__.split("\n\n")[0].split()))
     p.add_argument("sweep", type=pathlib.Path, help="the sweep file (TOML)")
     p.add_argument("--out", type=pathlib.Path, required=True,
                    help="run directory: runs/<variant>/ and results.csv; rerun to resume")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 
 import h5py
@@ -13,7 +14,7 @@ import numpy as np
 import pedpy
 
 import moreau_run
-from conftest import DENSE, MOREAU, ROOM, moreau
+from conftest import DENSE, MOREAU, ROOM, ROOT, moreau
 
 
 def test_an_existing_output_is_not_overwritten_without_force(tmp_path):
@@ -132,6 +133,26 @@ def test_help_is_complete():
                     "example82"):
         shown = moreau(command, "--help").stdout
         assert "(`\n" not in shown and "`{n}`" not in shown, command
+
+
+def test_every_scripts_help_says_its_first_paragraph_whole():
+    """Regression: the Python scripts' `--help` showed the first line of their docstring, so
+    plot_run's description ended "density map (PedPy)," and the ensemble's "…: runs a"."""
+    import re
+    scripts = [("python/plot_run.py", "the per-step solver statistics."),
+               ("python/player_data.py", "made in Python from a run file."),
+               ("benches/output_overhead.py", "their ratio (one machine, one run)."),
+               ("fmu/cross_check.py", "`assemble` copies it in)."),
+               ("fmu/package.py", "its FMI 2 and FMI 3 FMUs into target/fmu/:"),
+               ("-m moreau_ensemble", "and writes DIR/results.csv.")]
+    for script, ending in scripts:
+        what = script.split() if script.startswith("-m") else [str(ROOT / script)]
+        proc = subprocess.run([sys.executable, *what, "--help"], capture_output=True,
+                              text=True, timeout=120,
+                              env={**os.environ, "PYTHONPATH": str(ROOT / "python")})
+        assert proc.returncode == 0, (script, proc.stderr)
+        said = " ".join(proc.stdout.split())
+        assert ending in re.sub(r"- ", "-", said), (script, said[:400])
 
 
 def test_usage_errors_exit_2():
