@@ -302,12 +302,26 @@ def main(argv=None) -> int:
         parser.error(f"{args.run} is a directory, not a run file")
     if not args.run.is_file():
         parser.error(f"no such run file: {args.run}")
-    run = load_or_explain(args.run)
+    if args.fps is not None and not (np.isfinite(args.fps) and args.fps > 0):
+        parser.error(f"--fps {args.fps:g}: must be finite and > 0")
+    if args.max_frames is not None and args.max_frames < 1:
+        parser.error(f"--max-frames {args.max_frames}: must be at least 1")
+    times = []
     if args.snapshots:
         try:
             times = [float(t) for t in args.snapshots.split(",")]
         except ValueError:
             parser.error(f"--snapshots {args.snapshots}: give times in seconds, e.g. 0,5,10")
+        if not all(np.isfinite(t) and t >= 0 for t in times):
+            parser.error(f"--snapshots {args.snapshots}: times must be finite and ≥ 0 (s)")
+    run = load_or_explain(args.run)
+    if args.snapshots:
+        # Each time is drawn at its nearest frame: one beyond the last frame by more than a
+        # frame's interval has none.
+        end = float(run.time[-1]) + 1.0 / run.fps
+        if max(times) > end:
+            parser.error(f"--snapshots {args.snapshots}: the run's frames end at "
+                         f"{run.time[-1]:g} s")
         out = args.out or args.run.with_name(args.run.stem + "-snapshots.png")
         drawn = snapshots(run, times, out)
         print(f"wrote {out} (t = {', '.join(f'{t:g}' for t in drawn)} s)")

@@ -309,6 +309,21 @@ def test_plot_run_gave_a_traceback_on_a_non_hdf5_or_truncated_file(tmp_path, roo
         assert "cannot be read as HDF5" in proc.stderr, proc.stderr
 
 
+def test_plot_run_refuses_bad_animation_and_snapshot_numbers_by_flag(tmp_path, room_run):
+    """Regression: `--fps 0` wrote an animation, `--max-frames 0` wrote every frame,
+    `--snapshots nan` drew t = 0 and `--snapshots 1000` the room's last frame (20 s) without
+    a word. Each is refused now (exit 2), naming the flag, and nothing is written."""
+    for args, said in [
+        (("--animate", tmp_path / "a.gif", "--fps", "0"), "--fps 0: must be finite and > 0"),
+        (("--animate", tmp_path / "a.gif", "--max-frames", "0"), "--max-frames 0: must be"),
+        (("--snapshots", "nan", "-o", tmp_path / "s.png"), "times must be finite and ≥ 0"),
+        (("--snapshots", "0,1000", "-o", tmp_path / "s.png"), "the run's frames end at 20 s"),
+    ]:
+        proc = plot(room_run, *args)
+        assert proc.returncode == 2 and said in proc.stderr, (args, proc.stderr)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_plot_run_failed_on_a_run_with_no_steps(tmp_path):
     # A run killed after its first frame: one frame, no step (made from a short run's file).
     out = tmp_path / "nothing.h5"
