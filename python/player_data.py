@@ -165,6 +165,15 @@ def main(argv=None) -> int:
     parser.add_argument("--max-values", type=int, default=MAX_VALUES,
                         help=f"float32 values kept before decimating (default {MAX_VALUES})")
     args = parser.parse_args(argv)
+    # The rules of `moreau view`'s --max-values and run file.
+    if args.max_values < 1000:
+        parser.error(f"--max-values {args.max_values}: must be at least 1000")
+    if not args.run.is_file():
+        parser.error(f"no such run file: {args.run}")
+    try:
+        h5py.File(args.run, "r").close()
+    except OSError as e:
+        parser.error(f"{args.run}: cannot be read as HDF5: {e}")
     out = write_html(args.run, args.out or args.run.with_suffix(".html"), args.max_values)
     print(f"{out}: {out.stat().st_size / 1e6:.1f} MB")
     return 0

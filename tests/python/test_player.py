@@ -336,3 +336,21 @@ def test_moving_walls_are_in_the_page_and_drawn_in_red(browser, make_html, tmp_p
     # (Chromium warns about this test's own repeated getImageData readbacks.)
     problems = [p for p in console_problems(browser) if "readback" not in p["message"]]
     assert problems == [], problems
+
+
+def test_player_data_refuses_what_moreau_view_refuses(room_run, tmp_path, capsys):
+    """Regression: python/player_data.py wrote an HTML of no data with `--max-values 0`, and
+    a missing or non-HDF5 run file ended in a traceback. Like `moreau view`, it refuses them
+    (exit 2), naming the flag or the file, and writes nothing."""
+    garbage = tmp_path / "garbage.h5"
+    garbage.write_text("not HDF5")
+    for args, said in [
+        ([str(room_run), "--max-values", "0", "-o", str(tmp_path / "x.html")],
+         "--max-values 0: must be at least 1000"),
+        ([str(tmp_path / "missing.h5")], "no such run file"),
+        ([str(garbage)], "cannot be read as HDF5"),
+    ]:
+        with pytest.raises(SystemExit) as ended:
+            player_data.main(args)
+        assert ended.value.code == 2 and said in capsys.readouterr().err, args
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.h5"]
