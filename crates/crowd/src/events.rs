@@ -13,7 +13,7 @@ use crate::error::CrowdError;
 use crate::exits::Exits;
 use crate::geometry::Polygon;
 use crate::people::{People, Place};
-use crate::scene::{Quantity, Scene, check_polygon, limits};
+use crate::scene::{Quantity, Scene, check_polygon, limits, no_such_exit};
 use crate::spawn::draw;
 use crate::walls::Walls;
 
@@ -198,10 +198,10 @@ pub(crate) fn validate(scene: &Scene) -> Result<(), CrowdError> {
         source.radius.check(&format!("{f}.radius"), true)?;
         source.speed.check(&format!("{f}.speed"), false)?;
         if !scene.exits.iter().any(|e| e.name == source.destination) {
-            return Err(CrowdError::invalid(
+            return Err(no_such_exit(
                 format!("{f}.destination"),
                 &source.destination,
-                "no exit has this name",
+                &scene.exits,
             ));
         }
         people += source.most_people(horizon);

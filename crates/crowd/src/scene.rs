@@ -490,6 +490,16 @@ pub(crate) fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, Crow
     Ok(poly)
 }
 
+/// The error of a `destination` (at `field`) that no exit has: it names the exits there are.
+pub(crate) fn no_such_exit(field: String, destination: &str, exits: &[Exit]) -> CrowdError {
+    let names: Vec<&str> = exits.iter().map(|e| e.name.as_str()).collect();
+    CrowdError::invalid(
+        field,
+        destination,
+        format!("no exit has this name (the exits: {})", names.join(", ")),
+    )
+}
+
 /// A point: finite, and within [`limits::MAX_COORDINATE`] of the origin on both axes.
 pub(crate) fn check_point(field: &str, p: [f64; 2]) -> Result<(), CrowdError> {
     if !p[0].is_finite() || !p[1].is_finite() {
@@ -805,10 +815,10 @@ impl Scene {
             group.radius.check(&format!("{f}.radius"), true)?;
             group.speed.check(&format!("{f}.speed"), false)?;
             if !self.exits.iter().any(|e| e.name == group.destination) {
-                return Err(CrowdError::invalid(
+                return Err(no_such_exit(
                     format!("{f}.destination"),
                     &group.destination,
-                    "no exit has this name",
+                    &self.exits,
                 ));
             }
             match (&group.positions, group.count, &group.spawn) {

@@ -134,16 +134,21 @@ pub(crate) fn place_people(
                 let need = n as f64 * std::f64::consts::PI * r_min * r_min;
                 let room = crate::limits::PACKING * region.area();
                 if need > room {
+                    let fit = (room / (std::f64::consts::PI * r_min * r_min)).floor();
                     return Err(CrowdError::invalid(
                         format!("groups[{g}].count"),
                         n,
                         format!(
                             "{n} disks of radius ≥ {r_min} m cover {need:.4e} m², more than the \
                              spawn region ({:.4e} m²) holds at the densest packing ({:.1} %: \
-                             {room:.4e} m²); at most {} people fit in the spawn region",
+                             {room:.4e} m²); at most {fit} {} in the spawn region",
                             region.area(),
                             100.0 * crate::limits::PACKING,
-                            (room / (std::f64::consts::PI * r_min * r_min)).floor()
+                            if fit == 1.0 {
+                                "person fits"
+                            } else {
+                                "people fit"
+                            }
                         ),
                     ));
                 }
@@ -151,6 +156,8 @@ pub(crate) fn place_people(
                 let budget = 2000 * n + 10_000;
                 const STALL: usize = 1_000_000;
                 let (mut made, mut tries, mut missed) = (0, 0, 0);
+                // Tries that fell in the region and the walkable area both (for the error).
+                let mut inside = 0usize;
                 let mut r = draw(&group.radius, &mut rng);
                 while made < n && tries < budget && missed < STALL {
                     tries += 1;
@@ -159,11 +166,11 @@ pub(crate) fn place_people(
                         rng.random_range(rlo[0]..=rhi[0]),
                         rng.random_range(rlo[1]..=rhi[1]),
                     ];
-                    if region.contains(p)
-                        && walkable(p)
-                        && clear_of_walls(p, r)
-                        && placed.overlaps(p, r).is_none()
-                    {
+                    if !(region.contains(p) && walkable(p)) {
+                        continue;
+                    }
+                    inside += 1;
+                    if clear_of_walls(p, r) && placed.overlaps(p, r).is_none() {
                         placed.insert(p, r);
                         made += 1;
                         missed = 0;
@@ -178,7 +185,12 @@ pub(crate) fn place_people(
                             "only {made} people fit in the spawn region ({:.2} m²) after {tries} \
                              random tries{}",
                             region.area(),
-                            if missed >= STALL {
+                            if inside == 0 {
+                                format!(
+                                    ": none fell inside both the spawn region and the walkable \
+                                     area (does groups[{g}].spawn lie in [area]?)"
+                                )
+                            } else if missed >= STALL {
                                 format!(" ({STALL} in a row found no place)")
                             } else {
                                 String::new()
