@@ -49,7 +49,7 @@ pub(crate) fn grid_cells(lo: [f64; 2], hi: [f64; 2], cell: f64) -> f64 {
 }
 
 /// A number, or a uniform distribution `{ min, max }` to draw it from.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Quantity {
     /// The same value for everyone.
@@ -61,6 +61,33 @@ pub enum Quantity {
         /// Upper end.
         max: f64,
     },
+}
+
+/// Read as written: a number, or a table of `min` and `max` and no other key (an untagged
+/// enum took `{ min, max, mean }` without a word and said of anything else "data did not
+/// match any variant of untagged enum Quantity").
+impl<'de> Deserialize<'de> for Quantity {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Written {
+            Fixed(f64),
+            Uniform(Range),
+        }
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Range {
+            min: f64,
+            max: f64,
+        }
+        match Written::deserialize(d) {
+            Ok(Written::Fixed(x)) => Ok(Quantity::Fixed(x)),
+            Ok(Written::Uniform(Range { min, max })) => Ok(Quantity::Uniform { min, max }),
+            Err(_) => Err(serde::de::Error::custom(
+                "expected a number, or a range `{ min = …, max = … }` with no other key",
+            )),
+        }
+    }
 }
 
 impl Quantity {

@@ -23,6 +23,20 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ),
         ("nan-speed.toml", &["groups[0].speed", "NaN"]),
         (
+            // Regression: taken, `mean` ignored.
+            "radius-range-extra-key.toml",
+            &[
+                "line 18",
+                "mean = 0.22",
+                "a range `{ min = …, max = … }` with no other key",
+            ],
+        ),
+        (
+            // Regression: "data did not match any variant of untagged enum Quantity".
+            "speed-in-words.toml",
+            &["line 19", "\"fast\"", "expected a number, or a range"],
+        ),
+        (
             "overlapping-positions.toml",
             &[
                 "groups[0].positions[1]",
