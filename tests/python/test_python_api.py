@@ -12,6 +12,7 @@ import math
 import os
 import pathlib
 import pickle
+import re
 import subprocess
 import sys
 import threading
@@ -328,6 +329,14 @@ def test_exits_closed_and_people_removed_during_a_run():
     sim.advance_to(3.0)
     assert set(sim.ids) <= set(expect)
     assert sim.remove_people_in(left) == 0
+    # Regression: a list of points met a numpy broadcast error, None removed nobody, and bad
+    # WKT was reported as the scene's `area`.
+    for bad, error, said in [([[0, 0], [5, 0], [5, 10]], TypeError, "not list"),
+                             (None, TypeError, "not NoneType"),
+                             ("POLYGON ((0 0", ValueError, "polygon = 'POLYGON ((0 0'")]:
+        with pytest.raises(error, match=re.escape(said)):
+            sim.remove_people_in(bad)
+    assert set(sim.ids) <= set(expect)
 
 
 def test_two_threads_step_two_simulations_at_once_as_sequential_runs():

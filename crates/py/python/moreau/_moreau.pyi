@@ -131,7 +131,8 @@ class Simulation:
     def set_exit_open(self, exit: str | int, open: bool) -> None: ...
     def exits_open(self) -> list[bool]: ...
     def remove_people_in(self, polygon: Any | str) -> int:
-        """Removes the people whose centre is inside a shapely polygon or WKT; returns how many."""
+        """Removes the people whose centre is inside a shapely polygon or WKT; returns how many.
+        Anything else is a TypeError, WKT that does not parse a ValueError."""
     def recorded_frames(
         self,
     ) -> tuple[
