@@ -248,6 +248,10 @@ def test_areas_from_shapely_and_wkt_and_dicts_round_trip():
         room.with_area("POLYGON ((0 0, 1 1, 2 2, 0 0))")
     with pytest.raises(moreau.SceneError, match="Polygon"):
         room.with_area(shapely.MultiPolygon([area, shapely.box(30, 30, 31, 31)]))
+    # Regression: None or a list of points met an AttributeError on `geom_type`.
+    for bad, name in [(None, "NoneType"), ([[0, 0], [40, 0], [40, 30]], "list")]:
+        with pytest.raises(TypeError, match=f"area: a shapely Polygon or its WKT, not {name}"):
+            room.with_area(bad)
 
 
 def test_a_nan_speed_factor_raises_and_the_simulation_keeps_working():

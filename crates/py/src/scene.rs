@@ -21,15 +21,21 @@ pub struct PyScene {
 /// point.
 type Rings = (Vec<[f64; 2]>, Vec<Vec<[f64; 2]>>);
 
-/// A shapely geometry from a shapely geometry or a WKT string.
-pub fn geometry<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+/// A shapely geometry from a shapely geometry or a WKT string (anything else a TypeError).
+fn geometry<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
     let shapely = obj.py().import("shapely")?;
     if obj.is_instance_of::<PyString>() {
         shapely
             .call_method1("from_wkt", (obj,))
             .map_err(|e| SceneError::new_err(format!("scene error at area = {obj}: {e}")))
-    } else {
+    } else if obj.is_instance(&shapely.getattr("Geometry")?)? {
         Ok(obj.clone())
+    } else {
+        // (Anything else met an AttributeError on `geom_type`.)
+        Err(pyo3::exceptions::PyTypeError::new_err(format!(
+            "area: a shapely Polygon or its WKT, not {}",
+            obj.get_type().name()?
+        )))
     }
 }
 
