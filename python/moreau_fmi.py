@@ -94,7 +94,8 @@ def signal(md: ModelDescription, time, values: dict):
     """The structured array `simulate_fmu(..., input=...)` takes: a column `time` and one per
     input named in `values` (e.g. `{"moving.door": [0, 0, 1, 1]}`), each as long as `time`.
     Real inputs are floats, Boolean ones bools; a name that is not an input of `md` is
-    refused, naming the inputs there are."""
+    refused, naming the inputs there are, and so are times that go back and values or times
+    that are not finite."""
     import numpy as np
 
     inputs = {v.name: v for v in md.modelVariables if v.causality == "input"}
@@ -105,6 +106,10 @@ def signal(md: ModelDescription, time, values: dict):
                              f"(its inputs: {', '.join(sorted(inputs))})")
         columns.append((name, np.bool_ if inputs[name].type == "Boolean" else np.float64))
     time = np.asarray(time, dtype=np.float64)
+    # fmpy interpolates between consecutive rows: times must be finite and never go back (a
+    # time repeated makes a jump), and so must the values be finite.
+    if time.ndim != 1 or not np.isfinite(time).all() or (np.diff(time) < 0).any():
+        raise ValueError(f"time = {time.tolist()}: must be finite and never decrease")
     out = np.zeros(len(time), dtype=columns)
     out["time"] = time
     for name, column in values.items():
@@ -112,5 +117,7 @@ def signal(md: ModelDescription, time, values: dict):
         if column.shape != time.shape:
             raise ValueError(f"{name}: {column.shape[0] if column.ndim else 1} values for "
                              f"{len(time)} times")
+        if column.dtype.kind == "f" and not np.isfinite(column).all():
+            raise ValueError(f"{name} = {column.tolist()}: must be finite")
         out[name] = column
     return out

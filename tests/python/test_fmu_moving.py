@@ -107,3 +107,17 @@ def test_signal_refuses_a_name_that_is_no_input(fmus):
     md = read_model_description(str(fmus["3"]))
     with pytest.raises(ValueError, match="'moving.gate' is not an input.*moving.door"):
         moreau_fmi.signal(md, [0.0], {"moving.gate": [0.0]})
+
+
+def test_signal_refuses_times_that_go_back_and_values_that_are_not_finite(fmus):
+    """Regression: `signal` took times 1, 0 (fmpy then interpolates backwards) and NaN values
+    without a word."""
+    md = read_model_description(str(fmus["3"]))
+    with pytest.raises(ValueError, match=r"time = \[1.0, 0.0\]: must be finite and never"):
+        moreau_fmi.signal(md, [1.0, 0.0], {"moving.door": [0.0, 1.0]})
+    with pytest.raises(ValueError, match=r"time = \[0.0, nan\]"):
+        moreau_fmi.signal(md, [0.0, float("nan")], {"moving.door": [0.0, 1.0]})
+    with pytest.raises(ValueError, match=r"moving.door = \[0.0, nan\]: must be finite"):
+        moreau_fmi.signal(md, [0.0, 1.0], {"moving.door": [0.0, float("nan")]})
+    steps = moreau_fmi.signal(md, [0.0, 2.0, 2.0, 3.0], {"moving.door": [0.0, 0.0, 1.0, 1.0]})
+    assert steps["time"].tolist() == [0.0, 2.0, 2.0, 3.0]  # a repeated time is a jump
