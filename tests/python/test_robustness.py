@@ -260,6 +260,9 @@ def ensemble(*args):
     ('[vary]\n"groups.5.count" = [10, 20]\n', ["vary.groups.5.count = 10", "IndexError"]),
     ("[vary]\ndoor_width = [0]\n", ["vary.door_width = 0", "must be finite and > 0"]),
     ('[set]\n"time.horizon.x" = 1\n', ["set.time.horizon.x = 1", "has no parts"]),
+    # Regression: a misspelt key was written into every variant, and every run failed.
+    ('[vary]\n"groups.0.cont" = [10, 20]\n', ["{'groups.0.cont': 10}", "unknown field `cont`"]),
+    ('[set]\n"solver.kind" = "autoo"\n', ["{'solver.kind': 'autoo'}", "unknown variant"]),
 ])
 def test_a_bad_sweep_variant_gave_a_traceback_after_the_cluster_started(tmp_path, body,
                                                                           needles):
