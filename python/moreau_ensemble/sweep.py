@@ -118,7 +118,9 @@ def _scene_validator(base: dict):
         try:
             moreau.Scene.from_toml(text)
         except moreau.SceneError as e:
-            if "TOML parse error" in str(e):
+            # A value out of its domain carries the field it is at; a key or type the format
+            # does not have (the parser's error) carries none.
+            if getattr(e, "field", None) is None:
                 raise ValueError(str(e)) from e
     return validate
 
