@@ -263,9 +263,16 @@ fn auto_picks_gauss_seidel_in_free_flow_and_the_interior_point_in_a_jam_and_says
         "{solvers:?}"
     );
     assert!(
-        solvers
-            .iter()
-            .all(|s| ["gauss-seidel", "interior", "gs+interior"].contains(s)),
+        solvers.iter().all(|s| [
+            "gauss-seidel",
+            "interior",
+            "gs+interior",
+            "newton",
+            "gs+newton",
+            "interior+newton",
+            "gs+interior+newton"
+        ]
+        .contains(s)),
         "{solvers:?}"
     );
 }

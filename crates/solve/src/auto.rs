@@ -1,7 +1,8 @@
 //! The automatic choice of solver: each connected component of a projection (rows far from
 //! binding set aside, and taken back in rounds where the answer needs them) goes to
 //! Gauss–Seidel, which gives it up when its own progress shows the budget will not finish
-//! it, and then to the interior point.
+//! it, and then to the interior point; a round that takes back only a few rows goes first to
+//! the semismooth Newton method, warm from the answer it corrects.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -13,6 +14,7 @@ use crate::components::{CheckScratch, Components, DisjointSolution, SubProblem};
 use crate::error::SolveError;
 use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
 use crate::interior::{InteriorPoint, InteriorPointSettings};
+use crate::newton::{Newton, NewtonSettings};
 use crate::problem::{
     ProjectionProblem, ProjectionSolution, ProjectionSolver, SolveReport, Target,
 };
@@ -64,6 +66,20 @@ struct GivenUp {
 const OWN_REACH_HOPS: usize = 8;
 /// See [`OWN_REACH_HOPS`].
 const OWN_REACH_ROUNDS: usize = 6;
+
+/// A round that takes back at most this many rows set aside (by the shared reach: no rows
+/// around them) gives the largest component to the semismooth Newton method first
+/// ([`AutoSettings::round_newton_factorizations`]). Whole evacuations' rounds take back one
+/// to a few rows (benches/README.md, session 32); a crush's take back rings of hundreds.
+const ROUND_NEWTON_MAX_ROWS: usize = 16;
+
+/// The Newton method's penalty in such a round, relative to each row's squared norm
+/// ([`NewtonSettings::rho`]): from an answer this close to the round's, a penalty this high
+/// takes the multipliers in one or two updates. Measured on the 27 rounds of the whole
+/// evacuation of 10,000 (benches/README.md, session 32): 10³ (the method's default) took
+/// 110 factorizations and 327 ms, 10⁵ 48 and 165 ms, 10⁶ 39 and 136 ms, 10⁷ 47 and 139 ms,
+/// 10⁸ 59 and 149 ms; the interior point 314–326 ms on the same rounds.
+const ROUND_NEWTON_RHO: f64 = 1e6;
 
 /// How [`AutoSolver`] set rows aside in its last solve.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -141,6 +157,16 @@ pub struct AutoSettings {
     /// 1.0–1.8 times as many rows (cromosim's scene, median 1.06), so they keep the shared
     /// floor after their first, cold, solve.
     pub own_reach_ratio: f64,
+    /// When a round takes back only a few rows set aside (at most 16, by the shared reach),
+    /// the largest component is given first to the semismooth Newton method ([`Newton`],
+    /// with its factor updates), warm from the answer the round corrects, with this many
+    /// factorizations; when it does not meet the component's share of the target with them,
+    /// the interior point solves the component as before. 0: the interior point always.
+    /// From the corrected answer the active set is nearly known and a few Newton matrices
+    /// finish it, where the interior point starts again from its kept iterate (9–10
+    /// iterations for one row more). Measured (benches/README.md, session 32): the whole
+    /// evacuation of 10,000 took 2–8 factorizations a round instead of ~12.
+    pub round_newton_factorizations: usize,
     /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
     /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
     /// point's part runs as two solves at once (the largest component here, the others on the
@@ -185,6 +211,7 @@ impl Default for AutoSettings {
             retry_after: 16,
             set_aside_factor: 1.0,
             own_reach_ratio: 4.0,
+            round_newton_factorizations: 8,
             parallelism: Parallelism::SEQUENTIAL,
         }
     }
@@ -226,7 +253,8 @@ impl Default for AutoSettings {
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
 /// [`certify`](crate::certify). The report names the solver that answered:
-/// `gauss-seidel`, `interior`, or `gs+interior` when both answered components; its
+/// `gauss-seidel`, `interior`, or `gs+interior` when both answered components, with
+/// `newton` added where the Newton method answered a round's largest component; its
 /// iterations are Gauss–Seidel's work in passes over all the rows plus the interior
 /// point's iterations.
 #[derive(Debug)]
@@ -238,6 +266,10 @@ pub struct AutoSolver {
     // the interior point of the largest component (and of the whole problem), and of the
     // other components together: two, so that they can run at once
     interiors: [InteriorPoint; 2],
+    // the largest component's solver first in a round that took back a few rows (none when
+    // `round_newton_factorizations` is 0); whether this solve is such a round
+    newton: Option<Newton>,
+    newton_round: bool,
     // with threads, the helper thread the largest component's interior point shares
     helper: Option<Arc<Helper>>,
     components: Components,
@@ -450,10 +482,24 @@ impl AutoSolver {
             })
         };
         let threads = !settings.parallelism.is_sequential();
+        // One thread, as the interior points': it runs where the largest component's would.
+        // Stateless from solve to solve (its penalties and factor are its solve's), so a
+        // restored solver needs nothing of it.
+        let newton = (settings.round_newton_factorizations > 0)
+            .then(|| {
+                Newton::new(NewtonSettings {
+                    max_iterations: settings.round_newton_factorizations,
+                    rho: ROUND_NEWTON_RHO,
+                    ..NewtonSettings::default()
+                })
+            })
+            .transpose()?;
         Ok(Self {
             settings,
             gauss_seidel,
             interiors: [interior(threads)?, interior(false)?],
+            newton,
+            newton_round: false,
             helper: threads.then(Helper::shared).flatten(),
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
@@ -557,11 +603,14 @@ impl ProjectionSolver for AutoSolver {
                 } else {
                     0
                 };
-                self.join_needed(p, target, hops);
+                let joined = self.join_needed(p, target, hops);
+                self.newton_round = hops == 0 && joined <= ROUND_NEWTON_MAX_ROWS;
                 self.warm.clear();
                 self.warm.extend_from_slice(&sol.lambda);
             }
-            report = self.solve_split(p, target, sol, !last)?;
+            let answer = self.solve_split(p, target, sol, !last);
+            self.newton_round = false;
+            report = answer?;
             report.add_work(&earlier);
             if last {
                 break;
@@ -959,8 +1008,9 @@ impl AutoSolver {
     }
 
     /// Makes the rows set aside that the last answer violates join the others, and with
-    /// them every row set aside within `hops` rows of them (rows sharing an unknown).
-    fn join_needed(&mut self, p: &ProjectionProblem<'_>, target: Target, hops: usize) {
+    /// them every row set aside within `hops` rows of them (rows sharing an unknown);
+    /// returns how many the answer violates.
+    fn join_needed(&mut self, p: &ProjectionProblem<'_>, target: Target, hops: usize) -> usize {
         let j = p.jacobian;
         self.front.clear();
         for i in 0..p.rows() {
@@ -969,8 +1019,9 @@ impl AutoSolver {
                 self.front.push(i as u32);
             }
         }
-        if hops == 0 || self.front.is_empty() {
-            return;
+        let violated = self.front.len();
+        if hops == 0 || violated == 0 {
+            return violated;
         }
         if !self.indexed {
             self.jt.build_rows(j);
@@ -1005,6 +1056,7 @@ impl AutoSolver {
                 break;
             }
         }
+        violated
     }
 
     /// One solve, with the rows marked in `set_aside` set aside when `screened` (else none):
@@ -1033,6 +1085,7 @@ impl AutoSolver {
         let mut report = SolveReport::default();
         let mut status = SolveStatus::Converged;
         let mut interior_answered = false;
+        let mut newton_answered = false;
         if count == 1 && !any_aside {
             // The whole problem: no copy. Gauss–Seidel first unless it gave it up lately.
             if !self.skip_gs[0] {
@@ -1052,7 +1105,17 @@ impl AutoSolver {
                     );
                 }
             }
-            if !self.finished[0] {
+            if !self.finished[0] && self.newton_round {
+                // A round that took back a few rows: the Newton method first, from the answer
+                // the round corrects.
+                if let Some(newton) = self.newton.as_mut() {
+                    sol.lambda.copy_from_slice(&self.warm);
+                    let rep = newton.solve(p, target, sol)?;
+                    report.add_work(&rep);
+                    newton_answered = rep.status.is_converged();
+                }
+            }
+            if !self.finished[0] && !newton_answered {
                 // Again, from the caller's warm start.
                 sol.lambda.copy_from_slice(&self.warm);
                 let rep = self.interiors[0].solve(p, target, sol)?;
@@ -1063,9 +1126,11 @@ impl AutoSolver {
         } else {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
+            let newton_round = self.newton_round;
             let Self {
                 gauss_seidel,
                 interiors: [first, second],
+                newton,
                 parts: [largest_part, rest_part],
                 components,
                 warm,
@@ -1114,8 +1179,22 @@ impl AutoSolver {
             let (largest_report, (passes, rest)) = both(
                 helper.as_deref(),
                 || {
-                    largest
-                        .map(|(_, rows)| Self::solve_gathered(largest_part, first, m, rows, target))
+                    largest.map(|(c, rows)| {
+                        // In a round that took back a few rows, the Newton method first,
+                        // from the answer the round corrects; its work counts either way.
+                        let mut tried = SolveReport::default();
+                        if let Some(newton) = newton.as_mut().filter(|_| newton_round) {
+                            tried = Self::solve_gathered(largest_part, newton, m, rows, target)?;
+                            if tried.status.is_converged() {
+                                return Ok(tried);
+                            }
+                            largest_part.gather_one(components, p, warm, c);
+                        }
+                        let mut answer =
+                            Self::solve_gathered(largest_part, first, m, rows, target)?;
+                        answer.add_work(&tried);
+                        Ok(answer)
+                    })
                 },
                 || {
                     let passes = swept
@@ -1137,7 +1216,11 @@ impl AutoSolver {
                 report.add_work(&a);
                 status = a.status;
                 largest_part.scatter_all(sol);
-                interior_answered = true;
+                if a.solver == "newton" {
+                    newton_answered = true;
+                } else {
+                    interior_answered = true;
+                }
             }
             if let Some(b) = rest {
                 let b = b?;
@@ -1165,10 +1248,14 @@ impl AutoSolver {
         {
             status = SolveStatus::MaxIterations;
         }
-        report.solver = match (gs_answered, interior_answered) {
-            (true, true) => "gs+interior",
-            (false, true) => "interior",
-            _ => "gauss-seidel",
+        report.solver = match (gs_answered, interior_answered, newton_answered) {
+            (_, false, false) => "gauss-seidel",
+            (false, true, false) => "interior",
+            (true, true, false) => "gs+interior",
+            (false, false, true) => "newton",
+            (true, false, true) => "gs+newton",
+            (false, true, true) => "interior+newton",
+            (true, true, true) => "gs+interior+newton",
         };
         report.status = status;
         report.gap = cert.gap;
@@ -1430,5 +1517,100 @@ mod tests {
         restored.set_memory(&damaged);
         assert!(restored.given_up.is_empty());
         assert_eq!(restored.last_change, f64::INFINITY);
+    }
+
+    /// When the Newton method does not finish a round (here it is given one direction), the
+    /// interior point takes the round back from the answer the round corrects: certified,
+    /// with the bits the interior point alone gives, and the Newton method's work counted.
+    /// (A chain of 12 pushed at its head, its last person behind a stiff row far from binding
+    /// at rest, which the first answer violates; Gauss–Seidel is given one pass, so the chain
+    /// goes to the Newton-type solvers; beside it a far pair at rest makes a second
+    /// component, so the round is solved by component.)
+    #[test]
+    fn a_round_the_newton_method_does_not_finish_goes_back_to_the_interior_point() {
+        let n = 12;
+        let mut rows = ConstraintRows::new(n + 3);
+        for k in 0..n - 1 {
+            rows.push(k as u64, 0.0, [(k, -1.0), (k + 1, 1.0)]);
+        }
+        rows.push(n as u64, 0.0, [(n - 1, -1000.0), (n, 1000.0)]);
+        rows.push(n as u64 + 1, 0.0, [(n + 1, -1.0), (n + 2, 1.0)]);
+        let mut b = vec![0.0; n + 1];
+        b[n - 1] = 40.0;
+        let mut w = vec![0.0; n + 3];
+        w[0] = 1.0;
+        let t = Target {
+            gap: 1e-10,
+            violation: 1e-9,
+        };
+        let solve = |newton: Option<NewtonSettings>| {
+            // (Mehrotra's start every time, scaled by the caller's multipliers.)
+            let mut auto = AutoSolver::with_solvers(
+                AutoSettings {
+                    first_order_passes: 1,
+                    ..AutoSettings::default()
+                },
+                InteriorPointSettings {
+                    warm_iterate: 0.0,
+                    ..InteriorPointSettings::default()
+                },
+                GaussSeidelSettings::default(),
+            )
+            .unwrap();
+            if let Some(settings) = newton {
+                auto.newton = Some(Newton::new(settings).unwrap());
+            } else {
+                auto.newton = None;
+            }
+            let zero = vec![0.0; n + 3];
+            let mut sol = ProjectionSolution::default();
+            let rest = ProjectionProblem {
+                w: &zero,
+                jacobian: &rows,
+                b: &b,
+            };
+            assert!(
+                auto.solve(&rest, t, &mut sol)
+                    .unwrap()
+                    .status
+                    .is_converged()
+            );
+            let p = ProjectionProblem {
+                w: &w,
+                jacobian: &rows,
+                b: &b,
+            };
+            let rep = auto.solve(&p, t, &mut sol).unwrap();
+            assert_eq!(auto.screen().rounds, 1, "{rep:?}");
+            (rep, sol)
+        };
+        let (alone, alone_sol) = solve(None);
+        let (newton, newton_sol) = solve(Some(NewtonSettings {
+            max_iterations: 1,
+            max_solves: 1,
+            ..NewtonSettings::default()
+        }));
+        for (name, rep) in [("alone", &alone), ("after newton", &newton)] {
+            assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+            // (Gauss–Seidel answers the far pair.)
+            assert_eq!(rep.solver, "gs+interior", "{name}: {rep:?}");
+            assert!(
+                rep.gap <= t.gap && rep.violation <= t.violation,
+                "{name}: {rep:?}"
+            );
+        }
+        assert!(
+            newton.factorizations > alone.factorizations,
+            "the Newton method's work counts: {newton:?} against {alone:?}"
+        );
+        // The interior point starts from what it would have started from without the Newton
+        // method (the caller's multipliers set its start's scale): the same bits.
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&newton_sol.v), bits(&alone_sol.v));
+        assert_eq!(bits(&newton_sol.lambda), bits(&alone_sol.lambda));
+        let c = 1.04 / (n + 1) as f64;
+        for (k, a) in newton_sol.v.iter().take(n).enumerate() {
+            assert!((a - c).abs() <= 1e-6, "v[{k}] = {a}, closed form {c}");
+        }
     }
 }

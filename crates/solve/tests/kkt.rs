@@ -1073,6 +1073,115 @@ fn auto_solves_again_when_a_row_it_set_aside_is_needed() {
     );
 }
 
+/// A chain of `n` people pushed at its head (rows `v_{k+1} − v_k ≥ 0`, touching), its last
+/// person `n − 1` 0.04 m behind person `n` through a stiff row `1000 (v_n − v_{n−1}) + 40 ≥ 0`
+/// that is far from binding at rest: `auto`, its Gauss–Seidel given one pass (so the chain
+/// goes to a Newton-type solver), at rest and then pushed; the pushed solve's report and
+/// answer. The first answer moves the chain at `1/n`, which violates the stiff row: a round
+/// takes back that one row.
+fn pushed_chain_with_a_round(
+    settings: AutoSettings,
+    n: usize,
+) -> (SolveReport, Instance, Vec<f64>, Vec<f64>) {
+    let mut rows = ConstraintRows::new(n + 1);
+    for k in 0..n - 1 {
+        rows.push(k as u64, 0.0, [(k, -1.0), (k + 1, 1.0)]);
+    }
+    rows.push(n as u64, 0.0, [(n - 1, -1000.0), (n, 1000.0)]);
+    let mut b = vec![0.0; n];
+    b[n - 1] = 40.0;
+    let mut w = vec![0.0; n + 1];
+    w[0] = 1.0;
+    let push = Instance { w, rows, b };
+    let t = Target {
+        gap: 1e-10,
+        violation: 1e-9,
+    };
+    let mut auto = AutoSolver::new(AutoSettings {
+        first_order_passes: 1,
+        ..settings
+    })
+    .unwrap();
+    let zero = vec![0.0; n + 1];
+    let rest = ProjectionProblem {
+        w: &zero,
+        jacobian: &push.rows,
+        b: &push.b,
+    };
+    let mut sol = ProjectionSolution::default();
+    assert!(
+        auto.solve(&rest, t, &mut sol)
+            .unwrap()
+            .status
+            .is_converged()
+    );
+    let p = ProjectionProblem {
+        w: &push.w,
+        jacobian: &push.rows,
+        b: &push.b,
+    };
+    let rep = auto.solve(&p, t, &mut sol).unwrap();
+    assert_eq!(auto.screen().rounds, 1, "{rep:?}");
+    (rep, push, sol.v, sol.lambda)
+}
+
+/// A round that takes back one row goes to the semismooth Newton method first, warm from
+/// the answer it corrects: certified, at the closed-form projection (the chain and its last
+/// person move together at `1.04 / (n + 1)`, the last one 0.04 m/s slower), with the same
+/// bits on two threads; the interior point gives the same projection when the Newton
+/// method is off, and takes the round back when the Newton method's factorizations run
+/// out (their work counted in the report).
+#[test]
+fn a_round_that_takes_back_a_row_is_answered_by_newton_from_the_answer_it_corrects() {
+    let n = 10;
+    let c = 1.04 / (n + 1) as f64;
+    let exact: Vec<f64> = (0..=n).map(|k| if k < n { c } else { c - 0.04 }).collect();
+    let check =
+        |name: &str, (rep, push, v, lambda): &(SolveReport, Instance, Vec<f64>, Vec<f64>)| {
+            assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
+            let sol = ProjectionSolution {
+                v: v.clone(),
+                lambda: lambda.clone(),
+            };
+            check_kkt(push, name, &sol, rep.gap, rep.violation);
+            for (k, (a, e)) in v.iter().zip(&exact).enumerate() {
+                assert!(
+                    (a - e).abs() <= 1e-6,
+                    "{name}: v[{k}] = {a}, closed form {e}"
+                );
+            }
+            assert!(
+                lambda.iter().all(|&l| l > 0.0),
+                "{name}: every row binds: {lambda:?}"
+            );
+        };
+
+    let newton = pushed_chain_with_a_round(AutoSettings::default(), n);
+    check("newton", &newton);
+    assert_eq!(newton.0.solver, "newton", "{:?}", newton.0);
+    let two = pushed_chain_with_a_round(
+        AutoSettings {
+            parallelism: Parallelism::threads(2),
+            ..AutoSettings::default()
+        },
+        n,
+    );
+    assert_eq!(two.0.solver, "newton");
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&newton.2), bits(&two.2));
+    assert_eq!(bits(&newton.3), bits(&two.3));
+
+    let interior = pushed_chain_with_a_round(
+        AutoSettings {
+            round_newton_factorizations: 0,
+            ..AutoSettings::default()
+        },
+        n,
+    );
+    check("interior", &interior);
+    assert_eq!(interior.0.solver, "interior", "{:?}", interior.0);
+}
+
 /// Every option of the Gauss–Seidel (no momentum, symmetric sweeps, under- and
 /// over-relaxation, the rows by unknown, a certificate after every sweep).
 fn gauss_seidel_variants() -> Vec<(&'static str, GaussSeidelSettings)> {
