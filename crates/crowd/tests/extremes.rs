@@ -270,7 +270,7 @@ fn auto_picks_gauss_seidel_in_free_flow_and_the_interior_point_in_a_jam_and_says
             "newton",
             "gs+newton",
             "interior+newton",
-            "gs+interior+newton"
+            "gs+ip+newton"
         ]
         .contains(s)),
         "{solvers:?}"

@@ -256,7 +256,8 @@ impl Default for AutoSettings {
 /// whole violation target; the answer is then certified as a whole by
 /// [`certify`](crate::certify). The report names the solver that answered:
 /// `gauss-seidel`, `interior`, or `gs+interior` when both answered components, with
-/// `newton` added where the Newton method answered a round's largest component; its
+/// `newton` added where the Newton method answered a round's largest component
+/// (`newton`, `gs+newton`, `interior+newton`, `gs+ip+newton`); its
 /// iterations are Gauss–Seidel's work in passes over all the rows plus the interior
 /// point's iterations.
 #[derive(Debug)]
@@ -1250,15 +1251,7 @@ impl AutoSolver {
         {
             status = SolveStatus::MaxIterations;
         }
-        report.solver = match (gs_answered, interior_answered, newton_answered) {
-            (_, false, false) => "gauss-seidel",
-            (false, true, false) => "interior",
-            (true, true, false) => "gs+interior",
-            (false, false, true) => "newton",
-            (true, false, true) => "gs+newton",
-            (false, true, true) => "interior+newton",
-            (true, true, true) => "gs+interior+newton",
-        };
+        report.solver = answered_by(gs_answered, interior_answered, newton_answered);
         report.status = status;
         report.gap = cert.gap;
         report.violation = cert.violation;
@@ -1270,6 +1263,21 @@ impl AutoSolver {
             .filter(|&i| sol.lambda[i] > p.b[i] + self.scratch_m[i])
             .count();
         Ok(report)
+    }
+}
+
+/// The report's name of the solvers that answered components: Gauss–Seidel, the interior
+/// point, the Newton method (a round's largest component). At most 16 bytes, the run file's
+/// field for it (`crates/io`'s step rows): the three together are `gs+ip+newton`.
+fn answered_by(gauss_seidel: bool, interior: bool, newton: bool) -> &'static str {
+    match (gauss_seidel, interior, newton) {
+        (_, false, false) => "gauss-seidel",
+        (false, true, false) => "interior",
+        (true, true, false) => "gs+interior",
+        (false, false, true) => "newton",
+        (true, false, true) => "gs+newton",
+        (false, true, true) => "interior+newton",
+        (true, true, true) => "gs+ip+newton",
     }
 }
 
@@ -1614,5 +1622,21 @@ mod tests {
         for (k, a) in newton_sol.v.iter().take(n).enumerate() {
             assert!((a - c).abs() <= 1e-6, "v[{k}] = {a}, closed form {c}");
         }
+    }
+
+    /// Every name the report can give fits the run file's 16 bytes for it (a longer one was
+    /// cut there: `gs+interior+newton` was written `gs+interior+newt`).
+    #[test]
+    fn every_name_of_the_solvers_that_answered_fits_the_run_file() {
+        let mut names = Vec::new();
+        for k in 0..8 {
+            names.push(answered_by(k & 1 != 0, k & 2 != 0, k & 4 != 0));
+        }
+        for name in &names {
+            assert!(name.len() <= 16 && name.is_ascii(), "{name}");
+        }
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), 7, "{names:?}");
     }
 }
