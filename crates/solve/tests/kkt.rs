@@ -1002,19 +1002,18 @@ fn auto_gives_the_same_bits_on_one_and_two_threads() {
     assert_eq!((r1.iterations, r1.gap), (r2.iterations, r2.gap));
 }
 
-/// `auto` at rest on `rows` (so that the next solve expects small changes), then pushed at
-/// `w`: converged, meeting the KKT conditions, at the exact projection; its multipliers.
-fn auto_pushed_after_rest(rows: &ConstraintRows, b: &[f64], w: &[f64], name: &str) -> Vec<f64> {
-    let t = Target {
-        gap: 1e-12,
-        violation: 1e-9,
-    };
-    let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
-    let zero = vec![0.0; w.len()];
+/// `auto` on `push`'s rows at rest (`w = 0`, converged: so that the next solve expects small
+/// changes), then on `push`: the second solve's report and answer.
+fn at_rest_then_pushed(
+    auto: &mut AutoSolver,
+    push: &Instance,
+    t: Target,
+) -> (SolveReport, ProjectionSolution) {
+    let zero = vec![0.0; push.w.len()];
     let rest = ProjectionProblem {
         w: &zero,
-        jacobian: rows,
-        b,
+        jacobian: &push.rows,
+        b: &push.b,
     };
     let mut sol = ProjectionSolution::default();
     assert!(
@@ -1023,17 +1022,29 @@ fn auto_pushed_after_rest(rows: &ConstraintRows, b: &[f64], w: &[f64], name: &st
             .status
             .is_converged()
     );
-    let push = Instance {
-        w: w.to_vec(),
-        rows: rows.clone(),
-        b: b.to_vec(),
-    };
     let p = ProjectionProblem {
         w: &push.w,
         jacobian: &push.rows,
         b: &push.b,
     };
     let rep = auto.solve(&p, t, &mut sol).unwrap();
+    (rep, sol)
+}
+
+/// `auto` at rest on `rows` (so that the next solve expects small changes), then pushed at
+/// `w`: converged, meeting the KKT conditions, at the exact projection; its multipliers.
+fn auto_pushed_after_rest(rows: &ConstraintRows, b: &[f64], w: &[f64], name: &str) -> Vec<f64> {
+    let t = Target {
+        gap: 1e-12,
+        violation: 1e-9,
+    };
+    let mut auto = AutoSolver::new(AutoSettings::default()).unwrap();
+    let push = Instance {
+        w: w.to_vec(),
+        rows: rows.clone(),
+        b: b.to_vec(),
+    };
+    let (rep, sol) = at_rest_then_pushed(&mut auto, &push, t);
     assert_eq!(rep.status, SolveStatus::Converged, "{name}: {rep:?}");
     check_kkt(&push, name, &sol, rep.gap, rep.violation);
     let (v, _) = exact_projection(&push);
@@ -1102,25 +1113,7 @@ fn pushed_chain_with_a_round(
         ..settings
     })
     .unwrap();
-    let zero = vec![0.0; n + 1];
-    let rest = ProjectionProblem {
-        w: &zero,
-        jacobian: &push.rows,
-        b: &push.b,
-    };
-    let mut sol = ProjectionSolution::default();
-    assert!(
-        auto.solve(&rest, t, &mut sol)
-            .unwrap()
-            .status
-            .is_converged()
-    );
-    let p = ProjectionProblem {
-        w: &push.w,
-        jacobian: &push.rows,
-        b: &push.b,
-    };
-    let rep = auto.solve(&p, t, &mut sol).unwrap();
+    let (rep, sol) = at_rest_then_pushed(&mut auto, &push, t);
     assert_eq!(auto.screen().rounds, 1, "{rep:?}");
     (rep, push, sol.v, sol.lambda)
 }
