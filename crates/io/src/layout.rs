@@ -142,8 +142,15 @@ pub struct StepRow {
     pub time_total: f64,
 }
 
+/// `s` in the run file's 16 bytes: its ASCII characters, and a name too long for them cut
+/// to 15 and marked `~` (not cut without a word: a reader would take the cut name for a
+/// whole one).
 fn ascii16(s: &str) -> FixedAscii<16> {
-    let s: String = s.chars().filter(char::is_ascii).take(16).collect();
+    let mut s: String = s.chars().filter(char::is_ascii).collect();
+    if s.len() > 16 {
+        s.truncate(15);
+        s.push('~');
+    }
     FixedAscii::from_ascii(&s).expect("ASCII, at most 16 bytes")
 }
 
@@ -204,4 +211,19 @@ pub struct RunHeader {
     pub moving_names: Vec<String>,
     /// `moving/body`: for each moving segment (a column of `/frames/moving_walls`), its body.
     pub moving_body: Vec<u32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ascii16;
+
+    /// A name longer than the run file's 16 bytes is marked as cut, not cut silently (a
+    /// solver name of 18 bytes was once written as 16 that read as a whole name).
+    #[test]
+    fn a_name_too_long_for_its_field_is_marked_as_cut() {
+        assert_eq!(ascii16("gs+interior").as_str(), "gs+interior");
+        assert_eq!(ascii16("sixteen-bytes-ok").as_str(), "sixteen-bytes-ok");
+        assert_eq!(ascii16("gs+interior+newton").as_str(), "gs+interior+new~");
+        assert_eq!(ascii16("ε-gap").as_str(), "-gap");
+    }
 }
