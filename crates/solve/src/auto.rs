@@ -75,7 +75,7 @@ const ROUND_NEWTON_MAX_ROWS: usize = 16;
 
 /// The Newton method's penalty in such a round, relative to each row's squared norm
 /// ([`NewtonSettings::rho`]): from an answer this close to the round's, a penalty this high
-/// takes the multipliers in one or two updates. Measured on the 27 rounds of the whole
+/// finishes most rounds in one or two factorizations. Measured on the 27 rounds of the whole
 /// evacuation of 10,000 (benches/README.md, session 32): 10³ (the method's default) took
 /// 110 factorizations and 327 ms, 10⁵ 48 and 165 ms, 10⁶ 39 and 136 ms, 10⁷ 47 and 139 ms,
 /// 10⁸ 59 and 149 ms; the interior point 314–326 ms on the same rounds.
