@@ -21,19 +21,24 @@ pub struct PyScene {
 /// point.
 type Rings = (Vec<[f64; 2]>, Vec<Vec<[f64; 2]>>);
 
-/// A shapely geometry from a shapely geometry or a WKT string (anything else a TypeError).
-fn geometry<'py>(obj: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+/// A shapely geometry from a shapely geometry or a WKT string, for the argument `field`:
+/// WKT that does not parse is `wkt_error`'s error, anything else a TypeError naming `field`
+/// and what it takes (`expected`).
+pub fn geometry<'py>(
+    obj: &Bound<'py, PyAny>,
+    field: &str,
+    expected: &str,
+    wkt_error: impl FnOnce(PyErr) -> PyErr,
+) -> PyResult<Bound<'py, PyAny>> {
     let shapely = obj.py().import("shapely")?;
     if obj.is_instance_of::<PyString>() {
-        shapely
-            .call_method1("from_wkt", (obj,))
-            .map_err(|e| SceneError::new_err(format!("scene error at area = {obj}: {e}")))
+        shapely.call_method1("from_wkt", (obj,)).map_err(wkt_error)
     } else if obj.is_instance(&shapely.getattr("Geometry")?)? {
         Ok(obj.clone())
     } else {
-        // (Anything else met an AttributeError on `geom_type`.)
+        // (Anything else met an AttributeError on `geom_type`, or a numpy broadcast error.)
         Err(pyo3::exceptions::PyTypeError::new_err(format!(
-            "area: a shapely Polygon or its WKT, not {}",
+            "{field}: {expected} or its WKT, not {}",
             obj.get_type().name()?
         )))
     }
@@ -52,7 +57,9 @@ fn ring(coords: &Bound<'_, PyAny>) -> PyResult<Vec<[f64; 2]>> {
 }
 
 fn rings(obj: &Bound<'_, PyAny>) -> PyResult<Rings> {
-    let geom = geometry(obj)?;
+    let geom = geometry(obj, "area", "a shapely Polygon", |e| {
+        SceneError::new_err(format!("scene error at area = {obj}: {e}"))
+    })?;
     let kind: String = geom.getattr("geom_type")?.extract()?;
     if kind != "Polygon" {
         let wkt: String = geom.getattr("wkt")?.extract()?;

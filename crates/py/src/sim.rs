@@ -15,7 +15,7 @@ use pyo3::exceptions::{PyFileExistsError, PyOSError, PyRuntimeError, PyValueErro
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
 
-use crate::scene::PyScene;
+use crate::scene::{PyScene, geometry};
 use crate::value::to_py;
 
 /// How often a long computation without the GIL looks for Ctrl-C (and calls progress).
@@ -457,22 +457,11 @@ impl PySimulation {
     /// exit record. Returns how many were removed.
     fn remove_people_in(&self, polygon: &Bound<'_, PyAny>) -> PyResult<usize> {
         let py = polygon.py();
-        // Named `polygon`, not the scene's `area` that `geometry` reports; and anything but a
-        // geometry refused (a list of points met a numpy broadcast error, None removed nobody).
-        let shapely = py.import("shapely")?;
-        let geom = if polygon.is_instance_of::<PyString>() {
-            shapely
-                .call_method1("from_wkt", (polygon,))
-                .map_err(|e| PyValueError::new_err(format!("polygon = {polygon:?}: {e}")))?
-        } else {
-            polygon.clone()
-        };
-        if !geom.is_instance(&shapely.getattr("Geometry")?)? {
-            return Err(pyo3::exceptions::PyTypeError::new_err(format!(
-                "polygon: a shapely geometry or its WKT, not {}",
-                polygon.get_type().name()?
-            )));
-        }
+        // Named `polygon`, not the scene's `area`; and anything but a geometry refused (a list
+        // of points met a numpy broadcast error, None removed nobody).
+        let geom = geometry(polygon, "polygon", "a shapely geometry", |e| {
+            PyValueError::new_err(format!("polygon = {polygon:?}: {e}"))
+        })?;
         let mut inner = self.lock()?;
         let q = inner.sim.people().positions();
         let xs: Vec<f64> = q.iter().step_by(2).copied().collect();

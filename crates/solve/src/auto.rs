@@ -270,9 +270,8 @@ pub struct AutoSolver {
     // other components together: two, so that they can run at once
     interiors: [InteriorPoint; 2],
     // the largest component's solver first in a round that took back a few rows (none when
-    // `round_newton_factorizations` is 0); whether this solve is such a round
+    // `round_newton_factorizations` is 0)
     newton: Option<Newton>,
-    newton_round: bool,
     // with threads, the helper thread the largest component's interior point shares
     helper: Option<Arc<Helper>>,
     components: Components,
@@ -502,7 +501,6 @@ impl AutoSolver {
             gauss_seidel,
             interiors: [interior(threads)?, interior(false)?],
             newton,
-            newton_round: false,
             helper: threads.then(Helper::shared).flatten(),
             components: Components::default(),
             parts: [SubProblem::default(), SubProblem::default()],
@@ -585,7 +583,7 @@ impl ProjectionSolver for AutoSolver {
         };
         let screened = reach != Reach::None;
         self.indexed = false;
-        let mut report = self.solve_split(p, target, sol, screened)?;
+        let mut report = self.solve_split(p, target, sol, screened, false)?;
         // Rows set aside were needed after all: those the answer violates join the others
         // (by their own reach, with the rows around them), and the projection is solved again
         // from that answer (the components they do not touch certify at once); when rows set
@@ -600,6 +598,7 @@ impl ProjectionSolver for AutoSolver {
             let earlier = report;
             rounds += 1;
             let last = rounds > joins;
+            let mut newton_round = false;
             if !last {
                 let hops = if reach == Reach::Own {
                     OWN_REACH_HOPS << (rounds - 1)
@@ -607,13 +606,11 @@ impl ProjectionSolver for AutoSolver {
                     0
                 };
                 let joined = self.join_needed(p, target, hops);
-                self.newton_round = hops == 0 && joined <= ROUND_NEWTON_MAX_ROWS;
+                newton_round = hops == 0 && joined <= ROUND_NEWTON_MAX_ROWS;
                 self.warm.clear();
                 self.warm.extend_from_slice(&sol.lambda);
             }
-            let answer = self.solve_split(p, target, sol, !last);
-            self.newton_round = false;
-            report = answer?;
+            report = self.solve_split(p, target, sol, !last, newton_round)?;
             report.add_work(&earlier);
             if last {
                 break;
@@ -1063,15 +1060,17 @@ impl AutoSolver {
     }
 
     /// One solve, with the rows marked in `set_aside` set aside when `screened` (else none):
-    /// the components of the rest, each answered by Gauss–Seidel or the interior point,
-    /// certified as a whole (rows set aside included, with zero multipliers). Leaves `J v` in
-    /// `scratch_m`.
+    /// the components of the rest, each answered by Gauss–Seidel or the interior point (the
+    /// largest by the Newton method first in a `newton_round`: a round that took back a few
+    /// rows), certified as a whole (rows set aside included, with zero multipliers). Leaves
+    /// `J v` in `scratch_m`.
     fn solve_split(
         &mut self,
         p: &ProjectionProblem<'_>,
         target: Target,
         sol: &mut ProjectionSolution,
         screened: bool,
+        newton_round: bool,
     ) -> Result<SolveReport, SolveError> {
         let m = p.rows();
         if !screened {
@@ -1108,7 +1107,7 @@ impl AutoSolver {
                     );
                 }
             }
-            if !self.finished[0] && self.newton_round {
+            if !self.finished[0] && newton_round {
                 // A round that took back a few rows: the Newton method first, from the answer
                 // the round corrects.
                 if let Some(newton) = self.newton.as_mut() {
@@ -1129,7 +1128,6 @@ impl AutoSolver {
         } else {
             sol.v.copy_from_slice(p.w);
             sol.lambda.iter_mut().for_each(|l| *l = 0.0);
-            let newton_round = self.newton_round;
             let Self {
                 gauss_seidel,
                 interiors: [first, second],
