@@ -35,6 +35,21 @@ pub enum CrowdError {
     /// The time stepping failed.
     #[error(transparent)]
     Integrate(#[from] moreau_integrate::IntegrateError),
+    /// A step's projection could not be certified although its constraints admit a velocity:
+    /// the integrator's error, with how fast the crowd asked to go. The certified accuracy is
+    /// absolute while rounding grows with the velocities, so a speed factor or desired speed
+    /// far beyond walking shows here (10⁶ × 1.3 m/s stops at the rounding floor).
+    #[error(
+        "{error}; the step's desired velocities reach {fastest:e} m/s (speed factor {speed_factor})"
+    )]
+    NotCertified {
+        /// The integrator's error ([`moreau_integrate::IntegrateError::NotCertified`]).
+        error: moreau_integrate::IntegrateError,
+        /// The largest desired speed of the step, the speed factor included (m/s).
+        fastest: f64,
+        /// The speed factor on every desired speed.
+        speed_factor: f64,
+    },
     /// The feasible set left no room: the constraints of a step cannot all hold (a moving wall
     /// crushing people against another, say).
     #[error("{0}")]

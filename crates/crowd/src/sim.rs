@@ -721,15 +721,29 @@ impl Simulation {
 
     /// A step that failed to certify: when its constraints admit no velocity at all (checked by
     /// a Farkas certificate, [`moreau_solve::infeasibility_certificate`]), the error names the
-    /// constraints, people and moving bodies at fault; otherwise `error` as it was.
+    /// constraints, people and moving bodies at fault; otherwise it says how fast the step's
+    /// desired velocities were ([`CrowdError::NotCertified`]). Other errors pass as they are.
     fn diagnose(&self, error: CrowdError) -> CrowdError {
         use moreau_integrate::IntegrateError;
-        let CrowdError::Integrate(IntegrateError::NotCertified { t, .. }) = &error else {
-            return error;
+        let t = match &error {
+            CrowdError::Integrate(IntegrateError::NotCertified { t, .. }) => *t,
+            _ => return error,
         };
         let problem = self.last_projection();
         let Ok(Some(y)) = moreau_solve::infeasibility_certificate(&problem) else {
-            return error;
+            let fastest = problem
+                .w
+                .chunks_exact(2)
+                .map(|u| u[0].hypot(u[1]))
+                .fold(0.0, f64::max);
+            let CrowdError::Integrate(error) = error else {
+                return error;
+            };
+            return CrowdError::NotCertified {
+                error,
+                fastest,
+                speed_factor: self.speed_factor,
+            };
         };
         let mut contacts: Vec<(ContactKind, u32, u32, f64)> = problem
             .jacobian
@@ -760,7 +774,7 @@ impl Simulation {
         moving.sort_unstable();
         moving.dedup();
         CrowdError::Infeasible(Box::new(crate::error::Infeasibility {
-            t: *t,
+            t,
             contacts,
             people,
             moving: moving

@@ -229,6 +229,45 @@ fn an_unreachable_accuracy_is_a_clear_error() {
     );
 }
 
+/// Regression: a speed factor of 10⁶ stopped at the rounding floor with "ask a larger ε" and
+/// one of 10¹⁴ as a NumericalError, neither naming the speeds that caused it. The error now
+/// says how fast the step's desired velocities were and the factor, the failed step changes
+/// nothing, and the run goes on once the factor is sane again.
+#[test]
+fn a_speed_factor_too_high_to_certify_is_an_error_naming_the_speeds() {
+    // The paper's room: 150 people, desired speeds 1 m/s.
+    let path = format!(
+        "{}/../../data/scenes/room-150.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let scene = Scene::from_file(&path).unwrap();
+    for factor in [1e6, 1e14] {
+        let mut sim = Simulation::new(scene.clone()).unwrap();
+        let start = sim.frame().positions.to_vec();
+        sim.set_speed_factor(factor);
+        let err = sim.step(0.05).expect_err("a step at 10⁶ m/s or more cannot be certified");
+        let moreau_crowd::CrowdError::NotCertified {
+            fastest,
+            speed_factor,
+            ..
+        } = &err
+        else {
+            panic!("{err}");
+        };
+        // Everyone's desired speed is 1 m/s, times the factor.
+        assert!((fastest / factor - 1.0).abs() < 1e-9, "{err}");
+        assert_eq!(*speed_factor, factor);
+        let text = err.to_string();
+        assert!(text.contains("not certified"), "{text}");
+        assert!(text.contains(&format!("speed factor {factor}")), "{text}");
+        assert_eq!(sim.steps(), 0);
+        assert_eq!(sim.frame().positions, &start[..]);
+        sim.set_speed_factor(1.0);
+        let report = sim.step(0.05).unwrap();
+        assert_feasible(&scene, &sim, &report);
+    }
+}
+
 /// `kind = "auto"` answers free flow with Gauss–Seidel and a jam with the interior point
 /// (Gauss–Seidel does not finish the jam within its budget), and every step report names
 /// the solver that answered.

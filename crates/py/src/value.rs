@@ -31,7 +31,10 @@ pub fn to_py(py: Python<'_>, e: CrowdError) -> PyErr {
             PyFileNotFoundError::new_err(message)
         }
         CrowdError::Io { .. } => PyOSError::new_err(message),
-        CrowdError::Observer(_) | CrowdError::Integrate(_) | CrowdError::Infeasible(_) => {
+        CrowdError::Observer(_)
+        | CrowdError::Integrate(_)
+        | CrowdError::NotCertified { .. }
+        | CrowdError::Infeasible(_) => {
             PyRuntimeError::new_err(message)
         }
     }
