@@ -28,7 +28,7 @@ class Run:
     positions: np.ndarray  # (F, N, 2) by person id, NaN when absent
     radius: np.ndarray  # (N,)
     steps: np.ndarray  # structured, one row per step
-    exits: np.ndarray  # structured (id, t), one row per exit passage
+    exits: np.ndarray  # structured (id, exit, t), one row per exit passage (exit: the scene's [[exits]] index)
     trajectory: np.ndarray  # structured (id, frame, x, y)
 
     @property

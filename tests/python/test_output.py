@@ -246,7 +246,7 @@ def test_people_who_enter_during_the_run_are_in_the_file(tmp_path):
     run = moreau_run.load(out)
     n, frames = 80, len(run.time)
     with h5py.File(out, "r") as f:
-        assert f.attrs["format"] == "moreau-run/3"
+        assert f.attrs["format"] == "moreau-run/4"
         np.testing.assert_array_equal(f["people/id"][:], np.arange(n))
         exit_time = f["people/exit_time"][:]
     assert run.radius.shape == (n,) and exit_time.shape == (n,)
@@ -283,3 +283,35 @@ def test_people_who_enter_during_the_run_are_in_the_file(tmp_path):
     # The player shows them all (each from the frame they entered).
     shown = moreau("view", out, "-o", tmp_path / "gate.html")
     assert f"{frames} frames, {n} of {n} people" in shown.stdout
+
+
+def test_the_exits_table_says_which_exit_each_person_took(tmp_path):
+    """`/exits` rows are `(id, exit, t)`, `exit` indexing the scene's `[[exits]]` and the
+    dataset's `names` (format `moreau-run/4`): in the room with a door on each side, everyone
+    recorded through `west` was last seen west of the middle and everyone through `east` east
+    of it, and the in-process run records the same rows."""
+    import moreau as api
+    from conftest import ROOT
+
+    scene = ROOT / "data" / "scenes" / "room-two-exits.toml"
+    out = tmp_path / "two.h5"
+    moreau("run", scene, "-o", out, "--quiet")
+    with h5py.File(out, "r") as f:
+        exits = f["exits"][:]
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["exits"].attrs["names"]]
+        positions = f["frames/positions"][:]
+    assert exits.dtype.names == ("id", "exit", "t")
+    assert names == ["west", "east"]
+    assert len(exits) == 60
+    # Where each person was last seen (the frame before they are NaN for good).
+    seen = ~np.isnan(positions[:, :, 0])
+    last = seen.shape[0] - 1 - np.argmax(seen[::-1], axis=0)
+    x_last = positions[last, np.arange(seen.shape[1]), 0]
+    for row in exits:
+        side = "west" if x_last[row["id"]] < 6.0 else "east"
+        assert names[row["exit"]] == side, row
+    assert {names[e] for e in exits["exit"]} == {"west", "east"}
+
+    sim = api.Simulation(api.Scene.from_file(scene))
+    sim.advance_to(sim.scene.horizon)
+    assert sim.exit_records() == [(int(i), int(e), float(t)) for i, e, t in exits]

@@ -161,7 +161,7 @@ fn inspect(path: &std::path::Path) -> Result<()> {
             _ => String::new(),
         },
         steps.len(),
-        f.exits()?.len(),
+        exits_by_name(&f.exits()?, &h.exit_names),
     );
     if let Some(worst) = steps.iter().map(|s| s.violation).reduce(f64::max) {
         let eps = steps.iter().map(|s| s.eps).fold(0.0, f64::max);
@@ -272,4 +272,24 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// How many passed an exit, and through which when the file says (format `moreau-run/4`) and
+/// there is more than one: `60 (door 35, back 25)`.
+fn exits_by_name(exits: &[moreau_io::ExitRow], names: &[String]) -> String {
+    let mut counts = vec![0usize; names.len()];
+    for e in exits {
+        if let Some(c) = usize::try_from(e.exit).ok().and_then(|i| counts.get_mut(i)) {
+            *c += 1;
+        }
+    }
+    if names.len() < 2 {
+        return exits.len().to_string();
+    }
+    let each: Vec<String> = names
+        .iter()
+        .zip(&counts)
+        .map(|(name, n)| format!("{name} {n}"))
+        .collect();
+    format!("{} ({})", exits.len(), each.join(", "))
 }

@@ -245,7 +245,9 @@ fn a_speed_factor_too_high_to_certify_is_an_error_naming_the_speeds() {
         let mut sim = Simulation::new(scene.clone()).unwrap();
         let start = sim.frame().positions.to_vec();
         sim.set_speed_factor(factor);
-        let err = sim.step(0.05).expect_err("a step at 10⁶ m/s or more cannot be certified");
+        let err = sim
+            .step(0.05)
+            .expect_err("a step at 10⁶ m/s or more cannot be certified");
         let moreau_crowd::CrowdError::NotCertified {
             fastest,
             speed_factor,

@@ -18,8 +18,8 @@ use crate::writer::RunWriter;
 pub trait RunSink: Send {
     /// Records a step (written with the next frame).
     fn step(&mut self, report: &StepReport);
-    /// Records that person `id` passed an exit at time `t`.
-    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError>;
+    /// Records that person `id` passed exit `exit` (its index in the scene) at time `t`.
+    fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError>;
     /// Records that person `id` of radius `radius` entered (ids in order, each the next).
     fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError>;
     /// Whether the file records contact forces.
@@ -43,8 +43,8 @@ impl RunSink for RunWriter {
     fn step(&mut self, report: &StepReport) {
         RunWriter::step(self, report);
     }
-    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
-        RunWriter::exit(self, id, t)
+    fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError> {
+        RunWriter::exit(self, id, exit, t)
     }
     fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
         RunWriter::enter(self, id, radius)
@@ -76,7 +76,7 @@ struct Batch {
     steps: Vec<StepRow>,
     /// Who entered, with their radii, in order.
     entries: Vec<(u32, f64)>,
-    exits: Vec<(u32, f64)>,
+    exits: Vec<(u32, u32, f64)>,
     contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
     moving: Option<Vec<[f64; 4]>>,
     t: f64,
@@ -90,7 +90,7 @@ enum Message {
     Finish {
         steps: Vec<StepRow>,
         entries: Vec<(u32, f64)>,
-        exits: Vec<(u32, f64)>,
+        exits: Vec<(u32, u32, f64)>,
         status: String,
         summary: String,
     },
@@ -239,8 +239,8 @@ fn work(
                 for (id, radius) in entries {
                     let _ = writer.enter(id, radius);
                 }
-                for (id, t) in exits {
-                    let _ = writer.exit(id, t);
+                for (id, exit, t) in exits {
+                    let _ = writer.exit(id, exit, t);
                 }
                 return writer.finish(&status, &summary);
             }
@@ -259,8 +259,8 @@ fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
     for (id, radius) in batch.entries {
         writer.enter(id, radius)?;
     }
-    for (id, t) in batch.exits {
-        writer.exit(id, t)?;
+    for (id, exit, t) in batch.exits {
+        writer.exit(id, exit, t)?;
     }
     if let Some((rows, pressure)) = batch.contacts {
         writer.contacts(rows, &pressure)?;
@@ -275,7 +275,7 @@ impl RunSink for BackgroundWriter {
     fn step(&mut self, report: &StepReport) {
         self.pending.steps.push(StepRow::from(report));
     }
-    fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
+    fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError> {
         if id as usize >= self.people {
             return Err(IoError::Layout {
                 path: self.path.clone(),
@@ -285,7 +285,7 @@ impl RunSink for BackgroundWriter {
                 ),
             });
         }
-        self.pending.exits.push((id, t));
+        self.pending.exits.push((id, exit, t));
         Ok(())
     }
     fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {

@@ -5,11 +5,15 @@ use hdf5::types::FixedAscii;
 use moreau_core::StepReport;
 
 /// The value of the root attribute `format`; bumped when the layout changes (3: people who
-/// enter during the run extend the per-person datasets; `/state` marks `people`).
-pub const FORMAT: &str = "moreau-run/3";
+/// enter during the run extend the per-person datasets; `/state` marks `people`; 4: `/exits`
+/// says which exit, and its attribute `names` names them).
+pub const FORMAT: &str = "moreau-run/4";
 /// Earlier formats this moreau still reads (their layout is a subset of this one's: their
-/// per-person datasets hold everyone from the start).
-pub const FORMATS_READ: &[&str] = &["moreau-run/1", "moreau-run/2", FORMAT];
+/// per-person datasets hold everyone from the start; their `/exits` rows name no exit, read
+/// as exit −1).
+pub const FORMATS_READ: &[&str] = &["moreau-run/1", "moreau-run/2", "moreau-run/3", FORMAT];
+/// The formats read whose `/exits` rows are [`ExitRowV3`]s (no exit).
+pub(crate) const FORMATS_WITHOUT_EXIT: &[&str] = &["moreau-run/1", "moreau-run/2", "moreau-run/3"];
 
 pub(crate) const TRAJECTORY: &str = "trajectory";
 pub(crate) const FRAME_TIME: &str = "frames/time";
@@ -67,7 +71,18 @@ pub struct TrajectoryRow {
 pub struct ExitRow {
     /// Person id.
     pub id: i64,
-    /// Time the person passed an exit (s).
+    /// The exit: its index in the scene's `[[exits]]` and in the attribute `names` (−1 in
+    /// files of formats before `moreau-run/4`, which did not record it).
+    pub exit: i64,
+    /// Time the person passed the exit (s).
+    pub t: f64,
+}
+
+/// One row of `/exits` in formats before `moreau-run/4`.
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub(crate) struct ExitRowV3 {
+    pub id: i64,
     pub t: f64,
 }
 
@@ -211,6 +226,9 @@ pub struct RunHeader {
     pub moving_names: Vec<String>,
     /// `moving/body`: for each moving segment (a column of `/frames/moving_walls`), its body.
     pub moving_body: Vec<u32>,
+    /// `exits.names`: the exits' names, in the scene's order (an `/exits` row's `exit` indexes
+    /// them; none in files of formats before `moreau-run/4`).
+    pub exit_names: Vec<String>,
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@
 //! | `/frames/positions` | float64 `[frames, people, 2]`, indexed by person id, NaN when absent (before a person entered, after they left) |
 //! | `/people/id`, `/people/radius` | everyone in the run, by id: the people at the start, then those who entered (from inflow sources), appended with the frame after they entered |
 //! | `/people/exit_time` | time each person passed an exit, NaN if never (written when the run ends) |
-//! | `/exits` | compound rows `id`, `t`, appended as people pass exits (complete up to the last frame) |
+//! | `/exits` | compound rows `id`, `exit` (int64, the exit's index in the scene's `[[exits]]`), `t`, appended as people pass exits (complete up to the last frame); attribute `names`, the exits' names in that order |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |
 //! | `/walls` | float64 `[segments, 4]`: the wall segments `x0, y0, x1, y1` at the start |
 //! | `/contacts` | only with `[output] contacts = true`: compound rows `frame`, `kind` (0 person–person, 1 person–wall, 2 person–moving wall), `a`, `b` (person ids; for a wall, its row in `/walls`; for a moving wall, its column in `/frames/moving_walls`), `lambda` (float64, m/s): the contacts with `λ > 10⁻⁶ m/s` of the step that ended at each frame; attribute `units` |
@@ -19,6 +19,9 @@
 //! | `/moving/name`, `/moving/body` | only with moving bodies: the bodies' names (strings), and each segment's body (int64, its row in `/moving/name`) |
 //!
 //! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `people`, `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
+//!
+//! Format `moreau-run/4` added `/exits`' `exit` column and `names` attribute; files of
+//! earlier formats read with exit −1 and no names.
 //!
 //! People who enter during the run (format `moreau-run/3`) extend the per-person datasets:
 //! `/people/id` and `/people/radius` grow by a row each, and the people axis of

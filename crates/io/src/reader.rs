@@ -139,6 +139,16 @@ impl RunFile {
             } else {
                 Vec::new()
             },
+            exit_names: if let Ok(names) = self.dataset(EXITS)?.attr("names") {
+                names
+                    .read_raw::<VarLenUnicode>()
+                    .at(&self.path, || "reading attribute 'exits.names'".into())?
+                    .iter()
+                    .map(|s| s.as_str().to_string())
+                    .collect()
+            } else {
+                Vec::new()
+            },
             moving_body: if self.file.dataset(MOVING_BODY).is_ok() {
                 self.read::<i64>(MOVING_BODY)?
                     .iter()
@@ -260,9 +270,27 @@ impl RunFile {
         Ok(Some(a.to_vec()))
     }
 
-    /// The `/exits` rows.
+    /// The `/exits` rows (exit −1 in files of formats before `moreau-run/4`, which did not
+    /// record it).
     pub fn exits(&self) -> Result<Vec<ExitRow>, IoError> {
-        self.read(EXITS)
+        if self.names_exits() {
+            return self.read(EXITS);
+        }
+        Ok(self
+            .read::<ExitRowV3>(EXITS)?
+            .into_iter()
+            .map(|r| ExitRow {
+                id: r.id,
+                exit: -1,
+                t: r.t,
+            })
+            .collect())
+    }
+
+    /// Whether `/exits` says which exit (format `moreau-run/4` on).
+    fn names_exits(&self) -> bool {
+        self.text("format")
+            .is_ok_and(|f| !FORMATS_WITHOUT_EXIT.contains(&f.as_str()))
     }
 
     /// Every dataset with its shape, type, chunks and filters, then the root attributes

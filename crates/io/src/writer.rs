@@ -471,6 +471,14 @@ impl RunWriter {
             .at(path, at("writing attribute 'trajectory.fps'"))?;
         let exits = table::<ExitRow>(&file, EXITS, SMALL_ROWS_PER_CHUNK)
             .at(path, at("creating 'exits'"))?;
+        if !header.exit_names.is_empty() {
+            let names: Vec<VarLenUnicode> = header.exit_names.iter().map(|n| text(n)).collect();
+            exits
+                .new_attr_builder()
+                .with_data(&names)
+                .create("names")
+                .at(path, at("writing attribute 'exits.names'"))?;
+        }
         let steps = table::<StepRow>(&file, STEPS, SMALL_ROWS_PER_CHUNK)
             .at(path, at("creating 'steps'"))?;
         let frame_time = table::<f64>(&file, FRAME_TIME, SMALL_ROWS_PER_CHUNK)
@@ -629,8 +637,9 @@ impl RunWriter {
         Ok(())
     }
 
-    /// Records that person `id` passed an exit at time `t` (written with the next frame).
-    pub fn exit(&mut self, id: u32, t: f64) -> Result<(), IoError> {
+    /// Records that person `id` passed exit `exit` (its index in the scene) at time `t`
+    /// (written with the next frame).
+    pub fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError> {
         let people = self.people();
         let slot = self
             .exit_times
@@ -640,7 +649,11 @@ impl RunWriter {
                 what: format!("exit of person {id}, but the file holds {people} people"),
             })?;
         *slot = t;
-        self.pending_exits.push(ExitRow { id: id as i64, t });
+        self.pending_exits.push(ExitRow {
+            id: id as i64,
+            exit: exit.into(),
+            t,
+        });
         Ok(())
     }
 
@@ -756,7 +769,8 @@ impl RunWriter {
             return Err(IoError::Layout {
                 path: partial,
                 what: format!(
-                    "format '{format}' has no saved state (this moreau writes '{FORMAT}')"
+                    "format '{format}': this moreau resumes only its own format '{FORMAT}' \
+                     (`moreau run --from` runs the file's scene again)"
                 ),
             });
         }

@@ -34,6 +34,7 @@ fn header(n: usize, contacts: bool) -> RunHeader {
         contacts,
         moving_names: Vec::new(),
         moving_body: Vec::new(),
+        exit_names: vec!["out".into()],
     }
 }
 
@@ -53,7 +54,7 @@ fn write_frame(w: &mut RunWriter, k: usize, n: usize) -> Result<(), IoError> {
     if k > 0 {
         w.step(&report(2 * k - 2));
         w.step(&report(2 * k - 1));
-        w.exit(0, 0.1 * k as f64)?;
+        w.exit(0, 0, 0.1 * k as f64)?;
     }
     let ids: Vec<u32> = (0..n as u32).collect();
     let q: Vec<f64> = (0..2 * n)
@@ -293,7 +294,7 @@ fn a_background_writer_writes_the_same_file_and_reports_its_failures() {
         if k > 0 {
             w.step(&report(2 * k - 2));
             w.step(&report(2 * k - 1));
-            w.exit(0, 0.1 * k as f64)?;
+            w.exit(0, 0, 0.1 * k as f64)?;
         }
         let row = ContactRow {
             frame: 0,

@@ -33,6 +33,7 @@ fn header(n: usize) -> RunHeader {
         contacts: false,
         moving_names: Vec::new(),
         moving_body: Vec::new(),
+        exit_names: vec!["door".into(), "back door".into()],
     }
 }
 
@@ -63,7 +64,7 @@ fn a_run_file_reads_back_what_was_written() {
         .unwrap();
     w.step(&report(0, 0.05));
     w.step(&report(1, 0.1));
-    w.exit(1, 0.07).unwrap();
+    w.exit(1, 1, 0.07).unwrap();
     // Person 1 has left: frames hold the others, the dense array NaN in its place.
     w.frame(0.1, &[0, 2], &[0.11, 0.21, 0.51, 0.61]).unwrap();
     w.step(&report(2, 0.15));
@@ -88,7 +89,10 @@ fn a_run_file_reads_back_what_was_written() {
     assert_eq!(steps[1].status.as_str(), "converged");
     assert_eq!(steps[1].solver.as_str(), "apgd");
     let exits = f.exits().unwrap();
-    assert_eq!((exits.len(), exits[0].id, exits[0].t), (1, 1, 0.07));
+    assert_eq!(
+        (exits.len(), exits[0].id, exits[0].exit, exits[0].t),
+        (1, 1, 1, 0.07)
+    );
     // The temporary name used while laying out is gone.
     let dir = path.parent().unwrap();
     assert!(std::fs::read_dir(dir).unwrap().all(|e| {
@@ -195,7 +199,7 @@ fn a_frame_with_an_unknown_person_is_refused() {
     let mut w = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap();
     let err = w.frame(0.0, &[0, 5], &[0.0, 0.0, 1.0, 1.0]).unwrap_err();
     assert!(err.to_string().contains("person 5"), "{err}");
-    assert!(w.exit(7, 1.0).is_err());
+    assert!(w.exit(7, 0, 1.0).is_err());
 }
 
 /// `/people/id`, `/people/radius`, `/people/exit_time` and the people axis of
@@ -233,7 +237,7 @@ fn people_who_enter_during_the_run_extend_the_file() {
         .unwrap();
     // Person 3 enters and leaves between two frames: in the file all the same.
     w.enter(3, 0.35).unwrap();
-    w.exit(3, 0.15).unwrap();
+    w.exit(3, 0, 0.15).unwrap();
     w.enter(4, 0.4).unwrap();
     assert_eq!(w.people(), 5);
     w.frame(0.2, &[0, 2, 4], &[0.11, 0.21, 0.51, 0.61, 0.7, 0.8])
@@ -262,4 +266,54 @@ fn people_who_enter_during_the_run_extend_the_file() {
     assert_eq!(exit_time[3], 0.15);
     assert_eq!(exit_time.iter().filter(|t| t.is_nan()).count(), 5);
     assert_eq!(positions, [3, 6, 2]);
+}
+
+/// Files of format `moreau-run/3` (before `/exits` said which exit) still read: their rows
+/// with exit −1, no exit names. Made here by taking a new file back to that layout.
+#[test]
+fn a_file_of_format_3_reads_its_exits_with_no_exit() {
+    use hdf5::types::VarLenUnicode;
+    #[derive(hdf5::H5Type, Clone, Copy)]
+    #[repr(C)]
+    struct ExitRowV3 {
+        id: i64,
+        t: f64,
+    }
+    let path = scratch("format3.h5");
+    let mut w = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap();
+    w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
+    w.exit(0, 1, 0.05).unwrap();
+    w.frame(0.1, &[1], &[0.3, 0.4]).unwrap();
+    w.finish("complete", "{}").unwrap();
+    {
+        let file = hdf5::File::open_rw(&path).unwrap();
+        file.unlink("exits").unwrap();
+        file.new_dataset_builder()
+            .with_data(&[ExitRowV3 { id: 0, t: 0.05 }])
+            .create("exits")
+            .unwrap();
+        file.delete_attr("format").unwrap();
+        file.new_attr::<VarLenUnicode>()
+            .create("format")
+            .unwrap()
+            .write_scalar(&"moreau-run/3".parse::<VarLenUnicode>().unwrap())
+            .unwrap();
+    }
+    let f = RunFile::open(&path).unwrap();
+    let exits = f.exits().unwrap();
+    assert_eq!(
+        (exits.len(), exits[0].id, exits[0].exit, exits[0].t),
+        (1, 0, -1, 0.05)
+    );
+    assert!(f.header().unwrap().exit_names.is_empty());
+    // The same file in this format reads the exit and its name.
+    let again = scratch("format4.h5");
+    let mut w = RunWriter::create(&again, &header(2), Overwrite::Never).unwrap();
+    w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
+    w.exit(0, 1, 0.05).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&again).unwrap();
+    let header = f.header().unwrap();
+    assert_eq!(f.exits().unwrap()[0].exit, 1);
+    assert_eq!(header.exit_names[1], "back door");
 }

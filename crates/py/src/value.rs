@@ -34,9 +34,7 @@ pub fn to_py(py: Python<'_>, e: CrowdError) -> PyErr {
         CrowdError::Observer(_)
         | CrowdError::Integrate(_)
         | CrowdError::NotCertified { .. }
-        | CrowdError::Infeasible(_) => {
-            PyRuntimeError::new_err(message)
-        }
+        | CrowdError::Infeasible(_) => PyRuntimeError::new_err(message),
     }
 }
 

@@ -45,6 +45,7 @@ pub fn header(sim: &Simulation, command: String) -> RunHeader {
         contacts: sim.scene().output.contacts,
         moving_names: sim.moving().names().to_vec(),
         moving_body: sim.moving().segment_bodies().collect(),
+        exit_names: sim.scene().exits.iter().map(|e| e.name.clone()).collect(),
     }
 }
 
@@ -234,7 +235,7 @@ impl Observer for Record<'_> {
     fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
         self.exits += 1;
         if let Some(w) = self.writer.as_deref_mut() {
-            w.exit(record.id, record.t)?;
+            w.exit(record.id, record.exit, record.t)?;
         }
         Ok(())
     }
