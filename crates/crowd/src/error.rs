@@ -35,8 +35,8 @@ pub enum CrowdError {
     /// The time stepping failed.
     #[error(transparent)]
     Integrate(#[from] moreau_integrate::IntegrateError),
-    /// A step's projection could not be certified although its constraints admit a velocity:
-    /// the integrator's error, with how fast the crowd asked to go. The certified accuracy is
+    /// A step's projection could not be certified, and no Farkas certificate showed its
+    /// constraints infeasible: the integrator's error, with how fast the crowd asked to go. The certified accuracy is
     /// absolute while rounding grows with the velocities, so a speed factor or desired speed
     /// far beyond walking shows here (10⁶ × 1.3 m/s stops at the rounding floor).
     #[error(
