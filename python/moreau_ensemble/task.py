@@ -77,11 +77,17 @@ def _read_run(output: pathlib.Path, row: dict) -> None:
 
     with h5py.File(output, "r") as f:
         people = int(f["people/radius"].shape[0])
-        exits = f["exits"]["t"][:] if f["exits"].shape[0] else []
+        rows = f["exits"][:]
+        names = [str(n, "utf-8") if isinstance(n, bytes) else str(n)
+                 for n in f["exits"].attrs.get("names", [])]
         status = f.attrs["status"]
+    exits = list(rows["t"])
     row["people"] = people
     row["passed_exit"] = len(exits)
-    row["evacuation_time"], row["mean_flow"] = evacuation(list(exits), people)
+    # Through each exit, by name (run files of format moreau-run/4 on say which).
+    for k, name in enumerate(names):
+        row[f"passed.{name}"] = int((rows["exit"] == k).sum())
+    row["evacuation_time"], row["mean_flow"] = evacuation(exits, people)
     row["output"] = str(output)
     row["status"] = "complete" if status == "complete" else f"incomplete ({status})"
 

@@ -466,6 +466,15 @@ def test_the_ensemble_runs_in_process_with_engine_python(tmp_path):
         assert rows[0][key] == rows[1][key]
     with h5py.File(rows[0]["output"]) as a, h5py.File(rows[1]["output"]) as b:
         assert np.array_equal(a["frames/positions"][:], b["frames/positions"][:], equal_nan=True)
+    # Through which exit, by name, where the scene has two: both engines the same counts.
+    two = (ROOT / "data" / "scenes" / "room-two-exits.toml").read_text()
+    rows = [run_variant("two", {}, 1, two, str(tmp_path / f"two-{engine}"), moreau=str(MOREAU),
+                        engine=engine) for engine in ("python", "driver")]
+    for row in rows:
+        assert row["status"] == "complete", row
+        assert row["passed.west"] + row["passed.east"] == row["passed_exit"] == 60, row
+        assert row["passed.west"] > 0 and row["passed.east"] > 0, row
+    assert rows[0]["passed.west"] == rows[1]["passed.west"]
     bad = run_variant("bad", {}, 1, scene.replace("radius = 0.2", "radius = -0.2"),
                       str(tmp_path / "bad"), engine="python")
     assert bad["status"] == "failed" and "SceneError" in bad["error"] and "radius" in bad["error"]
