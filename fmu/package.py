@@ -18,8 +18,11 @@ resources) and a model description generated from the shipped one for the scene:
 starts at the scene's count (FMI 3), the default experiment stops at its horizon, and every
 moving body (`[[moving]]`) is a continuous Real input `moving.<name>` with value reference
 1000 + its index in the scene: the body's keyframe parameter, from its first keyframe's time
-(the start value) to its last. The binary is the same (it serves the inputs of whatever scene
-it runs), and so is the GUID / instantiation token it checks.
+(the start value) to its last. Every exit is a Boolean input `exit_open.<name>` (value
+reference 2000 + its index; exit 0's is the same input as `door_open`) and an Integer output
+`passed.<name>` (3000 + its index): how many have passed it. The binary is the same (it
+serves the inputs of whatever scene it runs), and so is the GUID / instantiation token it
+checks.
 """
 
 import argparse
@@ -37,6 +40,9 @@ PLATFORMS = {"2": "linux64", "3": "x86_64-linux"}
 ROOM = ROOT / "data" / "scenes" / "room-150.toml"
 # The value reference of the first moving body's position (fmu/src/model.rs, vr::MOVING).
 MOVING = 1000
+# The value references of the first exit's input and output (vr::EXIT_OPEN, vr::EXIT_PASSED).
+EXIT_OPEN = 2000
+EXIT_PASSED = 3000
 
 
 def people_of(scene: dict) -> int:
@@ -94,7 +100,46 @@ def for_scene(version: str, text: str, path: pathlib.Path, where: pathlib.Path) 
                 f'    <Float64 name={name} valueReference="{vr}" causality="input" '
                 f'variability="continuous" start="{first!r}" min="{first!r}" max="{last!r}" '
                 f'description={description}/>\n')
-    return substitute(text, r"  </ModelVariables>", "".join(variables) + "  </ModelVariables>",
+    # The exits: whether each is open (a Boolean input; exit 0's is door_open under another
+    # name) and how many passed it (an Integer output, listed in the model structure).
+    outputs, unknowns = [], []
+    for k, exit_ in enumerate(scene.get("exits", [])):
+        name = exit_["name"]
+        opened, passed = quoteattr(f"exit_open.{name}"), quoteattr(f"passed.{name}")
+        said = (f"Whether the exit '{name}' is open (closed: a wall across it)"
+                + ("; the same input as door_open" if k == 0 else ""))
+        counted = f"People who have passed the exit '{name}'"
+        if version == "2":
+            variables.append(
+                f'    <!-- {index + 1} --><ScalarVariable name={opened} '
+                f'valueReference="{EXIT_OPEN + k}" causality="input" variability="discrete" '
+                f'description={quoteattr(said)}>\n      <Boolean start="true"/>\n'
+                f'    </ScalarVariable>\n'
+                f'    <!-- {index + 2} --><ScalarVariable name={passed} '
+                f'valueReference="{EXIT_PASSED + k}" causality="output" variability="discrete" '
+                f'initial="calculated" description={quoteattr(counted)}>\n      <Integer/>\n'
+                f'    </ScalarVariable>\n')
+            index += 2
+            outputs.append(f'      <Unknown index="{index}"/>\n')
+            unknowns.append(f'      <Unknown index="{index}"/>\n')
+        else:
+            variables.append(
+                f'    <Boolean name={opened} valueReference="{EXIT_OPEN + k}" causality="input" '
+                f'variability="discrete" start="true" description={quoteattr(said)}/>\n'
+                f'    <Int32 name={passed} valueReference="{EXIT_PASSED + k}" '
+                f'causality="output" variability="discrete" description={quoteattr(counted)}/>\n')
+            outputs.append(f'    <Output valueReference="{EXIT_PASSED + k}"/>\n')
+            unknowns.append(f'    <InitialUnknown valueReference="{EXIT_PASSED + k}"/>\n')
+    text = substitute(text, r"  </ModelVariables>", "".join(variables) + "  </ModelVariables>",
+                      where)
+    if version == "2":
+        text = substitute(text, r"    </Outputs>", "".join(outputs) + "    </Outputs>", where)
+        return substitute(text, r"    </InitialUnknowns>",
+                          "".join(unknowns) + "    </InitialUnknowns>", where)
+    last_output = text.rindex("<Output ")
+    end = text.index("\n", last_output) + 1
+    text = text[:end] + "".join(outputs) + text[end:]
+    return substitute(text, r"  </ModelStructure>", "".join(unknowns) + "  </ModelStructure>",
                       where)
 
 

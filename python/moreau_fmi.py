@@ -24,6 +24,13 @@ continuous Real input per body, `moving.<name>`: the body's keyframe parameter (
     md = read_model_description("target/fmu/moreau-crowd-corridor-door-fmi3.fmu")
     door = moreau_fmi.signal(md, [0, 2, 2.25, 12], {"moving.door": [0, 0, 1, 1]})
     r = simulate_fmu(fmu, stop_time=12, output_interval=0.25, input=door)
+
+Such an FMU also has, for each exit of its scene, a Boolean input `exit_open.<name>` and an
+Integer output `passed.<name>` (how many passed it); `signal` types a Boolean input's column
+as bools:
+
+    md = read_model_description("target/fmu/moreau-crowd-room-two-exits-fmi3.fmu")
+    east = moreau_fmi.signal(md, [0, 8, 8, 30], {"exit_open.east": [False, False, True, True]})
 """
 
 from __future__ import annotations

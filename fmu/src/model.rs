@@ -89,12 +89,38 @@ pub mod vr {
     /// `MOVING + b`, named `moving.<name>`, for the bodies in the order the scene lists them
     /// (see [`moving_body`](super::moving_body)).
     pub const MOVING: u32 = 1000;
+    /// Whether the scene's exit `k` is open is the Boolean input `EXIT_OPEN + k`, named
+    /// `exit_open.<name>`, for the exits in the order the scene lists them; exit 0's is
+    /// `door_open` under another name (see [`exit_input`](super::exit_input)).
+    pub const EXIT_OPEN: u32 = 2000;
+    /// How many people passed the scene's exit `k` is the Integer output `EXIT_PASSED + k`,
+    /// named `passed.<name>` (see [`exit_output`](super::exit_output)).
+    pub const EXIT_PASSED: u32 = 3000;
+    /// The end of the exits' outputs' range.
+    pub const EXIT_END: u32 = 4000;
 }
 
 /// The moving body whose position input has value reference `vr` (`vr::MOVING + b`), if `vr`
 /// is in that range; whether the scene has body `b` is the model's to say.
 pub fn moving_body(vr: u32) -> Option<usize> {
-    vr.checked_sub(vr::MOVING).map(|b| b as usize)
+    (vr::MOVING..vr::EXIT_OPEN)
+        .contains(&vr)
+        .then(|| (vr - vr::MOVING) as usize)
+}
+
+/// The exit whose input `exit_open.<name>` has value reference `vr` (`vr::EXIT_OPEN + k`), if
+/// `vr` is in that range; whether the scene has exit `k` is the model's to say.
+pub fn exit_input(vr: u32) -> Option<usize> {
+    (vr::EXIT_OPEN..vr::EXIT_PASSED)
+        .contains(&vr)
+        .then(|| (vr - vr::EXIT_OPEN) as usize)
+}
+
+/// The exit whose output `passed.<name>` has value reference `vr` (`vr::EXIT_PASSED + k`).
+pub fn exit_output(vr: u32) -> Option<usize> {
+    (vr::EXIT_PASSED..vr::EXIT_END)
+        .contains(&vr)
+        .then(|| (vr - vr::EXIT_PASSED) as usize)
 }
 
 /// The name of the position input of the moving body `name`.
@@ -216,8 +242,11 @@ pub struct Settings {
     pub desired_speed_factor: f64,
     /// `speed_factor`.
     pub speed_factor: f64,
-    /// `door_open`.
+    /// `door_open` (also `exit_open.<name of exit 0>`).
     pub door_open: bool,
+    /// `exit_open.<name>` of the exits after the first, as the master set them, by exit (the
+    /// others are as the scene has them: open).
+    pub exits_open: BTreeMap<usize, bool>,
     /// `moving.<name>`: the positions (keyframe parameters) the master set, by body; a body
     /// not in it is held at its start value, its first keyframe's time.
     pub moving: BTreeMap<usize, f64>,
@@ -235,6 +264,7 @@ impl Default for Settings {
             desired_speed_factor: 1.0,
             speed_factor: 1.0,
             door_open: true,
+            exits_open: BTreeMap::new(),
             moving: BTreeMap::new(),
             start_time: 0.0,
         }
@@ -447,6 +477,18 @@ impl CrowdModel {
         &self.moving
     }
 
+    /// The names of the scene's exits, in the scene's order (exit `k`'s input at value
+    /// reference `vr::EXIT_OPEN + k`, its output at `vr::EXIT_PASSED + k`).
+    pub fn exits(&self) -> impl ExactSizeIterator<Item = &str> {
+        self.sim.scene().exits.iter().map(|e| e.name.as_str())
+    }
+
+    /// People who passed exit `k` so far.
+    pub fn passed(&self, k: usize) -> i32 {
+        let records = self.sim.exit_records();
+        records.iter().filter(|r| r.exit as usize == k).count() as i32
+    }
+
     /// Where moving body `b` is now: its keyframe parameter at the model's time (the input's
     /// value set before the last communication step, or the start value).
     pub fn moving_position(&self, b: usize) -> f64 {
@@ -520,9 +562,23 @@ impl CrowdModel {
             }
             targets[b] = value;
         }
+        if let Some((&k, _)) = settings
+            .exits_open
+            .range(self.sim.scene().exits.len()..)
+            .next()
+        {
+            return Err(FmuError::Setting(format!(
+                "value reference {} set: the scene has {} exits",
+                vr::EXIT_OPEN as usize + k,
+                self.sim.scene().exits.len()
+            )));
+        }
         self.sim.set_speed_factor(factor);
         if self.sim.exit_open(0).is_some() {
             self.sim.set_exit_open(0, settings.door_open)?;
+        }
+        for (&k, &open) in &settings.exits_open {
+            self.sim.set_exit_open(k, open)?;
         }
         self.targets = targets;
         self.min_gap = None;

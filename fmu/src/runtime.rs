@@ -8,19 +8,33 @@ use moreau_core::Num;
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
-use crate::model::{Causality, CrowdModel, Kind, Settings, moving_body, variable, vr};
+use crate::model::{
+    Causality, CrowdModel, Kind, Settings, exit_input, exit_output, moving_body, variable, vr,
+};
 use crate::snapshot::Snapshot;
 
 /// What the runtime checks a value reference against: the variable's name, type and role. The
 /// model's variables are fixed ([`crate::model::VARIABLES`]); the moving bodies' position
-/// inputs are the scene's (`moving.<name>`, Real inputs).
+/// inputs (`moving.<name>`, Real inputs) and the exits' inputs and outputs
+/// (`exit_open.<name>`, Boolean; `passed.<name>`, Integer) are the scene's.
 #[derive(Debug, Clone)]
 struct Described {
     name: String,
     kind: Kind,
     causality: Causality,
-    /// The moving body, for a position input.
-    body: Option<usize>,
+    /// Whose variable it is, for the scene's.
+    of: Option<SceneVariable>,
+}
+
+/// A variable of the scene's, by what it belongs to.
+#[derive(Debug, Clone, Copy)]
+enum SceneVariable {
+    /// The position input of moving body `b`.
+    Body(usize),
+    /// Whether exit `k` is open.
+    ExitOpen(usize),
+    /// How many passed exit `k`.
+    Passed(usize),
 }
 
 /// The states of a co-simulation instance (FMI 2 names in brackets).
@@ -150,7 +164,38 @@ impl Instance {
                 name: v.name.to_string(),
                 kind: v.kind,
                 causality: v.causality,
-                body: None,
+                of: None,
+            });
+        }
+        if let Some((k, input)) = exit_input(vr)
+            .map(|k| (k, true))
+            .or_else(|| exit_output(vr).map(|k| (k, false)))
+        {
+            let scene = self.scene_name();
+            let model = self.model()?;
+            let count = model.exits().len();
+            let name = model.exits().nth(k).ok_or_else(|| {
+                FmuError::Setting(format!(
+                    "unknown value reference {vr}: the scene {scene} has {count} exits \
+                     (value references {} and up for their inputs, {} and up for their outputs)",
+                    vr::EXIT_OPEN,
+                    vr::EXIT_PASSED
+                ))
+            })?;
+            return Ok(if input {
+                Described {
+                    name: format!("exit_open.{name}"),
+                    kind: Kind::Boolean,
+                    causality: Causality::Input,
+                    of: Some(SceneVariable::ExitOpen(k)),
+                }
+            } else {
+                Described {
+                    name: format!("passed.{name}"),
+                    kind: Kind::Integer,
+                    causality: Causality::Output,
+                    of: Some(SceneVariable::Passed(k)),
+                }
             });
         }
         let b = moving_body(vr).ok_or(FmuError::UnknownReference(vr))?;
@@ -168,7 +213,7 @@ impl Instance {
             name: input.name.clone(),
             kind: Kind::Real,
             causality: Causality::Input,
-            body: Some(b),
+            of: Some(SceneVariable::Body(b)),
         })
     }
 
@@ -212,7 +257,7 @@ impl Instance {
     /// Sets a Real.
     pub fn set_real(&mut self, vr: u32, value: f64) -> Result<(), FmuError> {
         let v = self.settable(vr, Kind::Real)?;
-        if let Some(b) = v.body {
+        if let Some(SceneVariable::Body(b)) = v.of {
             return self.set_moving(b, &v.name, value);
         }
         let (causality, name) = (v.causality, v.name.as_str());
@@ -284,14 +329,27 @@ impl Instance {
         })
     }
 
-    /// Sets a Boolean.
+    /// Sets a Boolean: `door_open`, or `exit_open.<name>` (exit 0's is `door_open`); a value
+    /// the model refuses is not kept.
     pub fn set_boolean(&mut self, vr: u32, value: bool) -> Result<(), FmuError> {
-        let causality = self.settable(vr, Kind::Boolean)?.causality;
-        match vr {
-            vr::DOOR_OPEN => self.settings.door_open = value,
+        let v = self.settable(vr, Kind::Boolean)?;
+        let exit = match (vr, v.of) {
+            (vr::DOOR_OPEN, _) | (_, Some(SceneVariable::ExitOpen(0))) => 0,
+            (_, Some(SceneVariable::ExitOpen(k))) => k,
             _ => return Err(FmuError::UnknownReference(vr)),
+        };
+        let before = (self.settings.door_open, self.settings.exits_open.clone());
+        if exit == 0 {
+            self.settings.door_open = value;
+        } else {
+            self.settings.exits_open.insert(exit, value);
         }
-        self.changed(causality)
+        if let Err(e) = self.changed(v.causality) {
+            (self.settings.door_open, self.settings.exits_open) = before;
+            let _ = self.changed(v.causality);
+            return Err(e);
+        }
+        Ok(())
     }
 
     /// Sets a String.
@@ -337,7 +395,7 @@ impl Instance {
 
     /// Gets a Real.
     pub fn get_real(&mut self, vr: u32) -> Result<f64, FmuError> {
-        if let Some(b) = self.readable(vr, Kind::Real)?.body {
+        if let Some(SceneVariable::Body(b)) = self.readable(vr, Kind::Real)?.of {
             return self.get_moving(b);
         }
         Ok(match vr {
@@ -354,7 +412,9 @@ impl Instance {
 
     /// Gets an Integer.
     pub fn get_integer(&mut self, vr: u32) -> Result<i32, FmuError> {
-        self.readable(vr, Kind::Integer)?;
+        if let Some(SceneVariable::Passed(k)) = self.readable(vr, Kind::Integer)?.of {
+            return Ok(self.model()?.passed(k));
+        }
         self.model()?
             .integer(vr)
             .ok_or(FmuError::UnknownReference(vr))
@@ -371,9 +431,13 @@ impl Instance {
 
     /// Gets a Boolean.
     pub fn get_boolean(&mut self, vr: u32) -> Result<bool, FmuError> {
-        self.readable(vr, Kind::Boolean)?;
-        match vr {
-            vr::DOOR_OPEN => Ok(self.settings.door_open),
+        match (vr, self.readable(vr, Kind::Boolean)?.of) {
+            (vr::DOOR_OPEN, _) | (_, Some(SceneVariable::ExitOpen(0))) => {
+                Ok(self.settings.door_open)
+            }
+            (_, Some(SceneVariable::ExitOpen(k))) => {
+                Ok(self.settings.exits_open.get(&k).copied().unwrap_or(true))
+            }
             _ => Err(FmuError::UnknownReference(vr)),
         }
     }
@@ -479,6 +543,7 @@ impl Instance {
             start_time: self.settings.start_time,
             speed_factor: self.settings.speed_factor,
             door_open: self.settings.door_open,
+            exits_open: self.settings.exits_open.clone(),
             moving: self.settings.moving.clone(),
             desired_speed_factor: self.settings.desired_speed_factor,
             model,
@@ -527,10 +592,18 @@ impl Instance {
                 )));
             }
         }
+        let exits = model.exits().len();
+        if let Some(&k) = snapshot.exits_open.keys().find(|&&k| k == 0 || k >= exits) {
+            return Err(FmuError::Setting(format!(
+                "FMUstate: an input of exit {k}, the scene has {exits} exits (exit 0's is \
+                 door_open): refused"
+            )));
+        }
         model.load(&snapshot.model)?;
         self.settings.start_time = snapshot.start_time;
         self.settings.speed_factor = snapshot.speed_factor;
         self.settings.door_open = snapshot.door_open;
+        self.settings.exits_open = snapshot.exits_open.clone();
         self.settings.moving = snapshot.moving.clone();
         self.state = snapshot.state;
         Ok(())

@@ -24,6 +24,8 @@ pub struct Snapshot {
     pub speed_factor: f64,
     /// The input `door_open`.
     pub door_open: bool,
+    /// The inputs `exit_open.<name>` of the exits after the first, as the master set them.
+    pub exits_open: BTreeMap<usize, bool>,
     /// The moving bodies' position inputs the master set, by body (the others are at their
     /// start values); where the bodies are, and the drive they follow, is in the model's
     /// `SimState`.
@@ -41,9 +43,10 @@ const HEADER: usize = 8 + 4 + 8;
 
 impl Snapshot {
     /// The layout version of the serialized form (of the header and of what follows it);
-    /// bumped whenever a field changes meaning (3: the simulation's state format 5, whose
-    /// solver memory holds the interior points'; 2: the moving bodies' inputs).
-    pub const FORMAT: u32 = 3;
+    /// bumped whenever a field changes meaning (4: the exits' inputs; 3: the simulation's
+    /// state format 5, whose solver memory holds the interior points'; 2: the moving bodies'
+    /// inputs).
+    pub const FORMAT: u32 = 4;
 
     /// The hash of the scene the state was taken from.
     pub fn scene_hash(&self) -> u64 {

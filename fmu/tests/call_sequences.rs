@@ -78,9 +78,9 @@ fn hostile(rng: &mut Rng) -> f64 {
     }
 }
 
-/// A value reference: the model's, the moving body's, or none of them.
+/// A value reference: the model's, the moving body's, an exit's, or none of them.
 fn reference(rng: &mut Rng) -> u32 {
-    const REFS: [u32; 20] = [
+    const REFS: [u32; 25] = [
         vr::SCENE,
         vr::STEP,
         vr::EPS_KAPPA,
@@ -98,6 +98,11 @@ fn reference(rng: &mut Rng) -> u32 {
         vr::RADII,
         vr::MOVING,
         vr::MOVING + 1,
+        vr::EXIT_OPEN,
+        vr::EXIT_OPEN + 1,
+        vr::EXIT_PASSED,
+        vr::EXIT_PASSED + 1,
+        vr::EXIT_END,
         0,
         999,
         u32::MAX,
@@ -117,6 +122,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
     let scene_names = [
         scenes.join("fmu/corridor-door.toml"),
         scenes.join("scenes/room-60.toml"),
+        scenes.join("scenes/room-two-exits.toml"),
         scenes.join("scenes/no-such-scene.toml"),
         scenes.join("fmu"),
     ];
@@ -138,11 +144,11 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
             match what {
                 0 => {
                     let text = match if call == 0 {
-                        rng.below(2)
+                        rng.below(3)
                     } else {
-                        rng.below(5)
+                        rng.below(6)
                     } {
-                        4 => CString::new("\u{1}garbage").unwrap(),
+                        5 => CString::new("\u{1}garbage").unwrap(),
                         k => CString::new(scene_names[k].display().to_string()).unwrap(),
                     };
                     api.set_scene(&text)
@@ -241,6 +247,18 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     api.reset()
                 }
                 16 => api.terminate(),
+                17 => {
+                    let r = reference(&mut rng);
+                    let values: Vec<i32> = (0..rng.below(3))
+                        .map(|_| [0, 1, 2, -1][rng.below(4)])
+                        .collect();
+                    api.set_boolean(r, &values)
+                }
+                18 => {
+                    let refs: Vec<u32> = (0..rng.below(3)).map(|_| reference(&mut rng)).collect();
+                    let mut out = vec![0; rng.below(3)];
+                    api.get_boolean(&refs, &mut out)
+                }
                 _ => api.other(),
             }
         };
@@ -268,7 +286,7 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
 }
 
 /// The kinds of call a sequence draws from (see `sequence`).
-const KINDS: usize = 17;
+const KINDS: usize = 19;
 
 #[test]
 fn random_call_sequences_get_a_status_and_a_log_line_never_a_crash() {

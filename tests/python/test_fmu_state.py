@@ -224,7 +224,7 @@ def test_a_state_of_another_scene_is_refused_with_a_log_line(fmus, unzipped, whi
     damaged[8:12] = (1).to_bytes(4, "little")  # a state of a build before the moving inputs
     with pytest.raises(Exception, match="status 3"):
         b.s.deserializeFMUState(bytes(damaged))
-    assert "format 1; this FMU reads format 3" in capfd.readouterr().out
+    assert "format 1; this FMU reads format 4" in capfd.readouterr().out
     b.free()
 
 

@@ -156,6 +156,39 @@ impl Api {
             }
         }
     }
+    /// `values` to reference `r` (FMI 3: one reference and all the values; FMI 2: the
+    /// reference once for each value, any integer as the Boolean).
+    pub unsafe fn set_boolean(self, r: u32, values: &[c_int]) -> c_int {
+        unsafe {
+            if self.v3 {
+                let bytes: Vec<bool> = values.iter().map(|&v| v != 0).collect();
+                fmi3::fmi3SetBoolean(self.c, &r, 1, bytes.as_ptr(), bytes.len())
+            } else {
+                let refs = vec![r; values.len()];
+                fmi2::fmi2SetBoolean(self.c, refs.as_ptr(), refs.len(), values.as_ptr())
+            }
+        }
+    }
+    /// FMI 3: `out` of any length; FMI 2: one value a reference.
+    pub unsafe fn get_boolean(self, refs: &[u32], out: &mut Vec<c_int>) -> c_int {
+        unsafe {
+            if self.v3 {
+                let mut bytes = vec![false; out.len()];
+                let status = fmi3::fmi3GetBoolean(
+                    self.c,
+                    refs.as_ptr(),
+                    refs.len(),
+                    bytes.as_mut_ptr(),
+                    bytes.len(),
+                );
+                out.iter_mut().zip(&bytes).for_each(|(o, &b)| *o = b.into());
+                status
+            } else {
+                out.resize(refs.len(), 0);
+                fmi2::fmi2GetBoolean(self.c, refs.as_ptr(), refs.len(), out.as_mut_ptr())
+            }
+        }
+    }
     pub unsafe fn get_state(self, state: &mut *mut c_void) -> c_int {
         unsafe {
             if self.v3 {

@@ -1,0 +1,88 @@
+"""Each exit of a scene as an input and an output of the FMUs, in fmpy: the FMUs
+`fmu/package.py --scene data/scenes/room-two-exits.toml` builds declare `exit_open.<name>`
+(Boolean inputs, exit 0's the same input as `door_open`) and `passed.<name>` (Integer outputs)
+for both exits, fmpy's validator finds nothing, and `simulate_fmu` with the east door closed
+for the first 8 s lets nobody out through it until then; FMI 2 and FMI 3 give the same run,
+and it is the in-process `moreau.Simulation` with the same door, exit by exit."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from fmpy import read_model_description, simulate_fmu
+from fmpy.validation import validate_fmu
+
+import moreau
+import moreau_fmi
+from conftest import ROOT
+
+SCENE = ROOT / "data" / "scenes" / "room-two-exits.toml"
+OPEN_AT, STOP, H, PEOPLE = 8.0, 20.0, 1.0, 60
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    out = tmp_path_factory.mktemp("two-exits-fmus")
+    package = [sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build", "--out", str(out)]
+    subprocess.run(package + ["--scene", str(SCENE)], check=True, capture_output=True)
+    return {v: out / f"moreau-crowd-room-two-exits-fmi{v}.fmu" for v in ("2", "3")}
+
+
+@pytest.mark.parametrize("version", ["2", "3"])
+def test_each_exit_is_an_input_and_an_output_and_fmpy_validates_the_fmu(fmus, version):
+    fmu = str(fmus[version])
+    assert validate_fmu(fmu) == []
+    md = read_model_description(fmu, validate=True)
+    by_name = {v.name: v for v in md.modelVariables}
+    integer = "Integer" if version == "2" else "Int32"
+    for k, name in enumerate(["west", "east"]):
+        opened, passed = by_name[f"exit_open.{name}"], by_name[f"passed.{name}"]
+        assert (opened.valueReference, opened.causality, opened.type) == (2000 + k, "input",
+                                                                          "Boolean")
+        assert opened.start in ("true", True)
+        assert (passed.valueReference, passed.causality, passed.type) == (3000 + k, "output",
+                                                                          integer)
+        assert any(u.variable is passed for u in md.outputs)
+
+
+def simulate(fmu):
+    md = read_model_description(str(fmu))
+    east = moreau_fmi.signal(md, [0.0, OPEN_AT, OPEN_AT, STOP],
+                             {"exit_open.east": [False, False, True, True]})
+    return simulate_fmu(str(fmu), stop_time=STOP, output_interval=H, input=east,
+                        output=["people_evacuated", "passed.west", "passed.east",
+                                "exit_open.east", "door_open", "exit_open.west"])
+
+
+def test_a_closed_exit_lets_nobody_out_until_it_opens_as_the_native_run(fmus):
+    runs = {v: simulate(fmus[v]) for v in ("2", "3")}
+    r = runs["3"]
+    for name in r.dtype.names:
+        np.testing.assert_array_equal(r[name], runs["2"][name], err_msg=name)
+    t = r["time"]
+    # Set at the communication point 8 s, the door is open from the step after it.
+    assert (r["passed.east"][t <= OPEN_AT] == 0).all()
+    assert r["passed.west"][t <= OPEN_AT].max() > 0
+    assert r["passed.east"][-1] > 0
+    np.testing.assert_array_equal(r["passed.west"] + r["passed.east"], r["people_evacuated"])
+    assert r["people_evacuated"][-1] == PEOPLE
+    # What the FMU reads back is the input as set (exit 0's is door_open).
+    np.testing.assert_array_equal(r["exit_open.west"], r["door_open"])
+    assert r["exit_open.west"].all() and not r["exit_open.east"][t <= OPEN_AT].any()
+
+    # The in-process simulation with the same door, counted exit by exit.
+    sim = moreau.Simulation(moreau.Scene.from_file(SCENE))
+    sim.set_exit_open("east", False)
+    counts = []
+    for time in t:
+        if time == OPEN_AT + H:
+            sim.set_exit_open("east", True)
+        sim.advance_to(time)
+        records = sim.exit_records()
+        counts.append([sum(1 for _, e, _ in records if e == k) for k in (0, 1)])
+    counts = np.array(counts)
+    np.testing.assert_array_equal(counts[:, 0], r["passed.west"])
+    np.testing.assert_array_equal(counts[:, 1], r["passed.east"])
