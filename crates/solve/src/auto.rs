@@ -167,7 +167,10 @@ pub struct AutoSettings {
     /// iterations for one row more). Measured (benches/README.md, session 32): the whole
     /// evacuation of 10,000's 27 rounds took 39 factorizations and 136 ms instead of the
     /// interior point's 320 and 320 ms, and whole evacuations of six sizes 6–8 % less time
-    /// a step on average.
+    /// a step on average. Its penalty is fixed (10⁶ times each row's inverse squared norm,
+    /// the value those rounds were measured at) and its other settings are
+    /// [`NewtonSettings`]' defaults: a scene's `[solver.newton]` table configures the solver
+    /// of `kind = "newton"`, not these rounds.
     pub round_newton_factorizations: usize,
     /// Threads: Gauss–Seidel's groups of components are swept on all of them at once (each
     /// group by one thread, whichever takes it; from 4,096 rows in groups), and the interior
