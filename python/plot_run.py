@@ -1,4 +1,5 @@
-"""Plots of a moreau run file: evacuation curve, flow through the door, density map (PedPy),
+"""Plots of a moreau run file: evacuation curve, flow through each door (PedPy's N–t where
+people walk on past the exit, the exit records where it removes them), density map (PedPy),
 speed over time and the per-step solver statistics.
 
     .venv/bin/python python/plot_run.py out/room-150.h5 -o out/room-150-plots
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import pathlib
 import sys
+import warnings
 
 import matplotlib
 
@@ -38,31 +40,68 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import moreau_run  # noqa: E402
 
 
-def evacuation(ax, run, nt):
-    """N(t): people not yet through an exit (from the run's exit records) and PedPy's count
-    of crossings of the door line."""
+PEDPY, RECORDS = "PedPy N–t", "exit records"
+
+
+def door_counts(run, traj) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
+    """For each exit of the scene: its name, the frame times, how many had gone through it by
+    each, and where that count comes from. Where people walk on past the exit (`action =
+    "continue"`), PedPy's N–t across the exit's line (`moreau_run.exit_line`): an independent
+    count from the trajectories. Where the exit removes them, their trajectories end as their
+    centre enters its area, before that line (no trajectory crosses it, and a line before the
+    door misses people who come at it aslant), so the count is the run's exit records of that
+    exit (run files of format moreau-run/4 on say which; in older ones every record is the
+    first exit's)."""
+    out = []
+    t_frames = np.asarray(run.time, dtype=float)
+    which = run.exits["exit"] if "exit" in (run.exits.dtype.names or ()) else None
+    for k, exit_ in enumerate(run.scene.get("exits", [])):
+        name = exit_.get("name", f"exit {k}")
+        if exit_.get("action", "remove") == "continue":
+            line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene, k))
+            nt, _ = pedpy.compute_n_t(traj_data=traj, measurement_line=line)
+            # PedPy's count at each frame (its times are the frames', to rounding).
+            at = np.searchsorted(nt["time"].to_numpy(), t_frames + 1e-9, side="right") - 1
+            counted = nt["cumulative_pedestrians"].to_numpy()[np.maximum(at, 0)].astype(float)
+            out.append((name, t_frames, counted, PEDPY))
+        else:
+            mine = run.exits["t"] if which is None else run.exits["t"][which == k]
+            if which is None and k > 0:
+                mine = mine[:0]
+            counted = np.searchsorted(np.sort(mine), t_frames, side="right").astype(float)
+            out.append((name, t_frames, counted, RECORDS))
+    return out
+
+
+def evacuation(ax, run, counts):
+    """N(t): people not yet through an exit (from the run's exit records) and, where an exit
+    is counted by PedPy, the people not yet through a door by the exits' counts."""
     total = len(run.radius)
     t_exit = np.sort(run.exits["t"])
     ts = np.concatenate([[0.0], t_exit, [run.time[-1]]])
     left = total - np.concatenate([[0], np.arange(1, len(t_exit) + 1), [len(t_exit)]])
     ax.step(ts, left, where="post", label="not yet out (exit records)")
-    ax.plot(nt["time"], total - nt["cumulative_pedestrians"], "--",
-            label="not yet across the door line (PedPy N–t)")
+    if any(source == PEDPY for *_, source in counts):
+        through = sum(n for _, _, n, _ in counts)
+        ax.plot(run.time, total - through, "--",
+                label="not yet across a door line (PedPy N–t)")
     ax.set(xlabel="t (s)", ylabel="people", title="Evacuation curve N(t)")
     ax.legend(fontsize=8)
 
 
-def flow(ax, run, nt):
-    """Flow through the door line: the PedPy N–t curve and its slope over 2 s windows."""
-    ax.plot(nt["time"], nt["cumulative_pedestrians"], label="N–t (PedPy)")
-    ax.set(xlabel="t (s)", ylabel="crossings", title="Flow through the door")
+def flow(ax, run, counts):
+    """Through each door: how many by then, and the flow (the slope over 2 s windows)."""
+    ax.set(xlabel="t (s)", ylabel="people through", title="Flow through the doors"
+           if len(counts) > 1 else "Flow through the door")
     window = max(1, int(round(2 * run.fps)))
-    n = nt["cumulative_pedestrians"].to_numpy()
-    t = nt["time"].to_numpy()
-    if len(n) > window:
-        rate = (n[window:] - n[:-window]) / (t[window:] - t[:-window])
-        ax2 = ax.twinx()
-        ax2.plot(t[window:], rate, color="tab:orange", lw=0.8, label="flow (1/s)")
+    ax2 = ax.twinx() if any(len(n) > window for _, _, n, _ in counts) else None
+    for k, (name, t, n, source) in enumerate(counts):
+        colour = f"C{2 * k}"
+        ax.plot(t, n, color=colour, label=f"{name} ({source})")
+        if ax2 is not None and len(n) > window:
+            rate = (n[window:] - n[:-window]) / (t[window:] - t[:-window])
+            ax2.plot(t[window:], rate, color=f"C{2 * k + 1}", lw=0.8, label=f"{name}: flow (1/s)")
+    if ax2 is not None:
         ax2.set_ylabel("flow (1/s)")
         ax2.legend(loc="lower right", fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
@@ -84,7 +123,10 @@ def speed(ax, run):
     dt = np.diff(run.time)[:, None]
     v = np.linalg.norm(np.diff(p, axis=0), axis=2) / dt
     tm = 0.5 * (run.time[1:] + run.time[:-1])
-    with np.errstate(all="ignore"):
+    # Frames after everyone left have no speeds: NaN there, without numpy's warnings (which
+    # np.errstate does not reach).
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(v, axis=1)
         lo, hi = np.nanpercentile(v, [10, 90], axis=1)
     ax.fill_between(tm, lo, hi, alpha=0.3, label="10–90 %")
@@ -335,12 +377,11 @@ def main(argv=None) -> int:
 
     traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=args.run)
     walkable = pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=args.run)
-    line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene))
-    nt, _ = pedpy.compute_n_t(traj_data=traj, measurement_line=line)
+    counts = door_counts(run, traj)
 
     panels = {
-        "evacuation": lambda ax: evacuation(ax, run, nt),
-        "flow": lambda ax: flow(ax, run, nt),
+        "evacuation": lambda ax: evacuation(ax, run, counts),
+        "flow": lambda ax: flow(ax, run, counts),
         "density": lambda ax: density(ax, traj, walkable),
         "speed": lambda ax: speed(ax, run),
         "solver": lambda ax: solver(ax, run),

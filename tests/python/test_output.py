@@ -315,3 +315,35 @@ def test_the_exits_table_says_which_exit_each_person_took(tmp_path):
     sim = api.Simulation(api.Scene.from_file(scene))
     sim.advance_to(sim.scene.horizon)
     assert sim.exit_records() == [(int(i), int(e), float(t)) for i, e, t in exits]
+
+
+def test_the_plots_count_each_door_where_people_go_through_it(room_run, tmp_path):
+    """Regression: the flow plot counted PedPy's crossings of the exit area's mid-line, which
+    no trajectory crosses where the exit removes people (they vanish as their centre enters the
+    area): 0 through each door of room-two-exits, against 30 exit records each. Such exits are
+    now counted by their exit records, one curve per door; where people walk on (the room),
+    PedPy's N–t stays, within a second of the records."""
+    import plot_run
+    from conftest import ROOT
+
+    out = tmp_path / "two.h5"
+    moreau("run", ROOT / "data" / "scenes" / "room-two-exits.toml", "-o", out, "--quiet")
+    run = moreau_run.load(out)
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=out)
+    counts = plot_run.door_counts(run, traj)
+    assert [(name, source) for name, _, _, source in counts] == [
+        ("west", plot_run.RECORDS), ("east", plot_run.RECORDS)]
+    for k, (_, t, n, _) in enumerate(counts):
+        mine = np.sort(run.exits["t"][run.exits["exit"] == k])
+        assert n[-1] == len(mine) == 30
+        # The count at each frame: those whose record is at or before it.
+        np.testing.assert_array_equal(n, [np.sum(mine <= x) for x in t])
+    assert plot_run.main([str(out), "-o", str(tmp_path / "plots")]) == 0
+
+    room = moreau_run.load(room_run)
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=room_run)
+    [(name, t, n, source)] = plot_run.door_counts(room, traj)
+    assert (name, source) == ("door", plot_run.PEDPY)
+    exits = np.sort(room.exits["t"])
+    assert np.all(n <= np.searchsorted(exits, t, side="right"))
+    assert np.all(n >= np.searchsorted(exits, t - 1.0, side="right"))
