@@ -114,6 +114,10 @@ def _fmu(directory: pathlib.Path, fmu: str | None, row: dict) -> None:
     times = [float(result["time"][np.argmax(evacuated >= k)]) for k in range(1, int(evacuated[-1]) + 1)]
     row["people"] = people
     row["passed_exit"] = int(evacuated[-1])
+    # Through each exit, where the FMU declares its scene's exits (`fmu/package.py --scene`).
+    for name in result.dtype.names:
+        if name.startswith("passed."):
+            row[name] = int(result[name][-1])
     row["evacuation_time"], row["mean_flow"] = evacuation(times, people)
     row["output"] = str(directory / "outputs.csv")
     row["status"] = "complete"

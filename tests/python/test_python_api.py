@@ -475,6 +475,16 @@ def test_the_ensemble_runs_in_process_with_engine_python(tmp_path):
         assert row["passed.west"] + row["passed.east"] == row["passed_exit"] == 60, row
         assert row["passed.west"] > 0 and row["passed.east"] > 0, row
     assert rows[0]["passed.west"] == rows[1]["passed.west"]
+    # The FMU built for the scene declares its exits: the same counts through fmpy.
+    fmus = tmp_path / "fmus"
+    subprocess.run([sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build", "--out",
+                    str(fmus), "--scene", str(ROOT / "data" / "scenes" / "room-two-exits.toml")],
+                   check=True, capture_output=True)
+    fmu = run_variant("two", {}, 1, two, str(tmp_path / "two-fmu"), engine="fmu",
+                      fmu=str(fmus / "moreau-crowd-room-two-exits-fmi2.fmu"))
+    assert fmu["status"] == "complete", fmu
+    assert [fmu[k] for k in ("passed_exit", "passed.west", "passed.east")] == [
+        rows[1][k] for k in ("passed_exit", "passed.west", "passed.east")]
     bad = run_variant("bad", {}, 1, scene.replace("radius = 0.2", "radius = -0.2"),
                       str(tmp_path / "bad"), engine="python")
     assert bad["status"] == "failed" and "SceneError" in bad["error"] and "radius" in bad["error"]
