@@ -1122,8 +1122,9 @@ fn pushed_chain_with_a_round(
 /// the answer it corrects: certified, at the closed-form projection (the chain and its last
 /// person move together at `1.04 / (n + 1)`, the last one 0.04 m/s slower), with the same
 /// bits on two threads; the interior point gives the same projection when the Newton
-/// method is off, and takes the round back when the Newton method's factorizations run
-/// out (their work counted in the report).
+/// method is off. (That it takes the round back when the Newton method does not finish, with
+/// that work counted, is `auto.rs`' unit test
+/// `a_round_the_newton_method_does_not_finish_goes_back_to_the_interior_point`.)
 #[test]
 fn a_round_that_takes_back_a_row_is_answered_by_newton_from_the_answer_it_corrects() {
     let n = 10;
