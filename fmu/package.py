@@ -22,7 +22,8 @@ moving body (`[[moving]]`) is a continuous Real input `moving.<name>` with value
 reference 2000 + its index; exit 0's is the same input as `door_open`) and an Integer output
 `passed.<name>` (3000 + its index): how many have passed it. The binary is the same (it
 serves the inputs of whatever scene it runs), and so is the GUID / instantiation token it
-checks.
+checks; it refuses, through the `scene` parameter, a scene whose exits or moving bodies are
+not the ones such an FMU declares (those of the one scene file in its resources).
 """
 
 import argparse

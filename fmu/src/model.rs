@@ -305,6 +305,52 @@ pub fn default_scene(resources: &Path) -> Result<PathBuf, FmuError> {
     }
 }
 
+/// Refuses a scene (the `scene` parameter, at `path`) that does not have the exits and moving
+/// bodies the FMU declares variables for: an FMU that `fmu/package.py --scene` built declares
+/// `exit_open.<name>`, `passed.<name>` and `moving.<name>` for its default scene's (the one
+/// scene file in `resources/`), by index, so another scene would answer them under the wrong
+/// names. The room's FMU declares none and runs any scene.
+fn check_declared(scene: &Scene, path: &Path, resources: &Path) -> Result<(), FmuError> {
+    let Ok(built) = default_scene(resources) else {
+        return Ok(());
+    };
+    if built.file_name().is_some_and(|f| f == DEFAULT_SCENE) {
+        return Ok(());
+    }
+    let declared = Scene::from_file(&built)?;
+    let names = |s: &Scene| {
+        (
+            s.exits.iter().map(|e| e.name.clone()).collect::<Vec<_>>(),
+            s.moving.iter().map(|b| b.name.clone()).collect::<Vec<_>>(),
+        )
+    };
+    let (exits, bodies) = names(scene);
+    let (want_exits, want_bodies) = names(&declared);
+    let mut differ = Vec::new();
+    if exits != want_exits {
+        differ.push(format!(
+            "its exits are {exits:?}, the FMU declares exit_open/passed for {want_exits:?}"
+        ));
+    }
+    if bodies != want_bodies {
+        differ.push(format!(
+            "its moving bodies are {bodies:?}, the FMU declares moving for {want_bodies:?}"
+        ));
+    }
+    if differ.is_empty() {
+        return Ok(());
+    }
+    Err(FmuError::Setting(format!(
+        "scene = {}: {} (the variables of resources/{}, the scene this FMU was built for); \
+         build the FMU of this scene with fmu/package.py --scene",
+        path.display(),
+        differ.join("; "),
+        built
+            .file_name()
+            .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
+    )))
+}
+
 /// The position input of one moving body: the body's keyframe parameter, between its first
 /// and last keyframe times.
 #[derive(Debug, Clone, PartialEq)]
@@ -402,6 +448,11 @@ impl CrowdModel {
             PathBuf::from(&settings.scene)
         };
         let mut scene = Scene::from_file(&path)?;
+        if !settings.scene.is_empty()
+            && let Some(dir) = resources
+        {
+            check_declared(&scene, &path, dir)?;
+        }
         if settings.step != 0.0 {
             scene.time.step = settings.step;
         }

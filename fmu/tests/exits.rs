@@ -112,3 +112,77 @@ fn a_closed_exit_lets_nobody_out_and_a_state_restores_the_exits_inputs() {
         api.free();
     }
 }
+
+/// A directory standing for a scene FMU's `resources/`, holding `files` copied from
+/// `data/scenes/` (emptied first, one per name).
+fn resources(name: &str, files: &[&str]) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("moreau-fmu-resources-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in files {
+        std::fs::copy(scene_file(f), dir.join(f)).unwrap();
+    }
+    dir
+}
+
+fn scene_file(name: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/scenes")
+        .join(name)
+}
+
+/// A scene FMU (`package.py --scene`) declares its scene's exits and moving bodies by index;
+/// another scene loaded through the `scene` parameter would answer `passed.west` with its own
+/// exit 0 (regression: it did, under the old names, with nothing said).
+#[test]
+fn a_scene_fmu_refuses_a_scene_whose_exits_or_bodies_it_does_not_declare() {
+    use moreau_fmu::model::{CrowdModel, Settings};
+    let build = |scene: &std::path::Path, dir: &std::path::Path| {
+        let settings = Settings {
+            scene: scene.display().to_string(),
+            ..Settings::default()
+        };
+        CrowdModel::new(&settings, Some(dir)).map(|_| ())
+    };
+    let two_exits = resources("two-exits", &["room-two-exits.toml"]);
+    // The room: one exit `door`, no bodies.
+    let err = build(&scene_file("room-150.toml"), &two_exits)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(
+            r#"its exits are ["door"], the FMU declares exit_open/passed for ["west", "east"]"#
+        ) && err.contains("room-150.toml")
+            && err.contains("resources/room-two-exits.toml")
+            && !err.contains("moving bodies"),
+        "{err}"
+    );
+    // A moving body the FMU has no input for.
+    let err = build(&scene_file("rotating-bar.toml"), &two_exits)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(r#"its moving bodies are ["bar"], the FMU declares moving for []"#),
+        "{err}"
+    );
+    // The same exits, in a variant of the scene (fewer people, as a sweep writes it): taken.
+    let variant = two_exits.join("variant");
+    std::fs::create_dir_all(&variant).unwrap();
+    let text = std::fs::read_to_string(scene_file("room-two-exits.toml"))
+        .unwrap()
+        .replace("count = 30", "count = 12");
+    std::fs::write(variant.join("scene.toml"), text).unwrap();
+    build(&variant.join("scene.toml"), &two_exits).unwrap();
+    // The exits swapped: the names by index differ.
+    let text = std::fs::read_to_string(scene_file("room-two-exits.toml"))
+        .unwrap()
+        .replace("name = \"west\"", "name = \"tmp\"")
+        .replace("name = \"east\"", "name = \"west\"")
+        .replace("name = \"tmp\"", "name = \"east\"");
+    std::fs::write(variant.join("swapped.toml"), text).unwrap();
+    assert!(build(&variant.join("swapped.toml"), &two_exits).is_err());
+    // The room's FMU declares no scene's variables: it runs any scene.
+    let room = resources("room", &["room-150.toml"]);
+    build(&scene_file("room-two-exits.toml"), &room).unwrap();
+    build(&scene_file("rotating-bar.toml"), &room).unwrap();
+}

@@ -86,3 +86,23 @@ def test_a_closed_exit_lets_nobody_out_until_it_opens_as_the_native_run(fmus):
     counts = np.array(counts)
     np.testing.assert_array_equal(counts[:, 0], r["passed.west"])
     np.testing.assert_array_equal(counts[:, 1], r["passed.east"])
+
+
+@pytest.mark.parametrize("version", ["2", "3"])
+def test_the_fmu_of_a_scene_refuses_another_scenes_exits_and_logs_why(fmus, version):
+    """Its passed.west would have counted the room's door (regression: it did, silently)."""
+    room = ROOT / "data" / "scenes" / "room-150.toml"
+    logged = []
+
+    def logger(*args):  # FMI 2: (env, instance, status, category, message); FMI 3: no instance
+        logged.append(args[-1].decode())
+
+    with pytest.raises(Exception, match="(?i)initializ"):
+        simulate_fmu(str(fmus[version]), stop_time=1.0, start_values={"scene": str(room)},
+                     logger=logger, debug_logging=True)
+    said = "\n".join(logged)
+    assert 'its exits are ["door"], the FMU declares exit_open/passed for ["west", "east"]' \
+        in said, said
+    # The same scene through the parameter is taken.
+    r = simulate_fmu(str(fmus[version]), stop_time=1.0, start_values={"scene": str(SCENE)})
+    assert r["people_inside"][-1] + r["people_evacuated"][-1] == PEOPLE
