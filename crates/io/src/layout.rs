@@ -157,6 +157,58 @@ pub struct StepRow {
     pub time_total: f64,
 }
 
+/// One row of `/steps` in files written before 2026-11-21 (format `moreau-run/1`), which did
+/// not time the solve's analysis and factorization: [`StepRow`] without
+/// `time_solve_analyse` and `time_solve_factorize`.
+#[derive(H5Type, Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub(crate) struct StepRowUntimedSolve {
+    pub step: i64,
+    pub t: f64,
+    pub mu: f64,
+    pub eps_target: f64,
+    pub eps: f64,
+    pub violation: f64,
+    pub iterations: i64,
+    pub assembled: i64,
+    pub active: i64,
+    pub redone: i64,
+    pub status: FixedAscii<16>,
+    pub solver: FixedAscii<16>,
+    pub time_predict: f64,
+    pub time_assemble: f64,
+    pub time_solve: f64,
+    pub time_verify: f64,
+    pub time_total: f64,
+}
+
+impl From<StepRowUntimedSolve> for StepRow {
+    /// The two timings the file does not have are NaN: not measured, not 0 s.
+    fn from(r: StepRowUntimedSolve) -> Self {
+        Self {
+            step: r.step,
+            t: r.t,
+            mu: r.mu,
+            eps_target: r.eps_target,
+            eps: r.eps,
+            violation: r.violation,
+            iterations: r.iterations,
+            assembled: r.assembled,
+            active: r.active,
+            redone: r.redone,
+            status: r.status,
+            solver: r.solver,
+            time_predict: r.time_predict,
+            time_assemble: r.time_assemble,
+            time_solve: r.time_solve,
+            time_verify: r.time_verify,
+            time_solve_analyse: f64::NAN,
+            time_solve_factorize: f64::NAN,
+            time_total: r.time_total,
+        }
+    }
+}
+
 /// `s` in the run file's 16 bytes: its ASCII characters, and a name too long for them cut
 /// to 15 and marked `~` (not cut without a word: a reader would take the cut name for a
 /// whole one).

@@ -21,7 +21,10 @@
 //! | `/state/a`, `/state/b` | uint8: the run's state (moreau-crowd's `SimState`, its compact binary form) at the last output frame, written in turn into the two slots; the group's attributes `slot` (1: a, 2: b, 0: none yet), `people`, `frames`, `steps`, `exits`, `trajectory_rows`, `contact_rows` say which slot is whole and where the datasets stood: `moreau run --resume` continues from it |
 //!
 //! Format `moreau-run/4` added `/exits`' `exit` column and `names` attribute; files of
-//! earlier formats read with exit −1 and no names.
+//! earlier formats read with exit −1 and no names. `/steps` rows written before 2026-11-21
+//! (format `moreau-run/1`) have no `time_solve_analyse` or `time_solve_factorize`: they read as
+//! NaN (not measured). Any other member a table's rows lack is an error naming it (HDF5 itself
+//! would read it as 0 and say nothing).
 //!
 //! People who enter during the run (format `moreau-run/3`) extend the per-person datasets:
 //! `/people/id` and `/people/radius` grow by a row each, and the people axis of

@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use hdf5::types::VarLenUnicode;
+use hdf5::types::{TypeDescriptor, VarLenUnicode};
 use hdf5::{Dataset, File, H5Type};
 
 use crate::error::{Context, IoError};
@@ -101,10 +101,45 @@ impl RunFile {
             .map_err(|_| self.layout(format!("no dataset '{name}'")))
     }
 
+    /// The rows of dataset `name` as `T`s. HDF5 fills a member of `T` that the file's rows
+    /// lack with zeros and says nothing, so a compound `T` with a member the file does not
+    /// have is refused here, naming it (the readers of older layouts read them with their own
+    /// row types).
     fn read<T: H5Type>(&self, name: &str) -> Result<Vec<T>, IoError> {
-        self.dataset(name)?
+        let dataset = self.dataset(name)?;
+        if let TypeDescriptor::Compound(wanted) = T::type_descriptor() {
+            let has = self.members(name)?;
+            let missing: Vec<&str> = wanted
+                .fields
+                .iter()
+                .map(|f| f.name.as_str())
+                .filter(|m| !has.iter().any(|h| h == m))
+                .collect();
+            if !missing.is_empty() {
+                return Err(self.layout(format!(
+                    "dataset '{name}' has no member {} (its rows have {}): not a file this \
+                     moreau wrote, or damaged",
+                    missing.join(", "),
+                    has.join(", ")
+                )));
+            }
+        }
+        dataset
             .read_raw()
             .at(&self.path, || format!("reading '{name}'"))
+    }
+
+    /// The member names of dataset `name`'s rows (none unless they are compound).
+    fn members(&self, name: &str) -> Result<Vec<String>, IoError> {
+        let described = self
+            .dataset(name)?
+            .dtype()
+            .and_then(|t| t.to_descriptor())
+            .at(&self.path, || format!("reading the type of '{name}'"))?;
+        Ok(match described {
+            TypeDescriptor::Compound(c) => c.fields.into_iter().map(|f| f.name).collect(),
+            _ => Vec::new(),
+        })
     }
 
     /// The header the writer was given.
@@ -199,9 +234,18 @@ impl RunFile {
         self.read(TRAJECTORY)
     }
 
-    /// The `/steps` rows.
+    /// The `/steps` rows (`time_solve_analyse` and `time_solve_factorize` NaN in files written
+    /// before 2026-11-21, which did not measure them).
     pub fn steps(&self) -> Result<Vec<StepRow>, IoError> {
-        self.read(STEPS)
+        let has = self.members(STEPS)?;
+        if has.iter().any(|m| m == "time_solve_analyse") {
+            return self.read(STEPS);
+        }
+        Ok(self
+            .read::<StepRowUntimedSolve>(STEPS)?
+            .into_iter()
+            .map(StepRow::from)
+            .collect())
     }
 
     /// The wall segments `[x0, y0, x1, y1]` (empty for a file written before they were

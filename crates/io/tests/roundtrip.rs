@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use moreau_core::{SolveStatus, StepReport};
-use moreau_io::{ContactRow, IoError, Overwrite, RunFile, RunHeader, RunWriter};
+use moreau_io::{ContactRow, IoError, Overwrite, RunFile, RunHeader, RunWriter, StepRow};
 
 /// `name` in a directory of its own: tests run in parallel, and one checks that its directory
 /// holds no `.partial` file while another may be laying one out. Under cargo's scratch
@@ -272,7 +272,6 @@ fn people_who_enter_during_the_run_extend_the_file() {
 /// with exit −1, no exit names. Made here by taking a new file back to that layout.
 #[test]
 fn a_file_of_format_3_reads_its_exits_with_no_exit() {
-    use hdf5::types::VarLenUnicode;
     #[derive(hdf5::H5Type, Clone, Copy)]
     #[repr(C)]
     struct ExitRowV3 {
@@ -285,20 +284,12 @@ fn a_file_of_format_3_reads_its_exits_with_no_exit() {
     w.exit(0, 1, 0.05).unwrap();
     w.frame(0.1, &[1], &[0.3, 0.4]).unwrap();
     w.finish("complete", "{}").unwrap();
-    {
-        let file = hdf5::File::open_rw(&path).unwrap();
-        file.unlink("exits").unwrap();
-        file.new_dataset_builder()
-            .with_data(&[ExitRowV3 { id: 0, t: 0.05 }])
-            .create("exits")
-            .unwrap();
-        file.delete_attr("format").unwrap();
-        file.new_attr::<VarLenUnicode>()
-            .create("format")
-            .unwrap()
-            .write_scalar(&"moreau-run/3".parse::<VarLenUnicode>().unwrap())
-            .unwrap();
-    }
+    rewrite(
+        &path,
+        "exits",
+        &[ExitRowV3 { id: 0, t: 0.05 }],
+        "moreau-run/3",
+    );
     let f = RunFile::open(&path).unwrap();
     let exits = f.exits().unwrap();
     assert_eq!(
@@ -316,4 +307,120 @@ fn a_file_of_format_3_reads_its_exits_with_no_exit() {
     let header = f.header().unwrap();
     assert_eq!(f.exits().unwrap()[0].exit, 1);
     assert_eq!(header.exit_names[1], "back door");
+}
+
+/// `path`'s dataset `name` replaced by `rows`, and its format attribute set to `format`.
+fn rewrite<T: hdf5::H5Type>(path: &std::path::Path, name: &str, rows: &[T], format: &str) {
+    use hdf5::types::VarLenUnicode;
+    let file = hdf5::File::open_rw(path).unwrap();
+    file.unlink(name).unwrap();
+    file.new_dataset_builder()
+        .with_data(rows)
+        .create(name)
+        .unwrap();
+    file.delete_attr("format").unwrap();
+    file.new_attr::<VarLenUnicode>()
+        .create("format")
+        .unwrap()
+        .write_scalar(&format.parse::<VarLenUnicode>().unwrap())
+        .unwrap();
+}
+
+/// Files written before 2026-11-21 have no `time_solve_analyse` or `time_solve_factorize` in
+/// `/steps`; HDF5 read them as 0 s with nothing said (regression). They read as NaN, not
+/// measured, and every other member as written.
+#[test]
+fn a_steps_table_written_before_the_solves_timings_reads_them_as_not_measured() {
+    use hdf5::types::FixedAscii;
+    #[derive(hdf5::H5Type, Clone, Copy)]
+    #[repr(C)]
+    struct OldStepRow {
+        step: i64,
+        t: f64,
+        mu: f64,
+        eps_target: f64,
+        eps: f64,
+        violation: f64,
+        iterations: i64,
+        assembled: i64,
+        active: i64,
+        redone: i64,
+        status: FixedAscii<16>,
+        solver: FixedAscii<16>,
+        time_predict: f64,
+        time_assemble: f64,
+        time_solve: f64,
+        time_verify: f64,
+        time_total: f64,
+    }
+    let timed = |step, t| {
+        let mut r = report(step, t);
+        r.timings.predict = 1e-3;
+        r.timings.assemble = 2e-3;
+        r.timings.solve = 3e-3;
+        r.timings.solve_analyse = 1e-4;
+        r.timings.solve_factorize = 2e-4;
+        r.timings.verify = 4e-3;
+        r.timings.total = 1e-2;
+        r
+    };
+    let path = scratch("untimed-solves.h5");
+    let mut w = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap();
+    w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
+    w.step(&timed(0, 0.05));
+    w.step(&timed(1, 0.1));
+    w.finish("complete", "{}").unwrap();
+    let written = RunFile::open(&path).unwrap().steps().unwrap();
+    assert_eq!(written[1].time_solve_factorize, 2e-4);
+    // The same rows without the two members (HDF5 converts compounds by member name).
+    let old: Vec<OldStepRow> = hdf5::File::open(&path)
+        .unwrap()
+        .dataset("steps")
+        .unwrap()
+        .read_raw()
+        .unwrap();
+    rewrite(&path, "steps", &old, "moreau-run/1");
+    let read = RunFile::open(&path).unwrap().steps().unwrap();
+    assert_eq!(read.len(), 2);
+    for (r, w) in read.iter().zip(&written) {
+        assert!(r.time_solve_analyse.is_nan() && r.time_solve_factorize.is_nan());
+        let unmeasured = StepRow {
+            time_solve_analyse: w.time_solve_analyse,
+            time_solve_factorize: w.time_solve_factorize,
+            ..*r
+        };
+        assert_eq!(&unmeasured, w);
+    }
+}
+
+/// A row member the reader needs and the file lacks is an error naming it, not zeros:
+/// `/exits` of format 4 without its `exit` column read as exit 0 for everyone (regression).
+#[test]
+fn a_table_without_a_member_its_format_has_is_refused_naming_the_member() {
+    #[derive(hdf5::H5Type, Clone, Copy)]
+    #[repr(C)]
+    struct NoExit {
+        id: i64,
+        t: f64,
+    }
+    let path = scratch("no-exit-member.h5");
+    let mut w = RunWriter::create(&path, &header(2), Overwrite::Never).unwrap();
+    w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
+    w.exit(0, 1, 0.05).unwrap();
+    w.finish("complete", "{}").unwrap();
+    rewrite(
+        &path,
+        "exits",
+        &[NoExit { id: 0, t: 0.05 }],
+        moreau_io::FORMAT,
+    );
+    let err = RunFile::open(&path)
+        .unwrap()
+        .exits()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("dataset 'exits' has no member exit (its rows have id, t)"),
+        "{err}"
+    );
 }
