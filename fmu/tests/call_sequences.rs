@@ -4,7 +4,8 @@
 //! damaged, resets and terminations at any point): every call answers with a status, never a
 //! crash or an abort of the host nor a panic (FATAL), every refused FMI 3 call leaves a log
 //! line (FMI 2's logger is variadic, which a Rust test cannot be), and each instance is freed
-//! cleanly at the end. The FMU runs inside the master's process (fmpy's Python): a panic that
+//! cleanly at the end. Half the instances are given resources as the FMU of a scene, whose
+//! `scene` parameter refuses scenes with other exits or bodies. The FMU runs inside the master's process (fmpy's Python): a panic that
 //! escaped it, or memory it corrupted, would take the host down.
 //!
 //! Deterministic sequences (seeded by their number; even ones FMI 3, odd ones FMI 2) for
@@ -51,6 +52,19 @@ impl Rng {
 
 fn scenes() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data"))
+}
+
+/// A scene FMU's resources: a directory holding only `room-two-exits.toml` (made once).
+fn scene_fmu_resources() -> &'static std::path::Path {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join("moreau-fmu-fuzz-resources");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let scene = "room-two-exits.toml";
+        std::fs::copy(scenes().join("scenes").join(scene), dir.join(scene)).unwrap();
+        dir
+    })
 }
 
 /// A number a careless master might pass.
@@ -113,11 +127,17 @@ fn reference(rng: &mut Rng) -> u32 {
 /// One instance driven by `calls` random calls (most sequences first set a scene and
 /// initialize, as a master would, then go astray); adds the calls answered OK, by kind, to
 /// `answered`.
-fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
+/// Returns whether the instance refused a scene its variables do not declare (seen in FMI 3's
+/// log).
+fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) -> bool {
     let mut rng = Rng::seed(seed);
     let log = Box::new(RefCell::new(Vec::<String>::new()));
     let v3 = seed.is_multiple_of(2);
-    let api = support::instantiate(v3, &log, rng.chance(0.5));
+    let logging_on = rng.chance(0.5);
+    // Half the instances are the FMU of a scene (`package.py --scene`): resources holding
+    // the two-exit room, which refuses scenes with other exits or bodies.
+    let resources = rng.chance(0.5).then(scene_fmu_resources);
+    let api = support::instantiate_in(v3, &log, logging_on, resources);
     let scenes = scenes();
     let scene_names = [
         scenes.join("fmu/corridor-door.toml"),
@@ -146,9 +166,11 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
                     let text = match if call == 0 {
                         rng.below(3)
                     } else {
-                        rng.below(6)
+                        rng.below(7)
                     } {
                         5 => CString::new("\u{1}garbage").unwrap(),
+                        // The default: the resources' scene, or an error without them.
+                        6 => CString::default(),
                         k => CString::new(scene_names[k].display().to_string()).unwrap(),
                     };
                     api.set_scene(&text)
@@ -282,7 +304,12 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) {
     }
     // (Its log outlives it.)
     api.free();
+    let refused = log
+        .borrow()
+        .iter()
+        .any(|line| line.contains("the FMU declares"));
     drop(log);
+    refused
 }
 
 /// The kinds of call a sequence draws from (see `sequence`).
@@ -295,12 +322,19 @@ fn random_call_sequences_get_a_status_and_a_log_line_never_a_crash() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(10);
     let deadline = Instant::now() + Duration::from_secs(seconds);
-    let (mut sequences, mut answered) = (0u64, [0; KINDS]);
+    let (mut sequences, mut answered, mut refused) = (0u64, [0; KINDS], 0);
     while sequences < 8 || Instant::now() < deadline {
-        sequence(sequences, 60, &mut answered);
+        refused += usize::from(sequence(sequences, 60, &mut answered));
         sequences += 1;
     }
-    println!("{sequences} sequences of 60 calls; answered OK, by kind: {answered:?}");
+    println!(
+        "{sequences} sequences of 60 calls; answered OK, by kind: {answered:?}; {refused} \
+         scene FMUs refused another scene"
+    );
+    assert!(
+        refused > 0,
+        "no scene FMU refused a scene in {sequences} sequences"
+    );
     // Not all refused: the sequences step, and take, set, serialize and read back states.
     for (kind, what) in [
         (3, "steps"),

@@ -288,14 +288,34 @@ impl Api {
 }
 
 /// An instance of the FMU in FMI 3 (logging into `log`) or FMI 2 (no logger), state
-/// Instantiated.
+/// Instantiated, given no resource location.
 pub fn instantiate(v3: bool, log: &RefCell<Vec<String>>, logging_on: bool) -> Api {
+    instantiate_in(v3, log, logging_on, None)
+}
+
+/// [`instantiate`] with the FMU's resources in the directory `resources` (passed as FMI 3's
+/// path or FMI 2's `file://` URI).
+pub fn instantiate_in(
+    v3: bool,
+    log: &RefCell<Vec<String>>,
+    logging_on: bool,
+    resources: Option<&std::path::Path>,
+) -> Api {
+    let location = resources.map(|dir| {
+        CString::new(if v3 {
+            format!("{}/", dir.display())
+        } else {
+            format!("file://{}", dir.display())
+        })
+        .unwrap()
+    });
+    let location = location.as_ref().map_or(std::ptr::null(), |l| l.as_ptr());
     let c = if v3 {
         let token = CString::new(*fmi3::TOKEN).unwrap();
         fmi3::fmi3InstantiateCoSimulation(
             c"test".as_ptr(),
             token.as_ptr(),
-            std::ptr::null(),
+            location,
             false,
             logging_on,
             false,
@@ -322,7 +342,7 @@ pub fn instantiate(v3: bool, log: &RefCell<Vec<String>>, logging_on: bool) -> Ap
                 c"test".as_ptr(),
                 1,
                 guid.as_ptr(),
-                std::ptr::null(),
+                location,
                 &callbacks as *const Callbacks2 as *const fmi2::CallbackFunctions,
                 0,
                 c_int::from(logging_on),
