@@ -14,7 +14,8 @@ With `--scene FILE` it builds the FMUs of that scene instead,
     target/fmu/moreau-crowd-<scene>-fmi2.fmu, target/fmu/moreau-crowd-<scene>-fmi3.fmu
 
 with the scene as resources/<scene>.toml (the FMU's default scene: the one scene file in its
-resources) and a model description generated from the shipped one for the scene: n_people
+resources; a scene file named room-150.toml goes in as room-150-scene.toml, since the FMU
+takes resources/room-150.toml for the room's FMU, which declares no scene's variables) and a model description generated from the shipped one for the scene: n_people
 starts at the scene's count (FMI 3), the default experiment stops at its horizon, and every
 moving body (`[[moving]]`) is a continuous Real input `moving.<name>` with value reference
 1000 + its index in the scene: the body's keyframe parameter, from its first keyframe's time
@@ -59,10 +60,17 @@ def substitute(text: str, pattern: str, replacement: str, where: pathlib.Path) -
     return out
 
 
+def resource_name(scene: pathlib.Path) -> str:
+    """The name of scene file `scene` in the resources of its FMU: its own, unless that is the
+    room's (the FMU runs resources/room-150.toml as the room's FMU, with no scene variables
+    declared, so it would not check another scene against the ones this FMU declares)."""
+    return f"{scene.stem}-scene.toml" if scene.name == ROOM.name else scene.name
+
+
 def for_scene(version: str, text: str, path: pathlib.Path, where: pathlib.Path) -> str:
     """The shipped model description `text` made the description of the FMU of scene `path`."""
     scene = tomllib.loads(path.read_text())
-    file = path.name
+    file = resource_name(path)
     text = substitute(text, r"Default scene: [^\"]*?\(resources/room-150\.toml\)\.",
                       escape(f"Default scene: {scene.get('name', path.stem)} (resources/{file}).",
                              {'"': "&quot;"}), where)
@@ -157,10 +165,11 @@ def package(version: str, library: pathlib.Path, out: pathlib.Path,
         if int(start) != people:
             sys.exit(f"{description}: n_people starts at {start}, the scene has {people} people")
     if scene is None:
-        target, shipped = out / f"moreau-crowd-fmi{version}.fmu", ROOM
+        target, shipped, name = out / f"moreau-crowd-fmi{version}.fmu", ROOM, ROOM.name
     else:
         text = for_scene(version, text, scene, description)
         target, shipped = out / f"moreau-crowd-{scene.stem}-fmi{version}.fmu", scene
+        name = resource_name(scene)
     tmp = target.with_suffix(".fmu.partial")
     # The release profile keeps line tables for profiling (Cargo.toml); the FMU ships the
     # library without them: 47 MB against 6 MB, and fmpy's cross-check refuses FMUs over 10 MB.
@@ -169,7 +178,7 @@ def package(version: str, library: pathlib.Path, out: pathlib.Path,
     with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("modelDescription.xml", text)
         z.write(stripped, f"binaries/{PLATFORMS[version]}/{IDENTIFIER}.so")
-        z.write(shipped, f"resources/{shipped.name}")
+        z.write(shipped, f"resources/{name}")
         z.writestr("documentation/index.html",
                    "<html><body><p>moreau crowd FMU: see README.md of the moreau repository, "
                    "section 'The FMU'.</p></body></html>\n")

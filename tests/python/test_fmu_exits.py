@@ -103,3 +103,32 @@ def test_the_fmu_of_a_scene_refuses_another_scenes_exits_and_logs_why(fmus, vers
     # The same scene through the parameter is taken.
     r = simulate_fmu(str(fmus[version]), stop_time=1.0, start_values={"scene": str(SCENE)})
     assert r["people_inside"][-1] + r["people_evacuated"][-1] == PEOPLE
+
+
+def test_the_fmu_of_the_rooms_own_scene_checks_other_scenes_too(tmp_path, capfd):
+    """`package.py --scene data/scenes/room-150.toml` declares exit_open.door and passed.door;
+    its scene went into the resources as room-150.toml, the name the FMU takes for the room's
+    FMU (no scene variables, no check), so another scene's exit 0 was counted as passed.door
+    without a word (regression). It now goes in as room-150-scene.toml."""
+    import zipfile
+
+    room = ROOT / "data" / "scenes" / "room-150.toml"
+    package = [sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build", "--out",
+               str(tmp_path), "--fmi", "2"]
+    subprocess.run(package + ["--scene", str(room)], check=True, capture_output=True)
+    fmu = tmp_path / "moreau-crowd-room-150-fmi2.fmu"
+    with zipfile.ZipFile(fmu) as z:
+        assert [n for n in z.namelist() if n.startswith("resources/")] == \
+            ["resources/room-150-scene.toml"]
+        assert "resources/room-150-scene.toml" in z.read("modelDescription.xml").decode()
+    names = {v.name for v in read_model_description(str(fmu)).modelVariables}
+    assert {"exit_open.door", "passed.door"} <= names
+    # Its own scene by default, and through the parameter.
+    r = simulate_fmu(str(fmu), stop_time=1.0)
+    assert r["people_inside"][-1] + r["people_evacuated"][-1] == 150
+    simulate_fmu(str(fmu), stop_time=1.0, start_values={"scene": str(room)})
+    with pytest.raises(Exception, match="(?i)initializ"):
+        simulate_fmu(str(fmu), stop_time=1.0, start_values={"scene": str(SCENE)})
+    said = capfd.readouterr().out
+    assert 'its exits are ["west", "east"], the FMU declares exit_open/passed for ["door"]' \
+        in said, said
