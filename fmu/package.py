@@ -15,8 +15,9 @@ With `--scene FILE` it builds the FMUs of that scene instead,
 
 with the scene as resources/<scene>.toml (the FMU's default scene: the one scene file in its
 resources; a scene file named room-150.toml goes in as room-150-scene.toml, since the FMU
-takes resources/room-150.toml for the room's FMU, which declares no scene's variables) and a model description generated from the shipped one for the scene: n_people
-starts at the scene's count (FMI 3), the default experiment stops at its horizon, and every
+takes resources/room-150.toml for the room's FMU, which declares no scene's variables) and a
+model description generated from the shipped one for the scene: n_people starts at the
+scene's count (FMI 3), the default experiment stops at its horizon, and every
 moving body (`[[moving]]`) is a continuous Real input `moving.<name>` with value reference
 1000 + its index in the scene: the body's keyframe parameter, from its first keyframe's time
 (the start value) to its last. Every exit is a Boolean input `exit_open.<name>` (value
