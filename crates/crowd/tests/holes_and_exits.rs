@@ -19,6 +19,7 @@ fn scene() -> Scene {
 struct Heard {
     exits: Vec<ExitRecord>,
     frames: usize,
+    frame_times: Vec<f64>,
 }
 
 impl Observer for Heard {
@@ -27,9 +28,45 @@ impl Observer for Heard {
         Ok(())
     }
 
-    fn frame(&mut self, _frame: &Frame<'_>) -> Result<(), ObserverError> {
+    fn frame(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
         self.frames += 1;
+        self.frame_times.push(frame.t);
         Ok(())
+    }
+}
+
+/// Frame `k` is at `k × output_interval`, the last at the horizon, and every exit at the end
+/// of a step `j` of the scene's fixed step: regression, the times were the running sums of the
+/// steps (0.1 + 0.1 + 0.1 = 0.30000000000000004, 30.00000000000029 at the horizon), so a
+/// frame at 15 s read 15.000000000000078 in the run file.
+#[test]
+fn frame_times_are_multiples_of_the_output_interval_not_sums_of_steps() {
+    let scene = scene();
+    let (interval, step, horizon) = (
+        scene.time.output_interval,
+        scene.time.step,
+        scene.time.horizon,
+    );
+    let mut sim = Simulation::new(scene).unwrap();
+    let mut heard = Heard::default();
+    sim.run(&mut heard).unwrap();
+    assert_eq!(heard.frame_times.len(), 301);
+    for (k, &t) in heard.frame_times.iter().enumerate() {
+        assert_eq!(t, k as f64 * interval, "frame {k}");
+    }
+    assert_eq!(sim.time(), horizon);
+    assert_eq!(heard.frame_times.last(), Some(&horizon));
+    // Steps of 0.05 s between frames 0.1 s apart: each exit at a frame's time or one step
+    // after it (that step's time is the frame's plus the step, not a longer sum).
+    assert!(!heard.exits.is_empty());
+    for e in &heard.exits {
+        let k = (e.t / interval).floor() as usize;
+        let frame = k as f64 * interval;
+        assert!(
+            e.t == frame || e.t == frame + step || e.t == (k + 1) as f64 * interval,
+            "exit at {} (frame {frame})",
+            e.t
+        );
     }
 }
 
