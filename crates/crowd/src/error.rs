@@ -36,9 +36,10 @@ pub enum CrowdError {
     #[error(transparent)]
     Integrate(#[from] moreau_integrate::IntegrateError),
     /// A step's projection could not be certified, and no Farkas certificate showed its
-    /// constraints infeasible: the integrator's error, with how fast the crowd asked to go. The certified accuracy is
-    /// absolute while rounding grows with the velocities, so a speed factor or desired speed
-    /// far beyond walking shows here (10⁶ × 1.3 m/s stops at the rounding floor).
+    /// constraints infeasible: the integrator's error, with how fast the crowd asked to go.
+    /// The certified accuracy is absolute while rounding grows with the velocities, so a
+    /// speed factor or desired speed far beyond walking shows here (10⁶ × 1.3 m/s stops at
+    /// the rounding floor).
     #[error(
         "{error}; the step's desired velocities reach {fastest:e} m/s (speed factor {speed_factor})"
     )]

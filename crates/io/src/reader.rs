@@ -108,7 +108,7 @@ impl RunFile {
     fn read<T: H5Type>(&self, name: &str) -> Result<Vec<T>, IoError> {
         let dataset = self.dataset(name)?;
         if let TypeDescriptor::Compound(wanted) = T::type_descriptor() {
-            let has = self.members(name)?;
+            let has = self.members(&dataset, name)?;
             let missing: Vec<&str> = wanted
                 .fields
                 .iter()
@@ -129,10 +129,10 @@ impl RunFile {
             .at(&self.path, || format!("reading '{name}'"))
     }
 
-    /// The member names of dataset `name`'s rows (none unless they are compound).
-    fn members(&self, name: &str) -> Result<Vec<String>, IoError> {
-        let described = self
-            .dataset(name)?
+    /// The member names of the rows of `dataset` (named `name`; none unless they are
+    /// compound).
+    fn members(&self, dataset: &Dataset, name: &str) -> Result<Vec<String>, IoError> {
+        let described = dataset
             .dtype()
             .and_then(|t| t.to_descriptor())
             .at(&self.path, || format!("reading the type of '{name}'"))?;
@@ -237,7 +237,7 @@ impl RunFile {
     /// The `/steps` rows (`time_solve_analyse` and `time_solve_factorize` NaN in files written
     /// before 2026-11-21, which did not measure them).
     pub fn steps(&self) -> Result<Vec<StepRow>, IoError> {
-        let has = self.members(STEPS)?;
+        let has = self.members(&self.dataset(STEPS)?, STEPS)?;
         if has.iter().any(|m| m == "time_solve_analyse") {
             return self.read(STEPS);
         }
