@@ -96,7 +96,6 @@ def _fmu(directory: pathlib.Path, fmu: str | None, row: dict) -> None:
     import tomllib
 
     import numpy as np
-    from fmpy import simulate_fmu
     from fmpy.util import write_csv
 
     if not fmu:
@@ -105,8 +104,8 @@ def _fmu(directory: pathlib.Path, fmu: str | None, row: dict) -> None:
     scene = tomllib.loads((directory / SCENE).read_text())
     horizon = float(scene["time"]["horizon"])
     interval = float(scene["time"]["output_interval"])
-    result = simulate_fmu(fmu, stop_time=horizon, output_interval=interval,
-                          start_values={"scene": str(directory / SCENE)})
+    result = _simulate(fmu, stop_time=horizon, output_interval=interval,
+                       start_values={"scene": str(directory / SCENE)})
     write_csv(str(directory / "outputs.csv"), result)
     evacuated = result["people_evacuated"]
     people = int(evacuated[0] + result["people_inside"][0])
@@ -121,3 +120,24 @@ def _fmu(directory: pathlib.Path, fmu: str | None, row: dict) -> None:
     row["evacuation_time"], row["mean_flow"] = evacuation(times, people)
     row["output"] = str(directory / "outputs.csv")
     row["status"] = "complete"
+
+
+def _simulate(fmu: str, **kwargs):
+    """fmpy's `simulate_fmu` on an instance this function frees, whatever happens: when
+    `simulate_fmu` raises (a scene the FMU refuses), fmpy 0.3 neither frees the instance it
+    made (its whole crowd) nor removes the directory it extracted the FMU to, and a worker
+    running many tasks would keep both from every failed one."""
+    import shutil
+
+    from fmpy import extract, instantiate_fmu, read_model_description, simulate_fmu
+
+    model = read_model_description(fmu)
+    unzipped = extract(fmu)
+    instance = None
+    try:
+        instance = instantiate_fmu(unzipped, model, "CoSimulation")
+        return simulate_fmu(unzipped, model_description=model, fmu_instance=instance, **kwargs)
+    finally:
+        if instance is not None:
+            instance.freeInstance()
+        shutil.rmtree(unzipped, ignore_errors=True)

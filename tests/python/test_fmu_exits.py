@@ -132,3 +132,38 @@ def test_the_fmu_of_the_rooms_own_scene_checks_other_scenes_too(tmp_path, capfd)
     said = capfd.readouterr().out
     assert 'its exits are ["west", "east"], the FMU declares exit_open/passed for ["door"]' \
         in said, said
+
+
+@pytest.mark.parametrize("version", ["2", "3"])
+def test_a_failed_fmu_run_of_the_ensemble_left_its_instance_and_extracted_fmu_behind(
+        fmus, version, tmp_path, monkeypatch):
+    """A sweep's task on the FMU engine whose scene the FMU refuses: fmpy 0.3's
+    `simulate_fmu` raised without freeing the instance it had made or removing the directory
+    it had extracted the FMU to, so a Dask worker kept both from every failed task
+    (regression). Now the task frees its instance and removes the directory, failed or not."""
+    import tempfile
+
+    import fmpy.fmi2
+    import fmpy.fmi3
+
+    from moreau_ensemble.task import run_variant
+
+    extracted = tmp_path / "extracted"
+    extracted.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(extracted))
+    freed = []
+    for cls in (fmpy.fmi2.FMU2Slave, fmpy.fmi3.FMU3Slave):
+        free = cls.freeInstance
+        monkeypatch.setattr(cls, "freeInstance", lambda self, free=free: (freed.append(self),
+                                                                          free(self))[1])
+    fmu = str(fmus[version])
+    room = (ROOT / "data" / "scenes" / "room-150.toml").read_text()
+    bad = run_variant("bad", {}, 1, room, str(tmp_path / "bad"), engine="fmu", fmu=fmu)
+    assert bad["status"] == "failed" and "nitializ" in bad["error"], bad
+    assert len(freed) == 1 and list(extracted.iterdir()) == []
+    # A run that completes frees its instance the same way, and its counts are the FMU's.
+    short = SCENE.read_text().replace("horizon = 30.0", "horizon = 2.0")
+    assert short != SCENE.read_text()
+    ok = run_variant("ok", {}, 1, short, str(tmp_path / "ok"), engine="fmu", fmu=fmu)
+    assert ok["status"] == "complete" and ok["people"] == PEOPLE, ok
+    assert len(freed) == 2 and list(extracted.iterdir()) == []
