@@ -157,7 +157,11 @@ fn inspect(path: &std::path::Path) -> Result<()> {
         times.len(),
         h.fps,
         match (times.first(), times.last(), counts.last()) {
-            (Some(a), Some(b), Some(n)) => format!(" (t = {a} .. {b} s, {n} present at the end)"),
+            (Some(a), Some(b), Some(n)) => format!(
+                " (t = {} .. {} s, {n} present at the end)",
+                moreau_core::Num(*a),
+                moreau_core::Num(*b)
+            ),
             _ => String::new(),
         },
         steps.len(),

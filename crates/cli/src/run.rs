@@ -391,7 +391,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     if let Some(signal) = interrupted {
         eprintln!(
             "moreau: {signal} at simulated time {} s{}",
-            sim.time(),
+            moreau_core::Num(sim.time()),
             output.map_or(String::new(), |p| format!(
                 "; '{}' holds the run so far (status interrupted)",
                 p.display()
@@ -408,7 +408,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             eprintln!(
                 "moreau: error: {} (simulated time reached: {} s)",
                 crate::error_text(&e),
-                sim.time()
+                moreau_core::Num(sim.time())
             );
             Ok(ExitCode::from(1))
         }

@@ -77,7 +77,7 @@ impl Observer for Samples {
             return Err(format!(
                 "people left the scene at t = {}: the study compares everyone at every t_i, use \
                  exits with action = \"continue\"",
-                f.t
+                moreau_core::Num(f.t)
             )
             .into());
         }

@@ -41,7 +41,8 @@ pub enum CrowdError {
     /// speed factor or desired speed far beyond walking shows here (10⁶ × 1.3 m/s stops at
     /// the rounding floor).
     #[error(
-        "{error}; the step's desired velocities reach {fastest:e} m/s (speed factor {speed_factor})"
+        "{error}; the step's desired velocities reach {fastest:e} m/s (speed factor {})",
+        moreau_core::Num(*speed_factor)
     )]
     NotCertified {
         /// The integrator's error ([`moreau_integrate::IntegrateError::NotCertified`]).
@@ -78,7 +79,7 @@ impl std::fmt::Display for Infeasibility {
             f,
             "infeasible: no room for everyone at t = {} s: {} constraints cannot all hold, \
              between people {:?}",
-            self.t,
+            moreau_core::Num(self.t),
             self.contacts.len(),
             self.people
         )?;

@@ -403,7 +403,10 @@ impl Events {
             CrowdError::invalid(
                 format!("{f}.area"),
                 area,
-                format!("no point of it takes a person of radius {r} m clear of the walls"),
+                format!(
+                    "no point of it takes a person of radius {} m clear of the walls",
+                    Num(r)
+                ),
             )
         } else if !reachable {
             CrowdError::invalid(

@@ -15,8 +15,11 @@ pub enum FieldError {
     /// The grid would have more cells than [`limits::MAX_FIELD_CELLS`](crate::limits::MAX_FIELD_CELLS)
     /// (checked before anything is allocated).
     #[error(
-        "the distance grid over {width} m × {height} m with cells of {cell} m would have \
-         {cells:.3e} cells, more than the limit of {limit:e}"
+        "the distance grid over {} m × {} m with cells of {} m would have \
+         {cells:.3e} cells, more than the limit of {limit:e}",
+        moreau_core::Num(*width),
+        moreau_core::Num(*height),
+        moreau_core::Num(*cell)
     )]
     TooManyCells {
         /// Width of the box (m).
@@ -31,7 +34,10 @@ pub enum FieldError {
         limit: f64,
     },
     /// The cell size is not finite and > 0, or the box is not finite.
-    #[error("cell {cell} m over [{lo:?}, {hi:?}]: needs a finite box and a finite cell > 0")]
+    #[error(
+        "cell {} m over [{lo:?}, {hi:?}]: needs a finite box and a finite cell > 0",
+        moreau_core::Num(*cell)
+    )]
     Invalid {
         /// Lower corner.
         lo: [f64; 2],

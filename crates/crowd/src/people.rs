@@ -247,14 +247,16 @@ impl People {
             (self.radius.iter().enumerate()).find(|(_, r)| !(r.is_finite() && **r > 0.0))
         {
             return Err(format!(
-                "radius {r} of person index {i}: must be finite and > 0"
+                "radius {} of person index {i}: must be finite and > 0",
+                moreau_core::Num(*r)
             ));
         }
         if let Some((i, v)) =
             (self.speed.iter().enumerate()).find(|(_, v)| !(v.is_finite() && **v >= 0.0))
         {
             return Err(format!(
-                "desired speed {v} of person index {i}: must be finite and ≥ 0"
+                "desired speed {} of person index {i}: must be finite and ≥ 0",
+                moreau_core::Num(*v)
             ));
         }
         Ok(())

@@ -713,8 +713,8 @@ impl Scene {
                     "the distance grid over the area's {} m × {} m bounding box would have \
                      {cells:.3e} cells, more than the limit of {:e}: use a grid_cell of at \
                      least {:.3e} m",
-                    hi[0] - lo[0],
-                    hi[1] - lo[1],
+                    Num(hi[0] - lo[0]),
+                    Num(hi[1] - lo[1]),
                     limits::MAX_FIELD_CELLS,
                     ((hi[0] - lo[0]) * (hi[1] - lo[1]) / limits::MAX_FIELD_CELLS).sqrt() * 1.01
                 ),

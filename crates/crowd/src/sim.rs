@@ -2,7 +2,7 @@
 //! `advance_to`, the one loop over its steps, which reports steps, frames and exits to an
 //! observer the caller passes.
 
-use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, RunStats, StepReport};
+use moreau_core::{ConstraintKey, ConstraintRows, Num, Parallelism, RunStats, StepReport};
 use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Stepping};
 use moreau_solve::ProjectionSolver;
 
@@ -408,8 +408,8 @@ impl Simulation {
         if !(param.is_finite() && t_end.is_finite() && t_end >= self.t) {
             return Err(CrowdError::invalid(
                 format!("moving[{body}] position"),
-                format!("{param} at t = {t_end}"),
-                format!("must be finite, at a time ≥ the current {}", self.t),
+                format!("{} at t = {}", Num(param), Num(t_end)),
+                format!("must be finite, at a time ≥ the current {}", Num(self.t)),
             ));
         }
         self.moving.drive(body, self.t, t_end, param);
@@ -652,11 +652,12 @@ impl Simulation {
         if !(largest >= MIN_MOVING_STEP) {
             return Err(CrowdError::invalid(
                 "moving",
-                format!("β = {beta:e} m/s at t = {}", self.t),
+                format!("β = {beta:e} m/s at t = {}", Num(self.t)),
                 format!(
                     "a moving body this fast would need steps of {largest:.3e} s (half the \
-                     smallest radius, {r_min} m, per step), below the {MIN_MOVING_STEP:e} s \
-                     a run allows"
+                     smallest radius, {} m, per step), below the {MIN_MOVING_STEP:e} s \
+                     a run allows",
+                    Num(r_min)
                 ),
             ));
         }
@@ -855,8 +856,8 @@ impl Simulation {
         if !(t_end.is_finite() && t_end >= self.t) {
             return Err(CrowdError::invalid(
                 "t_end",
-                t_end,
-                format!("must be finite and ≥ the current time {}", self.t),
+                Num(t_end),
+                format!("must be finite and ≥ the current time {}", Num(self.t)),
             ));
         }
         while self.advance_step(t_end, observer)?.is_some() {}
@@ -1040,14 +1041,14 @@ impl Simulation {
         if !(state.time.is_finite() && state.time >= 0.0) {
             return refuse(
                 "time",
-                state.time.to_string(),
+                Num(state.time).to_string(),
                 "must be finite and ≥ 0 (a run starts at 0)".into(),
             );
         }
         if !(state.speed_factor.is_finite() && state.speed_factor >= 0.0) {
             return refuse(
                 "speed_factor",
-                state.speed_factor.to_string(),
+                Num(state.speed_factor).to_string(),
                 "must be finite and ≥ 0".into(),
             );
         }

@@ -139,9 +139,10 @@ pub(crate) fn place_people(
                         format!("groups[{g}].count"),
                         n,
                         format!(
-                            "{n} disks of radius ≥ {r_min} m cover {need:.4e} m², more than the \
+                            "{n} disks of radius ≥ {} m cover {need:.4e} m², more than the \
                              spawn region ({:.4e} m²) holds at the densest packing ({:.1} %: \
                              {room:.4e} m²); at most {fit} {} in the spawn region",
+                            moreau_core::Num(r_min),
                             region.area(),
                             100.0 * crate::limits::PACKING,
                             if fit == 1.0 {

@@ -193,18 +193,41 @@ fn apply(root: &mut Value, m: &Mutation) {
     }
 }
 
-/// A valid scene's text → whatever it becomes: a clean error, or a simulation that must be
-/// able to report its first frame.
+/// Whether a message prints a number with more digits in a row than any `f64` needs (17
+/// significant digits, 20 for a `u64`): Rust's `{}` writes 1e300 with three hundred, which
+/// buried the error (a radius of 1e300, a speed factor of 1e300; regression).
+fn buried_number(message: &str) -> bool {
+    let mut run = 0;
+    message.chars().any(|c| {
+        run = if c.is_ascii_digit() { run + 1 } else { 0 };
+        run > 24
+    })
+}
+
+/// A valid scene's text → whatever it becomes: a clean error whose message prints its numbers
+/// in a few characters, or a simulation that must be able to report its first frame.
 fn check(text: &str) -> Result<(), TestCaseError> {
-    let Ok(scene) = Scene::from_toml(text, "<fuzz>") else {
-        return Ok(());
+    let scene = match Scene::from_toml(text, "<fuzz>") {
+        Ok(scene) => scene,
+        // (A parse error quotes the fuzzer's own line.)
+        Err(moreau_crowd::CrowdError::Parse { .. }) => return Ok(()),
+        Err(e) => {
+            let message = e.to_string();
+            prop_assert!(!buried_number(&message), "{message}");
+            return Ok(());
+        }
     };
     // Too big to build quickly, though valid (the fuzzer's cap, not the library's).
     if scene.groups.iter().any(|g| g.count.unwrap_or(0) > 3000) {
         return Ok(());
     }
     let horizon = scene.time.horizon;
-    if let Ok(mut sim) = Simulation::new(scene) {
+    let built = Simulation::new(scene);
+    if let Err(e) = &built {
+        let message = e.to_string();
+        prop_assert!(!buried_number(&message), "{message}");
+    }
+    if let Ok(mut sim) = built {
         let frame = sim.frame();
         prop_assert!(frame.positions.iter().all(|x| x.is_finite()));
         // Every scene that builds takes a few steps too (the broad phase, the fields, the
@@ -214,7 +237,12 @@ fn check(text: &str) -> Result<(), TestCaseError> {
         for _ in 0..5 {
             match sim.advance_step(horizon, &mut ()) {
                 Ok(Some(_)) => {}
-                _ => break,
+                Ok(None) => break,
+                Err(e) => {
+                    let message = e.to_string();
+                    prop_assert!(!buried_number(&message), "{message}");
+                    break;
+                }
             }
         }
     }

@@ -140,6 +140,13 @@ fn ten_million_people_in_36_m2_took_hours_of_random_placement() {
 }
 
 #[test]
+fn a_radius_of_1e300_was_printed_with_its_three_hundred_digits() {
+    let msg = refused(&room(&[("radius = 0.2", "radius = 1e300")]));
+    assert_mentions(&msg, &["groups[0].count", "disks of radius ≥ 1e300 m"]);
+    assert!(msg.len() < 300, "{msg}");
+}
+
+#[test]
 fn a_thousand_threads_were_accepted_and_never_finished() {
     let msg = refused(&room(&[(
         "grid_cell = 0.1",

@@ -1,6 +1,6 @@
 //! The one error type of the integrator crate.
 
-use moreau_core::SolveStatus;
+use moreau_core::{Num, SolveStatus};
 
 /// Errors that stop a run.
 #[derive(Debug, thiserror::Error)]
@@ -17,7 +17,8 @@ pub enum IntegrateError {
     },
     /// The projection could not be certified to its target, even by the fallback.
     #[error(
-        "step {step} at t = {t}: projection not certified ({status:?}): ε = {eps:e} for target {eps_target:e}, violation {violation:e} for target {max_violation:e}{}",
+        "step {step} at t = {}: projection not certified ({status:?}): ε = {eps:e} for target {eps_target:e}, violation {violation:e} for target {max_violation:e}{}",
+        Num(*t),
         below_floor(*status)
     )]
     NotCertified {
@@ -38,7 +39,8 @@ pub enum IntegrateError {
     },
     /// Something outside the assembled constraints was still crossed after widening the margin.
     #[error(
-        "step {step} at t = {t}: {crossed} constraints outside the assembled set were crossed after {redone} wider margins"
+        "step {step} at t = {}: {crossed} constraints outside the assembled set were crossed after {redone} wider margins",
+        Num(*t)
     )]
     CrossedOutside {
         /// Step index.
@@ -51,7 +53,7 @@ pub enum IntegrateError {
         redone: usize,
     },
     /// The state or the field became non-finite.
-    #[error("step {step} at t = {t}: non-finite {what} at index {index}")]
+    #[error("step {step} at t = {}: non-finite {what} at index {index}", Num(*t))]
     NonFinite {
         /// Step index.
         step: usize,

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use hdf5::types::VarLenUnicode;
 use hdf5::{Dataset, File, H5Type};
-use moreau_core::StepReport;
+use moreau_core::{Num, StepReport};
 use ndarray::ArrayView2;
 
 use crate::error::{Context, IoError};
@@ -920,7 +920,8 @@ impl RunWriter {
     pub fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
         if positions.len() != 2 * ids.len() {
             return Err(self.layout_error(format!(
-                "frame at t = {t}: {} coordinates for {} people",
+                "frame at t = {}: {} coordinates for {} people",
+                Num(t),
                 positions.len(),
                 ids.len()
             )));
@@ -934,7 +935,8 @@ impl RunWriter {
             let i = id as usize;
             if i >= people {
                 return Err(self.layout_error(format!(
-                    "frame at t = {t}: person {id}, but the file holds {people} people"
+                    "frame at t = {}: person {id}, but the file holds {people} people",
+                    Num(t)
                 )));
             }
             let (x, y) = (positions[2 * k], positions[2 * k + 1]);
@@ -953,8 +955,9 @@ impl RunWriter {
         }
         if self.pending_moving.len() != 4 * self.moving_segments {
             return Err(self.layout_error(format!(
-                "frame at t = {t}: the moving walls were not given (the file holds {} moving \
+                "frame at t = {}: the moving walls were not given (the file holds {} moving \
                  segments)",
+                Num(t),
                 self.moving_segments
             )));
         }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use moreau_core::StepReport;
+use moreau_core::{Num, StepReport};
 use moreau_crowd::{ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation};
 use moreau_io::{IoError, Overwrite, RunWriter};
 use moreau_record::{Record, Summary};
@@ -261,8 +261,8 @@ impl PySimulation {
                 py,
                 CrowdError::Invalid {
                     field: "t_end".into(),
-                    value: t.to_string(),
-                    reason: format!("must be finite and ≥ the current time {now}"),
+                    value: Num(t).to_string(),
+                    reason: format!("must be finite and ≥ the current time {}", Num(now)),
                 },
             ));
         }
@@ -415,7 +415,8 @@ impl PySimulation {
     fn set_speed_factor(&self, factor: f64) -> PyResult<()> {
         if !(factor.is_finite() && factor >= 0.0) {
             return Err(PyValueError::new_err(format!(
-                "speed_factor = {factor}: must be finite and ≥ 0"
+                "speed_factor = {}: must be finite and ≥ 0",
+                Num(factor)
             )));
         }
         self.lock()?.sim.set_speed_factor(factor);
@@ -516,7 +517,7 @@ impl PySimulation {
             Ok(inner) => format!(
                 "Simulation(scene={:?}, t={}, people={})",
                 self.scene.scene.name,
-                inner.sim.time(),
+                Num(inner.sim.time()),
                 inner.sim.people().len()
             ),
             Err(_) => format!("Simulation(scene={:?}, <stepping>)", self.scene.scene.name),
