@@ -712,6 +712,24 @@ mod tests {
         assert_eq!(other.instance.time(), Some(1.0));
         steps(&mut other, 1.0, 1, 0.5);
 
+        // Another desired speed factor: refused, the factors in a few characters (1e-300 was
+        // printed with three hundred digits; regression).
+        let (mut slow, lines) = component(None);
+        slow.instance
+            .set_real(vr::DESIRED_SPEED_FACTOR, 1e-300)
+            .unwrap();
+        let c = ptr(&mut slow);
+        // SAFETY: the live state.
+        let status = with(c, "fmi2SetFMUstate", |comp| unsafe {
+            set_state(comp, slot)
+        });
+        assert_eq!(status, ERROR);
+        let line = lines.borrow().last().unwrap().clone();
+        assert!(
+            line.contains("saved with desired_speed_factor = 1, this instance has 1e-300"),
+            "{line}"
+        );
+
         // Damaged or foreign bytes are refused when deserialized, naming what is wrong.
         let mut fresh: *mut c_void = std::ptr::null_mut();
         // SAFETY: slices of ours.

@@ -571,7 +571,8 @@ impl Instance {
         if snapshot.desired_speed_factor != self.settings.desired_speed_factor {
             return Err(FmuError::Setting(format!(
                 "FMUstate: saved with desired_speed_factor = {}, this instance has {}: refused",
-                snapshot.desired_speed_factor, self.settings.desired_speed_factor
+                Num(snapshot.desired_speed_factor),
+                Num(self.settings.desired_speed_factor)
             )));
         }
         let model = self.model()?;

@@ -304,6 +304,15 @@ fn sequence(seed: u64, calls: usize, answered: &mut [usize; KINDS]) -> bool {
     }
     // (Its log outlives it.)
     api.free();
+    // No number printed with every digit (Rust's `{}` writes 1e300 with three hundred).
+    for line in log.borrow().iter() {
+        let mut run = 0;
+        let buried = line.chars().any(|c| {
+            run = if c.is_ascii_digit() { run + 1 } else { 0 };
+            run > 24
+        });
+        assert!(!buried, "seed {seed}: a log line buries a number: {line}");
+    }
     let refused = log
         .borrow()
         .iter()
