@@ -6,6 +6,7 @@ plot_run.py explains a file it cannot plot. Each test is named after what broke.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -240,6 +241,20 @@ def test_converge_horizon_minus_one_and_bench_density_0_gave_unrelated_errors(tm
     assert proc.returncode == 2 and "--horizon" in proc.stderr and "-1" in proc.stderr, proc.stderr
     proc = moreau("bench", "--density", "0", check=False, timeout=120)
     assert proc.returncode == 2 and "--density" in proc.stderr and "0" in proc.stderr, proc.stderr
+
+
+def test_bench_density_1e_minus_300_wrote_its_hall_as_toml_that_did_not_parse():
+    """The generated hall wrote its side, 3.2e150 m, with all its digits: TOML read an integer
+    that overflowed, and the error ("integer number overflowed", under a caret) named nothing
+    the user typed. Now the scene's own bound says what is wrong, with the number in a few
+    characters; the converge flags' numbers too."""
+    proc = moreau("bench", "--density", "1e-300", "--sizes", "10", check=False, timeout=120)
+    assert proc.returncode != 0
+    assert "coordinates must be within" in proc.stderr and "3.1622776601683793e150" in \
+        proc.stderr, proc.stderr
+    assert "overflow" not in proc.stderr and not re.search(r"\d{25}", proc.stderr), proc.stderr
+    proc = moreau("converge", ROOM, "--h-min", "1e300", check=False, timeout=120)
+    assert proc.returncode != 0 and "--h-min 1e300" in proc.stderr, proc.stderr
 
 
 # Python: sweeps and plot_run.py.

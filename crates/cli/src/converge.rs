@@ -120,10 +120,13 @@ pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
     if let Some(t) = args.horizon
         && !(t > 0.0 && t.is_finite())
     {
-        bail!("--horizon {t}: must be finite and > 0");
+        bail!("--horizon {}: must be finite and > 0", moreau_core::Num(t));
     }
     if args.steps.iter().any(|&h| !(h > args.h_min)) {
-        bail!("every step must be larger than --h-min {}", args.h_min);
+        bail!(
+            "every step must be larger than --h-min {}",
+            moreau_core::Num(args.h_min)
+        );
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating '{}'", args.out.display()))?;

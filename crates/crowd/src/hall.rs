@@ -60,15 +60,15 @@ impl Hall {
 name = "hall-{n}"
 seed = {seed}
 [area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{side}, {hi}], [{side}, {side}], [0.0, {side}]]
+outer = [[0.0, 0.0], [{side:?}, 0.0], [{side:?}, {lo:?}], [{x1:?}, {lo:?}], [{x1:?}, {hi:?}], [{side:?}, {hi:?}], [{side:?}, {side:?}], [0.0, {side:?}]]
 [[exits]]
 name = "door"
-area = [[{x0}, {lo}], [{x1}, {lo}], [{x1}, {hi}], [{x0}, {hi}]]
+area = [[{x0:?}, {lo:?}], [{x1:?}, {lo:?}], [{x1:?}, {hi:?}], [{x0:?}, {hi:?}]]
 action = "remove"
 [[groups]]
 name = "crowd"
 count = {n}
-spawn = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+spawn = [[0.0, 0.0], [{side:?}, 0.0], [{side:?}, {side:?}], [0.0, {side:?}]]
 radius = {{ min = 0.18, max = 0.22 }}
 speed = {{ min = 0.9, max = 1.3 }}
 destination = "door"
@@ -148,7 +148,7 @@ impl Crush {
                 (x, y)
             })
             .filter(|&(x, y)| !((c0..=c1).contains(&x) && (c0..=c1).contains(&y)))
-            .map(|(x, y)| format!("[{x}, {y}]"))
+            .map(|(x, y)| format!("[{x:?}, {y:?}]"))
             .collect();
         let solver = solver_section(&self.solver);
         let text = format!(
@@ -156,16 +156,16 @@ impl Crush {
 name = "crush-{n}"
 seed = 1
 [area]
-outer = [[0.0, 0.0], [{side}, 0.0], [{side}, {side}], [0.0, {side}]]
+outer = [[0.0, 0.0], [{side:?}, 0.0], [{side:?}, {side:?}], [0.0, {side:?}]]
 [[exits]]
 name = "centre"
-area = [[{c0}, {c0}], [{c1}, {c0}], [{c1}, {c1}], [{c0}, {c1}]]
+area = [[{c0:?}, {c0:?}], [{c1:?}, {c0:?}], [{c1:?}, {c1:?}], [{c0:?}, {c1:?}]]
 action = "continue"
-target = [[{c0}, {c0}], [{c1}, {c0}], [{c1}, {c1}], [{c0}, {c1}]]
+target = [[{c0:?}, {c0:?}], [{c1:?}, {c0:?}], [{c1:?}, {c1:?}], [{c0:?}, {c1:?}]]
 [[groups]]
 name = "crowd"
 positions = [{positions}]
-radius = {radius}
+radius = {radius:?}
 speed = 1.0
 destination = "centre"
 [time]
