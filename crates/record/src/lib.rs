@@ -4,7 +4,7 @@
 
 use moreau_core::{RunStats, StepReport};
 use moreau_crowd::{
-    ContactKind, EntryRecord, ExitRecord, Frame, Observer, ObserverError, SimState, Simulation,
+    ContactKind, EntryRecord, ExitRecord, Frame, Observer, ObserverError, Simulation,
 };
 use moreau_io::{ContactRow, RunHeader, RunSink};
 use serde::Serialize;
@@ -142,20 +142,57 @@ impl Summary {
     }
 }
 
-/// Steps `sim` to its horizon frame by frame through `record`, saving the run's state after
-/// every frame into its file (what `moreau run --resume` goes on from). What `moreau run` and
+/// Steps `sim` to its horizon frame by frame through `record`, saving the run's state into its
+/// file (what `moreau run --resume` goes on from) after the frames [`StateCadence`] picks:
+/// every frame while the state is at most [`STATE_BYTES_PER_FRAME`]. What `moreau run` and
 /// the Python module's `run` both do.
 pub fn run_to_horizon(
     sim: &mut Simulation,
     record: &mut Record<'_>,
 ) -> Result<(), moreau_crowd::CrowdError> {
+    let mut cadence = StateCadence::default();
     while let Some(t) = sim.next_frame_time() {
         sim.advance_to(t, record)?;
-        record
-            .save_state(&sim.state())
-            .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
+        if record.writer.is_some() && cadence.frame() {
+            let bytes = sim.state().to_bytes();
+            cadence.saved(bytes.len());
+            record
+                .save_state_bytes(bytes)
+                .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
+        }
     }
     Ok(())
+}
+
+/// The state's bytes a run writes per frame at most, on average: a larger state is saved every
+/// `⌈size / this⌉` frames. At a million people the state is 55 MB, and saving it with every
+/// frame cost ~10 % of the run (its serialization on the stepping thread, 0.1 s a frame, and
+/// its write); a state of up to 8 MB (about 10⁵ people) is still saved with every frame.
+pub const STATE_BYTES_PER_FRAME: usize = 8 << 20;
+
+/// After which frames a run saves its state: the first, then each once the frames since the
+/// last save carry [`STATE_BYTES_PER_FRAME`] for every byte of the last state saved. A run
+/// killed outright goes on from the last state saved, so it redoes at most
+/// `⌈size / STATE_BYTES_PER_FRAME⌉ − 1` frames.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StateCadence {
+    since: usize,
+    last: Option<usize>,
+}
+
+impl StateCadence {
+    /// Counts a frame; true when the state is to be saved after it.
+    pub fn frame(&mut self) -> bool {
+        self.since += 1;
+        self.last
+            .is_none_or(|size| self.since.saturating_mul(STATE_BYTES_PER_FRAME) >= size)
+    }
+
+    /// The state saved after the frame was `size` bytes.
+    pub fn saved(&mut self, size: usize) {
+        self.since = 0;
+        self.last = Some(size);
+    }
 }
 
 /// Told of every step with the run's totals so far and the people not yet out; an error
@@ -205,10 +242,11 @@ impl<'a> Record<'a> {
         }
     }
 
-    /// Saves `state` into the run file after its last frame (nothing without a file).
-    pub fn save_state(&mut self, state: &SimState) -> Result<(), moreau_io::IoError> {
+    /// Saves a state's bytes ([`SimState::to_bytes`](moreau_crowd::SimState::to_bytes)) into
+    /// the run file after its last frame (nothing without a file).
+    pub fn save_state_bytes(&mut self, bytes: Vec<u8>) -> Result<(), moreau_io::IoError> {
         match self.writer.as_deref_mut() {
-            Some(w) => w.save_state(state.to_bytes()),
+            Some(w) => w.save_state(bytes),
             None => Ok(()),
         }
     }
@@ -279,5 +317,34 @@ impl Observer for Record<'_> {
         }
         self.frames += 1;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{STATE_BYTES_PER_FRAME, StateCadence};
+
+    /// The frames after which states of `size` bytes are saved, of the first `frames`.
+    fn saves(size: usize, frames: usize) -> Vec<usize> {
+        let mut cadence = StateCadence::default();
+        (1..=frames)
+            .filter(|_| {
+                let due = cadence.frame();
+                if due {
+                    cadence.saved(size);
+                }
+                due
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_small_state_is_saved_with_every_frame_a_large_one_by_its_size() {
+        // The dense 2,000 scene's state (131 kB), and a state of exactly the budget.
+        assert_eq!(saves(131_000, 5), vec![1, 2, 3, 4, 5]);
+        assert_eq!(saves(STATE_BYTES_PER_FRAME, 5), vec![1, 2, 3, 4, 5]);
+        // One byte more: every second frame. A million people's 55 MB: every seventh.
+        assert_eq!(saves(STATE_BYTES_PER_FRAME + 1, 6), vec![1, 3, 5]);
+        assert_eq!(saves(55_000_000, 16), vec![1, 8, 15]);
     }
 }
