@@ -358,6 +358,11 @@ impl Simulation {
         self.steps
     }
 
+    /// Output frames reported so far, the first (at the start) included.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
     /// Everyone so far: the people at the start and those who entered since (every id is
     /// below it).
     pub fn total_people(&self) -> usize {

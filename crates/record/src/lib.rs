@@ -143,56 +143,43 @@ impl Summary {
 }
 
 /// Steps `sim` to its horizon frame by frame through `record`, saving the run's state into its
-/// file (what `moreau run --resume` goes on from) after the frames [`StateCadence`] picks:
-/// every frame while the state is at most [`STATE_BYTES_PER_FRAME`]. What `moreau run` and
-/// the Python module's `run` both do.
+/// file (what `moreau run --resume` goes on from) after the frames [`state_due`] picks: every
+/// frame up to ~10⁵ people. What `moreau run` and the Python module's `run` both do.
 pub fn run_to_horizon(
     sim: &mut Simulation,
     record: &mut Record<'_>,
 ) -> Result<(), moreau_crowd::CrowdError> {
-    let mut cadence = StateCadence::default();
     while let Some(t) = sim.next_frame_time() {
         sim.advance_to(t, record)?;
-        if record.writer.is_some() && cadence.frame() {
-            let bytes = sim.state().to_bytes();
-            cadence.saved(bytes.len());
+        if record.writer.is_some() && state_due(sim.frames(), sim.people().len()) {
             record
-                .save_state_bytes(bytes)
+                .save_state_bytes(sim.state().to_bytes())
                 .map_err(|e| moreau_crowd::CrowdError::Observer(Box::new(e)))?;
         }
     }
     Ok(())
 }
 
-/// The state's bytes a run writes per frame at most, on average: a larger state is saved every
-/// `⌈size / this⌉` frames. At a million people the state is 55 MB, and saving it with every
-/// frame cost ~10 % of the run (its serialization on the stepping thread, 0.1 s a frame, and
-/// its write); a state of up to 8 MB (about 10⁵ people) is still saved with every frame.
+/// The state's bytes a run writes per frame at most, on average (8 MiB).
 pub const STATE_BYTES_PER_FRAME: usize = 8 << 20;
 
-/// After which frames a run saves its state: the first, then each once the frames since the
-/// last save carry [`STATE_BYTES_PER_FRAME`] for every byte of the last state saved. A run
-/// killed outright goes on from the last state saved, so it redoes at most
-/// `⌈size / STATE_BYTES_PER_FRAME⌉ − 1` frames.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct StateCadence {
-    since: usize,
-    last: Option<usize>,
-}
+/// What a person's share of the state is taken to be, warm-start multipliers included (a
+/// million people's state measured 55 MB; the dense 2,000's 131 kB).
+pub const STATE_BYTES_PER_PERSON: usize = 64;
 
-impl StateCadence {
-    /// Counts a frame; true when the state is to be saved after it.
-    pub fn frame(&mut self) -> bool {
-        self.since += 1;
-        self.last
-            .is_none_or(|size| self.since.saturating_mul(STATE_BYTES_PER_FRAME) >= size)
-    }
-
-    /// The state saved after the frame was `size` bytes.
-    pub fn saved(&mut self, size: usize) {
-        self.since = 0;
-        self.last = Some(size);
-    }
+/// Whether the state is saved after output frame `frames` (counted from 1, the frame at the
+/// start) of `people` present: after every `k`-th frame, `k = ⌈people ·`
+/// [`STATE_BYTES_PER_PERSON`] `/` [`STATE_BYTES_PER_FRAME`]`⌉`: every frame up to 131,072
+/// people, every eighth at a million, whose state took 0.1 s a frame to serialize on the
+/// stepping thread (~8 % of a step). It depends on the frame and the crowd only, so a resumed
+/// run saves after the same frames as an uninterrupted one; a run killed outright redoes at
+/// most `k − 1` frames.
+pub fn state_due(frames: usize, people: usize) -> bool {
+    let k = people
+        .saturating_mul(STATE_BYTES_PER_PERSON)
+        .div_ceil(STATE_BYTES_PER_FRAME)
+        .max(1);
+    frames.is_multiple_of(k)
 }
 
 /// Told of every step with the run's totals so far and the people not yet out; an error
@@ -322,29 +309,21 @@ impl Observer for Record<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::{STATE_BYTES_PER_FRAME, StateCadence};
+    use super::state_due;
 
-    /// The frames after which states of `size` bytes are saved, of the first `frames`.
-    fn saves(size: usize, frames: usize) -> Vec<usize> {
-        let mut cadence = StateCadence::default();
-        (1..=frames)
-            .filter(|_| {
-                let due = cadence.frame();
-                if due {
-                    cadence.saved(size);
-                }
-                due
-            })
-            .collect()
+    /// The frames of the first `frames` after which a state of `people` is saved.
+    fn saves(people: usize, frames: usize) -> Vec<usize> {
+        (1..=frames).filter(|&f| state_due(f, people)).collect()
     }
 
     #[test]
-    fn a_small_state_is_saved_with_every_frame_a_large_one_by_its_size() {
-        // The dense 2,000 scene's state (131 kB), and a state of exactly the budget.
-        assert_eq!(saves(131_000, 5), vec![1, 2, 3, 4, 5]);
-        assert_eq!(saves(STATE_BYTES_PER_FRAME, 5), vec![1, 2, 3, 4, 5]);
-        // One byte more: every second frame. A million people's 55 MB: every seventh.
-        assert_eq!(saves(STATE_BYTES_PER_FRAME + 1, 6), vec![1, 3, 5]);
-        assert_eq!(saves(55_000_000, 16), vec![1, 8, 15]);
+    fn a_small_crowds_state_is_saved_with_every_frame_a_large_ones_by_its_size() {
+        assert_eq!(saves(0, 4), vec![1, 2, 3, 4]);
+        assert_eq!(saves(2_000, 4), vec![1, 2, 3, 4]);
+        // 2¹⁷ people: 8 MiB exactly; one more, every second frame.
+        assert_eq!(saves(131_072, 4), vec![1, 2, 3, 4]);
+        assert_eq!(saves(131_073, 6), vec![2, 4, 6]);
+        // A million: every eighth.
+        assert_eq!(saves(1_000_000, 24), vec![8, 16, 24]);
     }
 }
