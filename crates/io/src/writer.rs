@@ -783,8 +783,9 @@ impl RunWriter {
         let Some(marks) = marks else {
             return Err(IoError::Layout {
                 path: partial,
-                what: "nothing to resume: the run was killed before its first frame's state was \
-                       saved; run it again with --force"
+                what: "nothing to resume: the run was killed before it saved a state (after its \
+                       first frame; beyond 131,072 people after every k-th, k = ⌈people · 64 B / \
+                       8 MiB⌉); run it again with --force"
                     .into(),
             });
         };
