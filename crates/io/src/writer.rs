@@ -784,8 +784,7 @@ impl RunWriter {
             return Err(IoError::Layout {
                 path: partial,
                 what: "nothing to resume: the run was killed before it saved a state (after its \
-                       first frame; beyond 131,072 people after every k-th, k = ⌈people · 64 B / \
-                       8 MiB⌉); run it again with --force"
+                       first frame, or a later one for a large crowd); run it again with --force"
                     .into(),
             });
         };
