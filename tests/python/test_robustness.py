@@ -199,6 +199,21 @@ def test_the_examples_refuse_bad_numbers_by_flag_not_in_a_step_or_as_an_unknown_
         assert proc.stdout == "", (args, proc.stdout)
 
 
+def test_the_examples_printed_a_step_of_1e300_with_three_hundred_digits(tmp_path):
+    """Regression: `example81 --h 1e300` and `example82 --h 1e300` ran (one step of t_end
+    each) and printed the step in their tables, and example82.md, as a 1 with three hundred
+    zeros and six decimals."""
+    proc = moreau("example81", "--h", "1e300", timeout=120)
+    assert "1e300" in proc.stdout and not re.search(r"\d{25}", proc.stdout), proc.stdout
+    proc = moreau("example82", "--h", "1e300", "--out", tmp_path, timeout=120)
+    table = (tmp_path / "example82.md").read_text()
+    for text in (proc.stdout, table):
+        assert "1e300" in text and not re.search(r"\d{25}", text), text
+    # Ordinary steps keep their six decimals.
+    proc = moreau("example81", timeout=120)
+    assert re.search(r"^\s+0\.\d{6}\s", proc.stdout, re.M), proc.stdout
+
+
 def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
     """Regression: `converge --samples 0` and `--eps-kappa -1` ran the reference run (minutes
     on a large scene) before refusing, `--h-min 0` failed after it on "step 0 does not

@@ -1,7 +1,7 @@
 //! `moreau example81`: Example 8.1 of Cao & Saoud against its closed form.
 
 use anyhow::{Context, Result};
-use moreau_core::{FnField, HalfSpace, HalfSpaces};
+use moreau_core::{FnField, HalfSpace, HalfSpaces, Num};
 use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, StepSequence};
 use moreau_solve::{Apgd, ApgdSettings};
 
@@ -73,14 +73,27 @@ pub fn example_8_1(a: f64, b: f64, x0: f64, h0: f64, t_end: f64) -> Result<()> {
                     steps += 1;
                 },
             )
-            .with_context(|| format!("run with h = {h}"))?;
+            .with_context(|| format!("run with h = {}", Num(h)))?;
         let order = prev.map_or(String::from("-"), |(ph, pe)| {
             format!("{:.3}", (pe / err).ln() / (ph / h).ln())
         });
-        println!("{h:>12.6} {steps:>8} {err:>14.6e} {order:>8} {iters:>12} {eps:>12.2e}");
+        println!(
+            "{:>12} {steps:>8} {err:>14.6e} {order:>8} {iters:>12} {eps:>12.2e}",
+            step_cell(h)
+        );
         prev = Some((h, err));
     }
     Ok(())
+}
+
+/// A step in the examples' tables: six decimals as ever, or in a few characters (`1e300`,
+/// `1e-9`) where six decimals would print every digit or nothing.
+fn step_cell(h: f64) -> String {
+    if (1e-4..1e6).contains(&h) {
+        format!("{h:.6}")
+    } else {
+        Num(h).to_string()
+    }
 }
 
 /// Example 8.2's data: `x' ∈ τ − K x − ∂ψ(x) − N_C(x)`, `ψ = Σ μ_i |x_i|`, `C = [−1, 1]³`.
@@ -151,9 +164,10 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
         run_8_2(Selection::SemiImplicit, h_ref, t_end, 1e-6).context("the reference run")?;
     std::fs::create_dir_all(out).with_context(|| format!("creating '{}'", out.display()))?;
     let mut md = format!(
-        "Example 8.2 of Cao & Saoud, T = {t_end}, reference: semi-implicit with h = {h_ref:e}, \
+        "Example 8.2 of Cao & Saoud, T = {}, reference: semi-implicit with h = {h_ref:e}, \
          ε_k = 10⁻⁶ μ³; runs with ε_k = μ³. Error: max over the step times of |x_h − x_ref|.\n\n\
-         | selection | h | steps | error | order | wall (s) | iterations |\n|---|---|---|---|---|---|---|\n"
+         | selection | h | steps | error | order | wall (s) | iterations |\n|---|---|---|---|---|---|---|\n",
+        Num(t_end)
     );
     println!(
         "{:>14} {:>10} {:>7} {:>12} {:>7} {:>10} {:>10}",
@@ -168,8 +182,8 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
         let mut prev: Option<(f64, f64)> = None;
         for j in 0..levels {
             let h = h0 / 2f64.powi(j as i32);
-            let (states, wall, iterations) =
-                run_8_2(selection, h, t_end, 1.0).with_context(|| format!("{name}, h = {h}"))?;
+            let (states, wall, iterations) = run_8_2(selection, h, t_end, 1.0)
+                .with_context(|| format!("{name}, h = {}", Num(h)))?;
             let stride = fine >> j;
             let error = states
                 .iter()
@@ -181,11 +195,13 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
                 format!("{:.2}", (pe / error).ln() / (ph / h).ln())
             });
             println!(
-                "{name:>14} {h:>10.6} {:>7} {error:>12.4e} {order:>7} {wall:>10.4} {iterations:>10}",
+                "{name:>14} {:>10} {:>7} {error:>12.4e} {order:>7} {wall:>10.4} {iterations:>10}",
+                step_cell(h),
                 states.len() - 1
             );
             md.push_str(&format!(
-                "| {name} | {h} | {} | {error:.4e} | {order} | {wall:.4} | {iterations} |\n",
+                "| {name} | {} | {} | {error:.4e} | {order} | {wall:.4} | {iterations} |\n",
+                Num(h),
                 states.len() - 1
             ));
             points.push((wall.max(1e-6), error));

@@ -274,7 +274,12 @@ impl Time {
     /// projections no more than it certifies ([`SolverKind::certified_floor`]).
     pub fn stepping(&self, solver: SolverKind) -> Result<Stepping, CrowdError> {
         let Some(tol) = self.tol else {
-            return Ok(Stepping::fixed(self.step)?);
+            // Steps end at every frame, so none is longer than the output interval or the
+            // horizon; a longer `step` is taken as that (`fixed_step` takes what is left below
+            // a billionth of the step for rounding: `step = 1e300` was a run of no step).
+            return Ok(Stepping::fixed(
+                self.step.min(self.output_interval).min(self.horizon),
+            )?);
         };
         let mut settings = AdaptiveSettings::new(tol);
         settings.mu_max = settings.mu_max.min(self.output_interval).min(self.horizon);

@@ -147,6 +147,28 @@ fn a_radius_of_1e300_was_printed_with_its_three_hundred_digits() {
 }
 
 #[test]
+fn a_step_of_1e300_ended_the_run_at_t_0_as_complete() {
+    // The stepping took what was left below a billionth of the step as reached: every frame
+    // "reached" at t = 0, no step taken, and the run said it was complete.
+    let text = room(&[("step = 0.05", "step = 1e300")]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let (horizon, interval) = (sim.scene().time.horizon, sim.scene().time.output_interval);
+    let mut stats = moreau_core::RunStats::default();
+    let mut mus = Vec::new();
+    while let Some(report) = sim.advance_step(horizon, &mut stats).unwrap() {
+        mus.push(report.mu);
+    }
+    assert_eq!(sim.time(), horizon);
+    // Steps end at frames: one step of the output interval each.
+    assert_eq!(mus.len(), (horizon / interval).round() as usize, "{mus:?}");
+    assert!(mus.iter().all(|mu| (mu - interval).abs() < 1e-9), "{mus:?}");
+    assert!(
+        !sim.exit_records().is_empty(),
+        "nobody passed the door in {horizon} s"
+    );
+}
+
+#[test]
 fn a_thousand_threads_were_accepted_and_never_finished() {
     let msg = refused(&room(&[(
         "grid_cell = 0.1",

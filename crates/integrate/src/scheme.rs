@@ -295,8 +295,11 @@ impl<C: Correction> Scheme<C> {
             StepSequence::Given(v) => v.iter().try_for_each(|&mu| check_step(mu))?,
         }
         let (mut t, mut k) = (t0, 0);
+        // A step longer than the span is one step of the span: `fixed_step` takes what is
+        // left below a billionth of `h` for rounding, which `h = 1e300` made the whole span
+        // (no step at all).
         let next = |k: usize, t: f64| match steps {
-            StepSequence::Fixed { h, t_end } => fixed_step(*h, t_end - t),
+            StepSequence::Fixed { h, t_end } => fixed_step(h.min(t_end - t0), t_end - t),
             StepSequence::Given(v) => v.get(k).copied(),
         };
         while let Some(mu) = next(k, t) {

@@ -17,7 +17,8 @@ pub const MAX_STEPS: f64 = 1e9;
 /// The next of equal steps `h` that cover `remaining` with the last one shortened: `h` while
 /// more than one step is left, then what is left (taken as `h` when within `10⁻⁹ h` of it:
 /// rounding in the sum of the steps, so that spans that are multiples of `h` are covered by steps of exactly
-/// `h`); `None` once what is left is below `10⁻⁹ h`.
+/// `h`); `None` once what is left is below `10⁻⁹ h`. Callers pass an `h` no longer than the
+/// span they cover: of a span below `10⁻⁹ h` nothing is taken.
 pub fn fixed_step(h: f64, remaining: f64) -> Option<f64> {
     let n = (remaining / h - 1e-9).ceil();
     if !(n >= 1.0) {

@@ -276,3 +276,33 @@ fn iterates_from_two_starts_contract_like_the_dynamics() {
         }
     }
 }
+
+#[test]
+fn a_step_of_1e300_over_a_span_of_1_took_no_step() {
+    // `fixed_step` takes what is left below a billionth of the step for rounding: with
+    // h = 1e300 that was the whole span, and the run ended at t0 with x unchanged.
+    let (a, b, x0) = (1.0, 2.0, 3.0);
+    let field = FnField::new(1, move |_t, x: &[f64], out: &mut [f64]| {
+        out[0] = -(a + 1.0) * x[0] + b
+    });
+    let mut scheme = Scheme::new(ExactProjection::new(), EpsPolicy::new(1e-2, 3.0).unwrap());
+    let mut set = BoxSet::new(vec![0.0], vec![f64::INFINITY]).unwrap();
+    let mut x = [x0];
+    let mut steps = Vec::new();
+    let t = scheme
+        .run(
+            &field,
+            &mut set,
+            0.5,
+            &mut x,
+            &StepSequence::Fixed {
+                h: 1e300,
+                t_end: 1.5,
+            },
+            |r, _| steps.push(r.mu),
+        )
+        .unwrap();
+    assert_eq!((t, steps), (1.5, vec![1.0]));
+    // One explicit step of the span: x0 + 1.0 · (−(a + 1) x0 + b) = 3 − 4 = −1, projected on C.
+    assert_eq!(x, [0.0]);
+}
