@@ -272,13 +272,17 @@ impl StepController {
         let mut factorizations = 0usize;
         loop {
             // Land on t_end rather than leave a sliver after it.
-            let mut mu = self.mu.min(s.mu_max).max(s.mu_min);
+            let asked = self.mu.min(s.mu_max).max(s.mu_min);
+            let mut mu = asked;
             if mu >= remaining || remaining - mu < 0.5 * s.mu_min.max(1e-3 * mu) {
                 mu = remaining;
             }
             q.copy_from_slice(&self.saved);
             let trial = self.trial(scheme, field, set, k, t, q, mu);
-            let smallest = mu <= s.mu_min * (1.0 + 1e-12) || mu == remaining && mu < s.mu_min;
+            // No smaller trial follows this one: the floor was asked (landing may lengthen it
+            // to what is left, up to 1.5 `mu_min`), or less than the floor is left. (Judged by
+            // `mu` alone, a floor step lengthened to land was rejected and tried again forever.)
+            let smallest = asked <= s.mu_min * (1.0 + 1e-12) || mu == remaining && mu < s.mu_min;
             match trial {
                 Ok((mut report, error, (its, factors))) => {
                     iterations += its;

@@ -368,3 +368,48 @@ fn a_solver_that_stalls_above_the_floor_ends_the_step_at_once() {
     assert_eq!(step.unwrap(), mu / 16.0);
     assert_eq!(calls, 5);
 }
+
+/// Evaluations of `counted_f` (a step that never ended showed as a count without end).
+static EVALUATIONS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+fn counted_f(t: f64, x: &[f64], out: &mut [f64]) {
+    let n = EVALUATIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    assert!(
+        n < 10_000,
+        "the field was evaluated {n} times for a few steps"
+    );
+    f(t, x, out);
+}
+
+#[test]
+fn a_step_at_the_floor_lengthened_to_land_was_tried_again_forever() {
+    // With a tolerance no step meets, steps fall to `mu_min`; a floor step that landing
+    // lengthened to what was left (1.3 mu_min, instead of leaving a sliver of 0.3) was neither
+    // the floor nor below it, so it was rejected and the same trial came back: `moreau run
+    // --tol 1e-300` hung at the first frame, deaf to SIGTERM (checked between steps).
+    let mut settings = AdaptiveSettings::new(1e-300);
+    settings.estimate = ErrorEstimate::VelocityChange;
+    settings.mu_first = settings.mu_min;
+    let t_end = 2.3 * settings.mu_min;
+    let field: ExampleField = FnField::new(1, counted_f as fn(f64, &[f64], &mut [f64]));
+    let (_, mut set, mut scheme) = scheme();
+    let mut c = StepController::new(settings).unwrap();
+    let (mut t, mut x, mut mus) = (0.0, [X0], Vec::new());
+    while t < t_end {
+        let step = c
+            .step(&mut scheme, &field, &mut set, mus.len(), t, &mut x, t_end)
+            .unwrap();
+        // (The first step has no earlier velocity to compare with: no error.)
+        assert!(
+            mus.is_empty() || step.error > settings.tol,
+            "{}",
+            step.error
+        );
+        t = step.report.t;
+        mus.push(step.report.mu);
+    }
+    assert_eq!(t, t_end);
+    assert_eq!(mus.len(), 2, "{mus:?}");
+    assert_eq!(mus[0], settings.mu_min);
+    assert!((mus[1] - 1.3 * settings.mu_min).abs() < 1e-18, "{mus:?}");
+}
