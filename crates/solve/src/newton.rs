@@ -624,6 +624,11 @@ impl ProjectionSolver for Newton {
 
         let (mut factorizations, mut solves) = (0, 0);
         let mut exact = false;
+        // A multiplier update since the last Newton direction: the next pass takes a direction
+        // first. Updates alone never move `v`, so where the gap's target is met and only the
+        // violation is not (a target gap of 1e598 from `time.tol = 1e300`), every pass was an
+        // update, counted by no budget, and the solve never ended.
+        let mut after_update = false;
         let mut out_of_budget = false;
         let status = loop {
             let (gap, violation) = self.evaluate(p);
@@ -656,7 +661,7 @@ impl ProjectionSolver for Newton {
                     .workers()
                     .map(&mut self.d, |i, _| if y[i] > 0.0 { rho[i] } else { 0.0 });
             }
-            if exact || 0.5 * g_sq <= 0.1 * target.gap {
+            if !after_update && (exact || 0.5 * g_sq <= 0.1 * target.gap) {
                 // The inner problem is solved: when its Newton matrix is the factorized one,
                 // conjugate gradients on the dual of its active set first (each iteration
                 // one pair of triangular solves), then the multiplier update.
@@ -669,6 +674,7 @@ impl ProjectionSolver for Newton {
                 let active = self.yhat.iter().filter(|&&y| y > 0.0).count();
                 self.update_multipliers(target, active);
                 exact = false;
+                after_update = true;
                 continue;
             }
             // The rows whose weight is not the factor's, and whether a factor is in hand (a
@@ -718,6 +724,7 @@ impl ProjectionSolver for Newton {
             self.normal.workers().map(&mut self.dir, |c, _| -g[c]);
             self.normal.solve_in_place(&mut self.dir);
             solves += 1;
+            after_update = false;
             if self.dir.iter().any(|x| !x.is_finite()) {
                 break SolveStatus::NumericalError;
             }
@@ -793,6 +800,45 @@ mod tests {
         assert!((sol.lambda[0] - 2.0).abs() < 1e-9, "{sol:?}");
         assert_eq!(rep.active, 1);
         assert!(rep.iterations >= 1);
+    }
+
+    #[test]
+    fn a_target_gap_of_infinity_updated_the_multipliers_forever() {
+        // `time.tol = 1e300` asks a gap of (0.1 tol)² (μ/μ_max)³ = ∞: the inner problem was
+        // always "solved", every pass a multiplier update that moves no velocity, and the
+        // solve (of a round in `auto`) never ended. On a thread, so that the old code fails
+        // here instead of hanging the suite.
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut rows = ConstraintRows::new(2);
+            rows.push(0, 0.0, [(0, 1.0)]);
+            rows.push(0, 0.0, [(0, 1.0), (1, 1.0)]);
+            let p = ProjectionProblem {
+                w: &[-1.0, 2.0],
+                jacobian: &rows,
+                b: &[-1.0, -4.0],
+            };
+            let target = Target {
+                gap: f64::INFINITY,
+                violation: 1e-9,
+            };
+            let mut sol = ProjectionSolution::default();
+            let rep = Newton::new(NewtonSettings::default())
+                .unwrap()
+                .solve(&p, target, &mut sol)
+                .unwrap();
+            let _ = tx.send((rep, sol));
+        });
+        let (rep, sol) = rx
+            .recv_timeout(std::time::Duration::from_secs(20))
+            .expect("the solve ended");
+        assert_eq!(rep.status, SolveStatus::Converged, "{rep:?}");
+        assert!(rep.violation <= 1e-9, "{rep:?}");
+        // Feasible: v0 ≥ 1 and v0 + v1 ≥ 4.
+        assert!(
+            sol.v[0] >= 1.0 - 1e-9 && sol.v[0] + sol.v[1] >= 4.0 - 1e-9,
+            "{sol:?}"
+        );
     }
 
     #[test]
