@@ -5,6 +5,7 @@ plot_run.py explains a file it cannot plot. Each test is named after what broke.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -212,6 +213,17 @@ def test_the_examples_printed_a_step_of_1e300_with_three_hundred_digits(tmp_path
     # Ordinary steps keep their six decimals.
     proc = moreau("example81", timeout=120)
     assert re.search(r"^\s+0\.\d{6}\s", proc.stdout, re.M), proc.stdout
+
+
+def test_run_with_tol_1e300_never_ended(tmp_path):
+    """Regression: `--tol 1e300` asks a projection gap of (0.1 tol)² (μ/μ_max)³ = ∞, and the
+    semismooth Newton method that answers `auto`'s rounds updated its multipliers forever
+    (no velocity moved, no budget counted). Now the run ends, feasible within the scene's
+    `max_violation`."""
+    proc = moreau("run", ROOM, "--tol", "1e300", "-q", "--summary-json", "-", timeout=300)
+    summary = json.loads(proc.stdout)
+    assert summary["status"] == "complete", summary
+    assert summary["max_violation"] <= 1e-6, summary
 
 
 def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
