@@ -285,6 +285,13 @@ def test_velocities_report_and_contacts_of_the_last_step(tmp_path):
                            "solver", "status", "active", "timings"}
     assert report == {**sim.last_report, "timings": report["timings"]}
     assert report["eps"] <= report["eps_target"] and report["mu"] == pytest.approx(0.05)
+    # Fixed steps have no error estimate; adaptive ones give theirs (below tol but at μ_min).
+    assert report["local_error"] is None
+    d = scene.to_dict()
+    d["time"]["tol"] = 0.01
+    adaptive = moreau.Simulation(moreau.Scene.from_dict(d))
+    adaptive.advance_to(1.0)
+    assert 0.0 <= adaptive.last_report["local_error"] <= 0.01, adaptive.last_report
     assert np.array_equal(sim.velocities, (sim.positions - before) / report["mu"])
 
     # contacts() against the driver's /contacts of the same frame.

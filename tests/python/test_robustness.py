@@ -226,6 +226,22 @@ def test_run_with_tol_1e300_never_ended(tmp_path):
     assert summary["max_violation"] <= 1e-6, summary
 
 
+def test_a_tol_no_step_meets_ran_for_hours_at_the_smallest_step_without_a_word(tmp_path):
+    """`--tol 1e-12` keeps a run at the controller's smallest step (1e-6 s) from the first
+    contact on: `room-60` for 15 s would take ~15 minutes, silently. The run now says so once,
+    with the step, its error and the tolerance, and goes on; a tolerance that steps meet says
+    nothing."""
+    scene = tmp_path / "short.toml"
+    text = (ROOT / "data" / "scenes" / "room-60.toml").read_text()
+    scene.write_text(re.sub(r"(?m)^horizon = .*$", "horizon = 0.06", text))
+    proc = moreau("run", scene, "--tol", "1e-12", "-q", timeout=120)
+    warnings = [line for line in proc.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 1, proc.stderr
+    for needle in ("the smallest step, 1e-6 s", "time.tol = 1e-12 m"):
+        assert needle in warnings[0], warnings[0]
+    assert "warning" not in moreau("run", scene, "--tol", "1e-3", "-q").stderr
+
+
 def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
     """Regression: `converge --samples 0` and `--eps-kappa -1` ran the reference run (minutes
     on a large scene) before refusing, `--h-min 0` failed after it on "step 0 does not

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use moreau_core::Num;
 use moreau_crowd::{Scene, SimState, Simulation};
 use moreau_integrate::ErrorEstimate;
 use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
@@ -324,10 +325,31 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
+    let tol = sim.scene().time.tol;
+    let mut warned = false;
     let mut progress = |report: &moreau_core::StepReport, stats: &moreau_core::RunStats, left| {
         // SIGINT or SIGTERM: stop after this step (the file is finished as interrupted).
         if let Some(signal) = signals.caught() {
             return Err(Box::new(signal) as moreau_crowd::ObserverError);
+        }
+        // A step accepted above the tolerance is one at the smallest step: a tolerance this
+        // small keeps the run at that step (hours for a long horizon). Said once, not fatal.
+        if let (Some(tol), Some(error)) = (tol, report.local_error)
+            && error > tol
+            && !warned
+        {
+            warned = true;
+            bar.suspend(|| {
+                eprintln!(
+                    "moreau: warning: at t = {} s the smallest step, {} s, erred by {} m, more \
+                     than time.tol = {} m: the run goes on at that step where the tolerance \
+                     cannot be met (a larger tol runs faster)",
+                    Num(report.t),
+                    Num(report.mu),
+                    Num(error),
+                    Num(tol)
+                )
+            });
         }
         if !bar.is_hidden() {
             bar.set_position((report.t * 1e3).round() as u64);
@@ -391,7 +413,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     if let Some(signal) = interrupted {
         eprintln!(
             "moreau: {signal} at simulated time {} s{}",
-            moreau_core::Num(sim.time()),
+            Num(sim.time()),
             output.map_or(String::new(), |p| format!(
                 "; '{}' holds the run so far (status interrupted)",
                 p.display()
@@ -408,7 +430,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
             eprintln!(
                 "moreau: error: {} (simulated time reached: {} s)",
                 crate::error_text(&e),
-                moreau_core::Num(sim.time())
+                Num(sim.time())
             );
             Ok(ExitCode::from(1))
         }

@@ -100,6 +100,9 @@ pub struct StepReport {
     pub redone: usize,
     /// Trial steps rejected before this one was accepted (adaptive steps).
     pub rejected: usize,
+    /// The adaptive controller's estimate of this step's local error (the state's unit);
+    /// `None` for fixed steps. Above the tolerance only for a step at the smallest size.
+    pub local_error: Option<f64>,
     /// How the projection solve ended.
     pub status: SolveStatus,
     /// Which solver produced the accepted answer.

@@ -306,6 +306,7 @@ impl StepController {
                         report.iterations = iterations;
                         report.factorizations = factorizations;
                         report.redone = redone;
+                        report.local_error = Some(error);
                         report.mu = mu;
                         if mu == remaining {
                             report.t = t_end;

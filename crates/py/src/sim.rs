@@ -163,6 +163,7 @@ fn report_dict<'py>(py: Python<'py>, r: &StepReport) -> PyResult<Bound<'py, PyDi
     d.set_item("active", r.active)?;
     d.set_item("redone", r.redone)?;
     d.set_item("rejected", r.rejected)?;
+    d.set_item("local_error", r.local_error)?;
     d.set_item("solver", r.solver)?;
     d.set_item("status", r.status.as_str())?;
     let t = PyDict::new(py);
