@@ -54,8 +54,10 @@ def one_call(rng, sim, states, other_state):
         sim.step()
     elif what == 3:
         now = sim.time
+        # 1e300 and 1e308 asked ~10³⁰¹ steps of one call, which ran until killed (refused
+        # now, as a horizon that far is).
         t = rng.choice([now + rng.uniform(0, 0.6), now, now - 0.1, math.nan, math.inf, -1.0,
-                        -1e300])
+                        -1e300, 1e300, 1e308])
         sim.advance_to(t)
     elif what == 4:
         sim.set_speed_factor(hostile(rng))

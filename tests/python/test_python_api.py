@@ -572,3 +572,12 @@ def test_an_error_in_the_progress_callback_stops_the_run_and_keeps_the_file(tmp_
     with h5py.File(out) as f:
         assert f.attrs["status"].startswith("failed: stopped from Python")
         assert 0 < f["frames/time"][-1] <= t and f["steps"].shape[0] == steps
+
+
+def test_advance_to_1e300_ran_until_killed():
+    """Regression: `advance_to(1e300)` took 2·10³⁰¹ steps of 0.05 s, one after the other.
+    Refused now, naming t_end, like a horizon beyond 10⁹ steps."""
+    sim = moreau.Simulation(moreau.Scene.from_file(ROOM60))
+    with pytest.raises(Exception, match=r"t_end = 1e300.*2\.000e301 steps.*limit of 1e9"):
+        sim.advance_to(1e300)
+    assert sim.time == 0.0 and sim.steps == 0

@@ -858,6 +858,16 @@ impl Simulation {
         t_end: f64,
         observer: &mut O,
     ) -> Result<(), CrowdError> {
+        self.check_t_end(t_end)?;
+        while self.advance_step(t_end, observer)?.is_some() {}
+        Ok(())
+    }
+
+    /// Whether [`advance_to`](Self::advance_to)`(t_end)` may be asked: `t_end` finite, not
+    /// before the current time, and at most [`limits::MAX_STEPS`](crate::limits::MAX_STEPS)
+    /// of the longest steps away (the bound a scene's horizon has; `t_end = 1e300` asked
+    /// ~10³⁰¹ steps of a call, which ran until killed).
+    pub fn check_t_end(&self, t_end: f64) -> Result<(), CrowdError> {
         if !(t_end.is_finite() && t_end >= self.t) {
             return Err(CrowdError::invalid(
                 "t_end",
@@ -865,7 +875,21 @@ impl Simulation {
                 format!("must be finite and ≥ the current time {}", Num(self.t)),
             ));
         }
-        while self.advance_step(t_end, observer)?.is_some() {}
+        let largest = self.stepping.largest_step();
+        let steps = (t_end - self.t) / largest;
+        if !(steps <= crate::limits::MAX_STEPS) {
+            return Err(CrowdError::invalid(
+                "t_end",
+                Num(t_end),
+                format!(
+                    "from the current time {} it takes {steps:.3e} steps of at most {} s, more \
+                     than the limit of {:e} steps a call",
+                    Num(self.t),
+                    Num(largest),
+                    crate::limits::MAX_STEPS
+                ),
+            ));
+        }
         Ok(())
     }
 

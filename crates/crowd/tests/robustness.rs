@@ -169,6 +169,23 @@ fn a_step_of_1e300_ended_the_run_at_t_0_as_complete() {
 }
 
 #[test]
+fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
+    let text = room(&[]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let msg = sim.advance_to(1e300, &mut ()).unwrap_err().to_string();
+    assert_mentions(
+        &msg,
+        &["t_end", "1e300", "2.000e301 steps of at most 0.05 s", "1e9"],
+    );
+    assert!(msg.len() < 300, "{msg}");
+    assert_eq!((sim.time(), sim.steps()), (0.0, 0), "nothing was stepped");
+    // Up to the limit is fine: past the horizon too (co-simulation hosts go on).
+    sim.check_t_end(1e9 * 0.05).unwrap();
+    sim.advance_to(20.0, &mut ()).unwrap();
+    assert_eq!(sim.time(), 20.0);
+}
+
+#[test]
 fn a_thousand_threads_were_accepted_and_never_finished() {
     let msg = refused(&room(&[(
         "grid_cell = 0.1",

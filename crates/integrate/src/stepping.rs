@@ -74,6 +74,14 @@ impl Stepping {
         Ok(Self::Adaptive(StepController::new(settings)?))
     }
 
+    /// The longest step it takes: the fixed step, or the adaptive controller's `mu_max`.
+    pub fn largest_step(&self) -> f64 {
+        match self {
+            Stepping::Fixed { step } => *step,
+            Stepping::Adaptive(c) => c.settings().mu_max,
+        }
+    }
+
     /// True once `t` is at `t_stop` (within a billionth of a step).
     pub fn reached(&self, t: f64, t_stop: f64) -> bool {
         let scale = match self {

@@ -256,17 +256,7 @@ impl PySimulation {
     fn advance_to(&self, py: Python<'_>, t: f64) -> PyResult<()> {
         let mut guard = self.lock()?;
         let inner: &mut Inner = &mut guard;
-        let now = inner.sim.time();
-        if !(t.is_finite() && t >= now) {
-            return Err(to_py(
-                py,
-                CrowdError::Invalid {
-                    field: "t_end".into(),
-                    value: Num(t).to_string(),
-                    reason: format!("must be finite and ≥ the current time {}", Num(now)),
-                },
-            ));
-        }
+        inner.sim.check_t_end(t).map_err(|e| to_py(py, e))?;
         py.detach(|| inner.advance(t)).map_err(stop_err)
     }
 
