@@ -285,7 +285,7 @@ def test_velocities_report_and_contacts_of_the_last_step(tmp_path):
                            "solver", "status", "active", "timings"}
     assert report == {**sim.last_report, "timings": report["timings"]}
     assert report["eps"] <= report["eps_target"] and report["mu"] == pytest.approx(0.05)
-    # Fixed steps have no error estimate; adaptive ones give theirs (below tol but at μ_min).
+    # Fixed steps have no error estimate; adaptive ones give theirs (at most tol above μ_min).
     assert report["local_error"] is None
     d = scene.to_dict()
     d["time"]["tol"] = 0.01

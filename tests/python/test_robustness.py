@@ -215,7 +215,7 @@ def test_the_examples_printed_a_step_of_1e300_with_three_hundred_digits(tmp_path
     assert re.search(r"^\s+0\.\d{6}\s", proc.stdout, re.M), proc.stdout
 
 
-def test_run_with_tol_1e300_never_ended(tmp_path):
+def test_run_with_tol_1e300_never_ended():
     """Regression: `--tol 1e300` asks a projection gap of (0.1 tol)² (μ/μ_max)³ = ∞, and the
     semismooth Newton method that answers `auto`'s rounds updated its multipliers forever
     (no velocity moved, no budget counted). Now the run ends, feasible within the scene's
