@@ -30,8 +30,9 @@ class Timings(TypedDict):
 class StepReport(TypedDict):
     """One step: ``t`` at its end, ``mu`` its size (s), the certified ``eps`` and its target
     ``eps_target`` (m²), ``violation`` (m), solver ``iterations``, constraints ``assembled``
-    and ``active``, ``redone``/``rejected`` trials, the ``solver`` that answered, ``status``,
-    ``timings`` (s)."""
+    and ``active``, ``redone``/``rejected`` trials, ``local_error`` (m: the adaptive step's error
+    estimate, ``None`` for fixed steps), the ``solver`` that answered, ``status``, ``timings``
+    (s)."""
 
     step: int
     t: float
@@ -44,6 +45,7 @@ class StepReport(TypedDict):
     active: int
     redone: int
     rejected: int
+    local_error: float | None
     solver: str
     status: str
     timings: Timings
@@ -92,7 +94,9 @@ class Simulation:
     def step(self) -> StepReport:
         """One step of the scene's stepping, as ``advance_to`` and ``moreau run`` take it."""
     def advance_to(self, t: float) -> None:
-        """Steps to time ``t`` (s), the last step shortened to land on it (GIL released)."""
+        """Steps to time ``t`` (s), the last step shortened to land on it (GIL released).
+        Raises ``SceneError`` for a ``t`` before the current time, not finite, or more than
+        10⁹ of the scene's longest steps away."""
     def run(self) -> None:
         """``advance_to(scene.horizon)``."""
     @property
