@@ -41,7 +41,8 @@ pub enum CrowdError {
     /// speed factor or desired speed far beyond walking shows here (10⁶ × 1.3 m/s stops at
     /// the rounding floor).
     #[error(
-        "{error}; the step's desired velocities reach {fastest:e} m/s (speed factor {})",
+        "{error}; the step's desired velocities reach {} m/s (speed factor {})",
+        moreau_core::Num(*fastest),
         moreau_core::Num(*speed_factor)
     )]
     NotCertified {

@@ -5,7 +5,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use moreau_core::Num;
-use moreau_integrate::{AdaptiveSettings, ErrorEstimate, Stepping};
+use moreau_integrate::{AdaptiveSettings, EpsPolicy, ErrorEstimate, Stepping};
 pub use moreau_solve::SolverKind;
 
 use crate::error::CrowdError;
@@ -690,6 +690,46 @@ impl Scene {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(CrowdError::invalid(f, Num(v), "must be finite and > 0"));
             }
+        }
+        // The certified accuracy of the shortest step must be a number: an `ε` below the
+        // smallest normal double is rounded away (to 0), which no projection certifies (a
+        // horizon of 1e-300 s failed its first step as "not certified, ε = 0e0 for target
+        // 0e0").
+        let stepping = t.stepping(s.kind)?;
+        let policy = match &stepping {
+            Stepping::Fixed { .. } => EpsPolicy::new(s.eps_kappa, 3.0).map_err(|e| {
+                CrowdError::invalid("solver.eps_kappa", Num(s.eps_kappa), e.to_string())
+            })?,
+            Stepping::Adaptive(c) => c.settings().eps_policy(),
+        };
+        let (shortest, field) = [
+            (t.step, "time.step"),
+            (t.output_interval, "time.output_interval"),
+            (t.horizon, "time.horizon"),
+        ]
+        .into_iter()
+        .fold((f64::INFINITY, ""), |a, b| if b.0 < a.0 { b } else { a });
+        let eps = policy.eps(shortest);
+        if !(eps >= f64::MIN_POSITIVE) {
+            return Err(CrowdError::invalid(
+                field,
+                Num(shortest),
+                format!(
+                    "a step of {} s would be certified to ε = {}, below the smallest normal \
+                     double ({:e}): no step may be shorter than {:.3e} s here{}",
+                    Num(shortest),
+                    Num(eps),
+                    f64::MIN_POSITIVE,
+                    policy.shortest_certifiable(),
+                    match stepping {
+                        Stepping::Fixed { .. } => format!(
+                            " (ε = solver.eps_kappa·μ³, solver.eps_kappa = {})",
+                            Num(s.eps_kappa)
+                        ),
+                        Stepping::Adaptive(_) => String::new(),
+                    }
+                ),
+            ));
         }
         if s.threads > 1024 {
             return Err(CrowdError::invalid(

@@ -1,9 +1,12 @@
 //! A fuzzer of scene files (proptest): mutated scenes go through the parser, validation,
 //! `Simulation::new` and five steps, which must answer every one with a value or an error,
-//! never a panic or an abort, and quickly. The seeds are `tests/fuzz-corpus/*.toml` (valid scenes and every
-//! input that once crashed); the mutations set numbers to extremes (0, −1, NaN, ±∞, 1e±308,
-//! 5e-324, …), drop and retype keys, move polygon vertices, and cut or splice the text.
-//! Failing cases are kept in `fuzz_scenes.proptest-regressions` (replayed first).
+//! never a panic or an abort, and quickly: each case has a minute on a thread of its own, so
+//! a run that never ends fails the test with its scene. The seeds are
+//! `tests/fuzz-corpus/*.toml` (valid scenes and every input that once crashed); the mutations
+//! set numbers to extremes (0, −1, NaN, ±∞, 1e±308, 5e-324, …), drop and retype keys, choose
+//! the solver, the broad phase and the desired velocity, move polygon vertices, and cut or
+//! splice the text. Failing cases are kept in `fuzz_scenes.proptest-regressions` (replayed
+//! first).
 //!
 //! CI runs it for `MOREAU_FUZZ_SECONDS` (default 30 s); the README's testing section gives the
 //! 10-minute command. Sizes are capped (≤ 3,000 people, grids within the library's limit) so
@@ -52,7 +55,28 @@ enum Mutation {
     Vertex(usize, usize, f64, f64),
     /// Drops vertex `k` of polygon `which`.
     DropVertex(usize, usize),
+    /// Sets the word at path `which` (of [`WORDS`]) to its choice `k`.
+    Word(usize, usize),
 }
+
+/// The keys that take a word, and the words each takes (every solver, so that the solvers'
+/// stops are reached from hostile tolerances and steps too; until session 37 every mutated
+/// scene ran the corpus' `auto`).
+const WORDS: &[(&str, &[&str])] = &[
+    (
+        "solver.kind",
+        &[
+            "auto",
+            "interior",
+            "newton",
+            "gauss-seidel",
+            "apgd",
+            "clarabel",
+        ],
+    ),
+    ("solver.broad_phase", &["auto", "grid", "bvh"]),
+    ("model.desired_velocity", &["classic", "lipschitz"]),
+];
 
 const PATHS: &[&str] = &[
     "time.horizon",
@@ -114,6 +138,7 @@ fn mutation() -> impl Strategy<Value = Mutation> {
         3 => (poly.clone(), 0..16usize, extreme(), extreme())
             .prop_map(|(p, k, x, y)| Mutation::Vertex(p, k, x, y)),
         1 => (poly, 0..16usize).prop_map(|(p, k)| Mutation::DropVertex(p, k)),
+        2 => (0..WORDS.len(), 0..6usize).prop_map(|(p, k)| Mutation::Word(p, k)),
     ]
 }
 
@@ -180,6 +205,19 @@ fn apply(root: &mut Value, m: &Mutation) {
             {
                 let k = k % v.len();
                 v[k] = Value::Array(vec![Value::Float(x), Value::Float(y)]);
+            }
+        }
+        Mutation::Word(p, k) => {
+            let (path, words) = WORDS[p];
+            let (table, key) = path.rsplit_once('.').unwrap();
+            // A scene without the table (no `[model]`, say) is given one.
+            if let Value::Table(t) = root
+                && !t.contains_key(table)
+            {
+                t.insert(table.into(), Value::Table(toml::map::Map::new()));
+            }
+            if let Some(Value::Table(t)) = at(root, table) {
+                t.insert(key.into(), Value::String(words[k % words.len()].into()));
             }
         }
         Mutation::DropVertex(p, k) => {
@@ -249,6 +287,36 @@ fn check(text: &str) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// How long one case may take before it counts as a hang: an accepted scene builds in well
+/// under a second and takes five steps (session 36 found runs that never ended: a step
+/// retried forever at the smallest step, multiplier updates forever at a target gap of ∞).
+const BUDGET: Duration = Duration::from_secs(60);
+
+/// The first scene that took longer than [`BUDGET`]: once one has, every case passes at once
+/// (shrinking would leave a spinning thread per try) and the run fails with it.
+static HUNG: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
+
+/// [`check`] on a thread of its own, given [`BUDGET`]: a panic is a failure, as is a case
+/// that does not end (its thread is left running).
+fn check_in_time(text: &str) -> Result<(), TestCaseError> {
+    if HUNG.lock().unwrap().is_some() {
+        return Ok(());
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = text.to_string();
+    std::thread::spawn(move || {
+        let _ = tx.send(std::panic::catch_unwind(|| check(&owned)));
+    });
+    match rx.recv_timeout(BUDGET) {
+        Ok(Ok(outcome)) => outcome,
+        Ok(Err(_)) => Err(TestCaseError::fail("panicked")),
+        Err(_) => {
+            *HUNG.lock().unwrap() = Some(text.to_string());
+            Err(TestCaseError::fail(format!("took more than {BUDGET:?}")))
+        }
+    }
+}
+
 /// The runner of batch `batch`: 64 cases from a random stream of its own (a runner counts
 /// the cases it passed and runs none once it has its 64, so every batch needs a new one;
 /// seeded by the batch number, a run is reproducible).
@@ -273,12 +341,8 @@ fn runner(batch: u64) -> TestRunner {
 #[test]
 fn the_corpus_gives_values_or_errors() {
     for (name, text) in corpus() {
-        let outcome = std::panic::catch_unwind(|| check(&text));
-        assert!(
-            matches!(outcome, Ok(Ok(()))),
-            "{name}: {:?}",
-            outcome.map_err(|_| "panicked")
-        );
+        let outcome = check_in_time(&text);
+        assert!(outcome.is_ok(), "{name}: {outcome:?}");
     }
 }
 
@@ -321,8 +385,11 @@ fn mutated_scenes_give_values_or_errors_never_panics() {
                 text.truncate(cut);
                 text.push(char::from(byte));
             }
-            check(&text)
+            check_in_time(&text)
         });
+        if let Some(text) = HUNG.lock().unwrap().take() {
+            panic!("a scene took more than {BUDGET:?} (a hang?):\n{text}");
+        }
         if let Err(e) = outcome {
             panic!("{e}");
         }

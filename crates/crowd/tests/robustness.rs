@@ -169,6 +169,43 @@ fn a_step_of_1e300_ended_the_run_at_t_0_as_complete() {
 }
 
 #[test]
+fn a_horizon_of_1e_minus_300_failed_its_first_step_as_not_certified() {
+    // Its one step was certified to ε = κ μ³ = 0: "projection not certified (NumericalError):
+    // ε = 0e0 for target 0e0". Now refused by name, with the shortest step the scene's ε allows
+    // ((2.2·10⁻³⁰⁸ / 10⁻³)^⅓ = 2.813·10⁻¹⁰² s for room-60's eps_kappa = 10⁻³).
+    let msg = refused(&room(&[("horizon = 15.0", "horizon = 1e-300")]));
+    assert_mentions(
+        &msg,
+        &[
+            "time.horizon",
+            "1e-300",
+            "2.813e-102 s",
+            "solver.eps_kappa = 0.001",
+        ],
+    );
+    assert!(msg.len() < 400, "{msg}");
+    let msg = refused(&room(&[
+        ("horizon = 15.0", "horizon = 1e-195"),
+        ("step = 0.05", "step = 1e-200"),
+    ]));
+    assert_mentions(&msg, &["time.step", "1e-200", "2.813e-102 s"]);
+    // Adaptive steps: their ε has a floor (2·10⁻⁷ μ²), so they go lower, but not to 10⁻¹⁶⁰.
+    let msg = refused(&room(&[
+        ("horizon = 15.0", "horizon = 1e-160"),
+        ("output_interval = 0.1", "output_interval = 0.1\ntol = 0.01"),
+    ]));
+    assert_mentions(&msg, &["time.horizon", "1e-160", "3.335e-151 s"]);
+    // Short steps above the bound run (the people are not in contact within them).
+    for horizon in ["1e-12", "1e-90"] {
+        let text = room(&[("horizon = 15.0", &format!("horizon = {horizon}"))]);
+        let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+        let end = sim.scene().time.horizon;
+        sim.advance_to(end, &mut ()).unwrap();
+        assert_eq!((sim.time(), sim.steps()), (end, 1));
+    }
+}
+
+#[test]
 fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
     let text = room(&[]);
     let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();

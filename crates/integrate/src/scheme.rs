@@ -89,6 +89,24 @@ impl EpsPolicy {
         (self.kappa * mu.powf(self.power)).max(self.floor * mu * mu)
     }
 
+    /// The shortest step whose `ε` is a normal double (`≥ f64::MIN_POSITIVE`): below it `ε`
+    /// is rounded away, and no projection can be certified to it. (With `κ = ∞`, as a
+    /// tolerance of 10³⁰⁰ gives, `κ μ^p` is NaN once `μ^p` underflows: only the floor counts
+    /// below that.)
+    pub fn shortest_certifiable(&self) -> f64 {
+        let m = f64::MIN_POSITIVE;
+        let by_kappa = if self.kappa.is_finite() {
+            (m / self.kappa).powf(1.0 / self.power)
+        } else {
+            m.powf(1.0 / self.power)
+        };
+        if self.floor > 0.0 {
+            by_kappa.min((m / self.floor).sqrt())
+        } else {
+            by_kappa
+        }
+    }
+
     /// Whether `ε` is the floor's at step `mu` (then, and at every smaller step, `ε/μ²` is the
     /// floor: a smaller step asks the same relative accuracy).
     pub fn at_floor(&self, mu: f64) -> bool {
@@ -309,5 +327,42 @@ impl<C: Correction> Scheme<C> {
             observe(&report, q);
         }
         Ok(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::EpsPolicy;
+
+    /// `ε(shortest_certifiable)` is a normal double and `ε` a little below is not, for a fixed
+    /// `κ μ³`, an adaptive policy's floor, and the `κ = ∞` of a tolerance of 10³⁰⁰.
+    #[test]
+    fn the_shortest_certifiable_step_is_where_eps_leaves_the_normal_doubles() {
+        let m = f64::MIN_POSITIVE;
+        let normal = |x: f64| x >= m;
+        for policy in [
+            EpsPolicy::new(1e-3, 3.0).unwrap(),
+            EpsPolicy::new(1.0, 3.0).unwrap(),
+            EpsPolicy::new(1e6, 4.0).unwrap(),
+            EpsPolicy::tied_to_tolerance(1e-3, 0.5),
+            EpsPolicy::tied_to_tolerance(1e-3, 1e-120),
+        ] {
+            let s = policy.shortest_certifiable();
+            assert!(s > 0.0 && s.is_finite(), "{policy:?}: {s}");
+            assert!(normal(policy.eps(s * (1.0 + 1e-6))), "{policy:?}: {s}");
+            assert!(!normal(policy.eps(s * 0.999)), "{policy:?}: {s}");
+        }
+        // (m / 10⁻³)^⅓: the crowd's default room.
+        let s = EpsPolicy::new(1e-3, 3.0).unwrap().shortest_certifiable();
+        assert!((s / 2.8126e-102 - 1.0).abs() < 1e-4, "{s}");
+        // κ = ∞ (budget² overflowed): κ μ³ is NaN once μ³ underflows, so only the floor's
+        // 2·10⁻⁷ μ² counts below (m)^⅓.
+        let huge = EpsPolicy::tied_to_tolerance(1e300, 0.5);
+        let s = huge.shortest_certifiable();
+        assert!(
+            (s / (m / EpsPolicy::ADAPTIVE_FLOOR).sqrt() - 1.0).abs() < 1e-12,
+            "{s}"
+        );
+        assert!(!normal(huge.eps(s * 0.999)), "{s}");
     }
 }
