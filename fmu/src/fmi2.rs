@@ -8,8 +8,8 @@ use std::sync::LazyLock;
 
 use crate::FmuError;
 use crate::glue::{
-    Component, ERROR, OK, Status, c_text, deserialize_state, free_state, get_scalars, get_state,
-    get_strings, serialize_state, set_scalars, set_state, set_strings, state_size, text,
+    Component, ERROR, OK, Status, WARNING, c_text, deserialize_state, free_state, get_scalars,
+    get_state, get_strings, serialize_state, set_scalars, set_state, set_strings, state_size, text,
     values_mut, with,
 };
 use crate::runtime::{Instance, Level, State};
@@ -100,6 +100,7 @@ pub unsafe extern "C" fn fmi2Instantiate(
             if let Some(logger) = logger {
                 let (status, category) = match level {
                     Level::Info => (OK, c"logAll"),
+                    Level::Warning => (WARNING, c"logStatusWarning"),
                     Level::Error => (ERROR, c"logStatusError"),
                 };
                 let message = c_text(message);

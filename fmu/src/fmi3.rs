@@ -44,6 +44,7 @@ fn instantiate(
             if let Some(log_message) = log_message {
                 let (status, category) = match level {
                     Level::Info => (0, c"logAll"),
+                    Level::Warning => (1, c"logStatusWarning"),
                     Level::Error => (3, c"logStatusError"),
                 };
                 let message = c_text(message);

@@ -16,6 +16,8 @@ use crate::snapshot::Snapshot;
 pub type Status = c_int;
 /// OK.
 pub const OK: Status = 0;
+/// Warning.
+pub const WARNING: Status = 1;
 /// Error.
 pub const ERROR: Status = 3;
 /// Fatal.

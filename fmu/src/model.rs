@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use moreau_core::{Num, StepReport};
-use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation};
+use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation, Time};
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
@@ -402,6 +402,10 @@ pub struct CrowdModel {
     targets: Vec<f64>,
     before: Vec<f64>,
     after: Vec<f64>,
+    /// Whether the instance was told that a step missed `time.tol` (said once).
+    warned: bool,
+    /// What to log after this communication step, if anything.
+    warning: Option<String>,
 }
 
 /// Everything a [`CrowdModel`] answers from besides its scene: the simulation's state and the
@@ -425,12 +429,20 @@ pub struct ModelState {
 /// small scene); a longer one is refused before it starts.
 pub const MAX_INTERNAL_STEPS: f64 = 1e6;
 
-/// Keeps the certified ε of the last step.
-struct LastEps<'a>(&'a mut f64);
+/// Keeps the certified ε of the last step, and the first step's word of an adaptive step
+/// accepted above `time.tol` ([`moreau_crowd::Time::unmet_tolerance`]).
+struct StepWatch<'a> {
+    eps: &'a mut f64,
+    time: Time,
+    unmet: Option<String>,
+}
 
-impl Observer for LastEps<'_> {
+impl Observer for StepWatch<'_> {
     fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
-        *self.0 = report.eps;
+        *self.eps = report.eps;
+        if self.unmet.is_none() {
+            self.unmet = self.time.unmet_tolerance(report);
+        }
         Ok(())
     }
 }
@@ -507,6 +519,8 @@ impl CrowdModel {
             targets,
             before: Vec::new(),
             after: Vec::new(),
+            warned: false,
+            warning: None,
         };
         model.apply(settings)?;
         Ok(model)
@@ -683,7 +697,16 @@ impl CrowdModel {
                 self.sim.drive_moving(b, target, t_end)?;
             }
         }
-        self.sim.advance_to(t_end, &mut LastEps(&mut self.eps))?;
+        let mut watch = StepWatch {
+            eps: &mut self.eps,
+            time,
+            unmet: None,
+        };
+        self.sim.advance_to(t_end, &mut watch)?;
+        if !self.warned && watch.unmet.is_some() {
+            self.warned = true;
+            self.warning = watch.unmet;
+        }
         self.time = t + h;
         // Mean speed of the people present before and after the communication step.
         self.after.resize(2 * self.people, 0.0);
@@ -701,6 +724,12 @@ impl CrowdModel {
             0.0
         };
         Ok(())
+    }
+
+    /// What the last communication step has to tell the host, once: an adaptive step
+    /// accepted above `time.tol` (the run goes on at the smallest step).
+    pub fn take_warning(&mut self) -> Option<String> {
+        self.warning.take()
     }
 
     /// A Real output (the smallest gap is computed once per configuration, at its first read).

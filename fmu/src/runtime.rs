@@ -59,6 +59,8 @@ pub enum State {
 pub enum Level {
     /// Information (only when logging is on).
     Info,
+    /// A warning: the call succeeded, but the host should know (always logged).
+    Warning,
     /// An error (always logged).
     Error,
 }
@@ -112,6 +114,11 @@ impl Instance {
         if self.logging_on {
             (self.log)(Level::Info, message);
         }
+    }
+
+    /// Logs a warning (always).
+    pub fn warning(&self, message: &str) {
+        (self.log)(Level::Warning, message);
     }
 
     /// Logs an error (always).
@@ -519,7 +526,11 @@ impl Instance {
         let settings = self.settings.clone();
         let model = self.model()?;
         model.apply(&settings)?;
-        model.do_step(t, h)
+        model.do_step(t, h)?;
+        if let Some(message) = model.take_warning() {
+            self.warning(&format!("DoStep: {message}"));
+        }
+        Ok(())
     }
 
     /// The model's time (the last communication point reached), if built.

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use moreau_fmu::model::vr;
-use moreau_fmu::runtime::Instance;
+use moreau_fmu::runtime::{Instance, Level};
 
 /// An instance of `data/scenes/room-60.toml`, initialized (state Stepping).
 fn stepping() -> Instance {
@@ -70,4 +70,50 @@ fn the_log_printed_t_with_300_digits() {
     let err = inst.do_step(1e300, 0.1).unwrap_err().to_string();
     assert!(err.contains("currentCommunicationPoint = 1e300"), "{err}");
     assert!(err.len() < 200, "{err}");
+}
+
+#[test]
+fn a_tol_no_step_meets_ran_at_the_smallest_step_without_a_word_to_the_host() {
+    // `time.tol = 1e-12` keeps every step at the controller's smallest (10⁻⁶ s) whatever it
+    // errs: `moreau run` warned once (session 36), the FMU said nothing. Now one warning (status
+    // Warning, category logStatusWarning) on the first communication step that has one, even
+    // with logging off, and none after it.
+    let scenes = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../data/scenes"));
+    let dir = std::env::temp_dir().join(format!("moreau-fmu-tol-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(scenes.join("room-60.toml")).unwrap();
+    let run = |tol: &str| {
+        let scene = dir.join(format!("tol-{tol}.toml"));
+        let edited = text.replace(
+            "output_interval = 0.1",
+            &format!("output_interval = 0.1\ntol = {tol}"),
+        );
+        assert_ne!(edited, text);
+        std::fs::write(&scene, edited).unwrap();
+        let log = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+        let sink = log.clone();
+        let mut inst = Instance::new(
+            "tol".into(),
+            Some(dir.clone()),
+            false,
+            Box::new(move |level, message| sink.borrow_mut().push((level, message.to_string()))),
+        );
+        inst.settings.scene = scene.display().to_string();
+        inst.enter_initialization().unwrap();
+        inst.exit_initialization().unwrap();
+        for k in 0..3 {
+            inst.do_step(k as f64 * 0.002, 0.002).unwrap();
+        }
+        log.take()
+    };
+    let log = run("1e-12");
+    assert_eq!(log.len(), 1, "{log:?}");
+    let (level, message) = &log[0];
+    assert_eq!(*level, Level::Warning);
+    for needle in ["DoStep", "the smallest step, 1e-6 s", "time.tol = 1e-12 m"] {
+        assert!(message.contains(needle), "{needle:?} not in {message}");
+    }
+    // A tolerance the steps meet says nothing.
+    assert_eq!(run("1e-3"), vec![]);
+    std::fs::remove_dir_all(&dir).ok();
 }

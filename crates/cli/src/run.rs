@@ -325,7 +325,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
-    let tol = sim.scene().time.tol;
+    let time = sim.scene().time;
     let mut warned = false;
     let mut progress = |report: &moreau_core::StepReport, stats: &moreau_core::RunStats, left| {
         // SIGINT or SIGTERM: stop after this step (the file is finished as interrupted).
@@ -334,22 +334,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         // A step accepted above the tolerance is one at the smallest step: a tolerance this
         // small keeps the run at that step (hours for a long horizon). Said once, not fatal.
-        if let (Some(tol), Some(error)) = (tol, report.local_error)
-            && error > tol
-            && !warned
-        {
+        if !warned && let Some(message) = time.unmet_tolerance(report) {
             warned = true;
-            bar.suspend(|| {
-                eprintln!(
-                    "moreau: warning: at t = {} s the smallest step, {} s, erred by {} m, more \
-                     than time.tol = {} m: the run goes on at that step where the tolerance \
-                     cannot be met (a larger tol runs faster)",
-                    Num(report.t),
-                    Num(report.mu),
-                    Num(error),
-                    Num(tol)
-                )
-            });
+            bar.suspend(|| eprintln!("moreau: warning: {message}"));
         }
         if !bar.is_hidden() {
             bar.set_position((report.t * 1e3).round() as u64);

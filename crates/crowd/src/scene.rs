@@ -4,7 +4,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use moreau_core::Num;
+use moreau_core::{Num, StepReport};
 use moreau_integrate::{AdaptiveSettings, EpsPolicy, ErrorEstimate, Stepping};
 pub use moreau_solve::SolverKind;
 
@@ -269,6 +269,25 @@ pub struct Time {
 }
 
 impl Time {
+    /// What to tell the user when an adaptive step was accepted above `tol`:
+    /// only a step at the controller's smallest is (whatever its error), so a tolerance this
+    /// small keeps the run at that step, hours for a long horizon. `None` for steps within
+    /// the tolerance and for fixed steps. The CLI prints it once as a warning, the FMU logs
+    /// it once.
+    pub fn unmet_tolerance(&self, report: &StepReport) -> Option<String> {
+        let tol = self.tol?;
+        let error = report.local_error.filter(|&e| e > tol)?;
+        Some(format!(
+            "at t = {} s the smallest step, {} s, erred by {} m, more than time.tol = {} m: \
+             the run goes on at that step where the tolerance cannot be met (a larger tol runs \
+             faster)",
+            Num(report.t),
+            Num(report.mu),
+            Num(error),
+            Num(tol)
+        ))
+    }
+
     /// How the run chooses its steps: fixed steps of `step`, or with `tol` adaptive steps
     /// whose largest is the output interval (frames land on output times), asking `solver`'s
     /// projections no more than it certifies ([`SolverKind::certified_floor`]).
