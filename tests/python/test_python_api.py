@@ -274,6 +274,28 @@ def test_a_nan_speed_factor_raises_and_the_simulation_keeps_working():
     assert np.median(np.linalg.norm(slow.velocities, axis=1)) == pytest.approx(0.5, abs=0.02)
 
 
+def test_a_tol_no_step_meets_ran_at_the_smallest_step_without_a_python_warning():
+    """`time.tol = 1e-12` keeps every step at the smallest (10⁻⁶ s) whatever it errs: `moreau
+    run` warned once, the FMU logged nothing and Python said nothing (only `local_error`
+    showed it). Now one RuntimeWarning a simulation, and none for a tolerance steps meet."""
+    import warnings
+
+    d = moreau.Scene.from_file(ROOT / "data" / "scenes" / "room-60.toml").to_dict()
+    d["time"]["tol"] = 1e-12
+    sim = moreau.Simulation(moreau.Scene.from_dict(d))
+    with pytest.warns(RuntimeWarning, match=r"the smallest step, 1e-6 s.*time\.tol = 1e-12 m") as said:
+        sim.advance_to(0.052)  # a first step of 0.05 s (free flow: no error), then 10⁻⁶ s
+    assert len(said) == 1, [str(w.message) for w in said]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim.advance_to(0.054)
+        sim.step()
+        d["time"]["tol"] = 1e-3
+        met = moreau.Simulation(moreau.Scene.from_dict(d))
+        met.advance_to(0.5)
+        met.step()
+
+
 def test_velocities_report_and_contacts_of_the_last_step(tmp_path):
     scene = short_room(6.0, output={"contacts": True})
     sim = moreau.Simulation(scene)

@@ -44,6 +44,10 @@ struct Inner {
     last: Option<LastStep>,
     recording: bool,
     frames: Vec<RecordedFrame>,
+    /// Whether Python was warned that adaptive steps miss `time.tol` (once a simulation).
+    warned: bool,
+    /// That warning, until it is given (stepping runs without the GIL).
+    warning: Option<String>,
 }
 
 /// The observer of the Python stepping: records frames when asked.
@@ -80,6 +84,12 @@ impl Inner {
             frames: self.recording.then_some(&mut self.frames),
         };
         let report = self.sim.advance_step(t_end, &mut watch)?;
+        if let Some(r) = &report
+            && !self.warned
+        {
+            self.warning = self.sim.scene().time.unmet_tolerance(r);
+            self.warned = self.warning.is_some();
+        }
         if let Some(r) = &report {
             self.last = Some(LastStep {
                 report: r.clone(),
@@ -100,6 +110,21 @@ impl Inner {
             }
         }
         Ok(())
+    }
+
+    /// Gives the pending warning, if any, as a `RuntimeWarning` (as `moreau run` prints it to
+    /// stderr and the FMU logs it): an error if the host turned warnings into errors.
+    fn warn(&mut self, py: Python<'_>) -> PyResult<()> {
+        let Some(message) = self.warning.take() else {
+            return Ok(());
+        };
+        let message = std::ffi::CString::new(message).unwrap_or_default();
+        PyErr::warn(
+            py,
+            &py.get_type::<pyo3::exceptions::PyRuntimeWarning>(),
+            &message,
+            1,
+        )
     }
 
     fn velocities(&self) -> Vec<f64> {
@@ -234,6 +259,8 @@ impl PySimulation {
                 last: None,
                 recording: record,
                 frames: Vec::new(),
+                warned: false,
+                warning: None,
             }),
         })
     }
@@ -248,16 +275,20 @@ impl PySimulation {
             .detach(|| inner.one_step(f64::MAX))
             .map_err(crowd_err)?
             .expect("a step towards the next output time");
+        inner.warn(py)?;
         report_dict(py, &report)
     }
 
     /// Steps to time `t` (s), the last step shortened to land on it, with the GIL released.
-    /// Ctrl-C stops it between two steps (the simulation stays at its last step).
+    /// Ctrl-C stops it between two steps (the simulation stays at its last step). Adaptive
+    /// steps that miss `time.tol` give one `RuntimeWarning` a simulation (here or in `step`).
     fn advance_to(&self, py: Python<'_>, t: f64) -> PyResult<()> {
         let mut guard = self.lock()?;
         let inner: &mut Inner = &mut guard;
         inner.sim.check_t_end(t).map_err(|e| to_py(py, e))?;
-        py.detach(|| inner.advance(t)).map_err(stop_err)
+        let advanced = py.detach(|| inner.advance(t)).map_err(stop_err);
+        inner.warn(py)?;
+        advanced
     }
 
     /// Runs to the scene's horizon (`advance_to(scene.horizon)`).

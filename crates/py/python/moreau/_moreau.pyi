@@ -96,7 +96,9 @@ class Simulation:
     def advance_to(self, t: float) -> None:
         """Steps to time ``t`` (s), the last step shortened to land on it (GIL released).
         Raises ``SceneError`` for a ``t`` before the current time, not finite, or more than
-        10⁹ of the scene's longest steps away."""
+        10⁹ of the scene's longest steps away. Adaptive steps that miss ``time.tol`` (a step at
+        the smallest, 10⁻⁶ s, is accepted whatever its error) give one ``RuntimeWarning`` a
+        simulation, from ``advance_to`` or ``step``."""
     def run(self) -> None:
         """``advance_to(scene.horizon)``."""
     @property
