@@ -242,6 +242,22 @@ def test_a_tol_no_step_meets_ran_for_hours_at_the_smallest_step_without_a_word(t
     assert "warning" not in moreau("run", scene, "--tol", "1e-3", "-q").stderr
 
 
+def test_tradeoff_at_a_tol_no_step_meets_ran_for_hours_without_a_word(tmp_path):
+    """`moreau run` warned that `--tol 1e-12` keeps a run at the smallest step; `moreau
+    tradeoff --tols 1e-12` runs three adaptive runs so, silently, and printed the tolerance as
+    `0.000000000001` (1e-300 with three hundred digits). Now each adaptive run warns once and
+    the tolerance prints as 1e-12, in the log and in tradeoff.md."""
+    out = tmp_path / "tradeoff"
+    proc = moreau("tradeoff", ROOT / "data" / "scenes" / "room-60.toml", "--horizon", "0.06",
+                  "--samples", "1", "--steps", "0.06", "--clarabel-steps", "0.06",
+                  "--tols", "1e-12", "-o", out, timeout=300)
+    warnings = [line for line in proc.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 3, proc.stderr
+    assert all("time.tol = 1e-12 m" in w for w in warnings), warnings
+    assert "0.000000000001" not in proc.stderr + (out / "tradeoff.md").read_text()
+    assert "| 1e-12 |" in (out / "tradeoff.md").read_text()
+
+
 def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
     """Regression: `converge --samples 0` and `--eps-kappa -1` ran the reference run (minutes
     on a large scene) before refusing, `--h-min 0` failed after it on "step 0 does not

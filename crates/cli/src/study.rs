@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Result, ensure};
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation};
+use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation, Time};
 
 use crate::run::{Estimate, adaptive};
 
@@ -49,6 +49,9 @@ struct Samples {
     through: Vec<bool>,
     exits: usize,
     stats: RunStats,
+    /// The run's time settings, for the one warning that adaptive steps miss `time.tol`.
+    time: Time,
+    warned: bool,
 }
 
 /// Whether a study accepts people who leave the scene at an exit.
@@ -63,6 +66,14 @@ pub enum Leaving {
 impl Observer for Samples {
     fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
         self.stats.add(report);
+        // As `moreau run` says it: a tolerance no step meets keeps the run at the smallest
+        // step, for hours on a long horizon.
+        if !self.warned
+            && let Some(message) = self.time.unmet_tolerance(report)
+        {
+            self.warned = true;
+            eprintln!("moreau: warning: {message}");
+        }
         Ok(())
     }
     fn exit(&mut self, record: &ExitRecord) -> Result<(), ObserverError> {
@@ -119,6 +130,8 @@ pub fn sample(scene: &Scene, how: &How, samples: usize, leaving: Leaving) -> Res
         through: vec![false; sim.total_people()],
         exits: 0,
         stats: RunStats::default(),
+        time: sim.scene().time,
+        warned: false,
     };
     let start = Instant::now();
     sim.run(&mut samples_seen)?;

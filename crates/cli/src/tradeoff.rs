@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
+use moreau_core::Num;
 use moreau_crowd::{Scene, SolverKind};
 use serde::Serialize;
 
@@ -164,7 +165,10 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
             Ok(r) => r,
             Err(e) => {
                 let why = format!("{e:#}");
-                eprintln!("  {method:<36} {setting:<6} failed: {why}");
+                eprintln!(
+                    "  {method:<36} {:<6} failed: {why}",
+                    Num(*setting).to_string()
+                );
                 points.push(Point {
                     method: method.clone(),
                     setting: *setting,
@@ -189,8 +193,11 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
             .max()
             .unwrap_or(0);
         eprintln!(
-            "  {method:<36} {setting:<6} e = {error:9.4}  ΔN = {evacuation_error:3}  {:5} steps ({:4} rejected)  {:7.2} s",
-            r.steps, r.rejected, r.wall
+            "  {method:<36} {:<6} e = {error:9.4}  ΔN = {evacuation_error:3}  {:5} steps ({:4} rejected)  {:7.2} s",
+            Num(*setting).to_string(),
+            r.steps,
+            r.rejected,
+            r.wall
         );
         points.push(Point {
             method: method.clone(),
@@ -253,7 +260,7 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
                 md,
                 "| {} | {} | {} | {} | {:.3} | {} | {:.2} |",
                 p.method,
-                p.setting,
+                Num(p.setting),
                 p.steps,
                 p.rejected,
                 p.error.unwrap_or(f64::NAN),
@@ -264,7 +271,7 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
                 md,
                 "| {} | {} | failed: {} | | | | |",
                 p.method,
-                p.setting,
+                Num(p.setting),
                 why.replace('|', "\\|")
             ),
         };
