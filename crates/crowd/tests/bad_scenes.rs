@@ -58,6 +58,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ),
         ("zero-step.toml", &["time.step", "0", "> 0"]),
         (
+            "max-violation-a-radius.toml",
+            &[
+                "solver.max_violation",
+                "0.3",
+                "below the smallest radius, 0.15 m (groups[0].radius)",
+            ],
+        ),
+        (
             "too-many-threads.toml",
             &["solver.threads", "100000", "at most 1024"],
         ),

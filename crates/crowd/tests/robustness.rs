@@ -206,6 +206,26 @@ fn a_horizon_of_1e_minus_300_failed_its_first_step_as_not_certified() {
 }
 
 #[test]
+fn a_max_violation_of_1e300_let_people_overlap_by_0_4_m_as_certified() {
+    // Every step was "within the bound": the bound is a tolerance on overlaps, and one as large
+    // as a radius is none. Refused now, naming the radius it must stay below.
+    for bound in ["1e300", "0.2"] {
+        let msg = refused(&room(&[(
+            "max_violation = 1e-6",
+            &format!("max_violation = {bound}"),
+        )]));
+        assert_mentions(
+            &msg,
+            &["solver.max_violation", bound, "0.2 m (groups[0].radius)"],
+        );
+        assert!(msg.len() < 300, "{msg}");
+    }
+    // Below the smallest radius, however loose, is the scene's call.
+    let text = room(&[("max_violation = 1e-6", "max_violation = 0.1")]);
+    Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+}
+
+#[test]
 fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
     let text = room(&[]);
     let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
