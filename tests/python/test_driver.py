@@ -141,7 +141,7 @@ def test_every_scripts_help_says_its_first_paragraph_whole():
     import re
     scripts = [("python/plot_run.py", "the per-step solver statistics."),
                ("python/player_data.py", "made in Python from a run file."),
-               ("benches/output_overhead.py", "their ratio (one machine, one run)."),
+               ("benches/output_overhead.py", "with their ratios (one machine, one run)."),
                ("fmu/cross_check.py", "`assemble` copies it in)."),
                ("fmu/package.py", "its FMI 2 and FMI 3 FMUs into target/fmu/:"),
                ("-m moreau_ensemble", "and writes DIR/results.csv.")]
