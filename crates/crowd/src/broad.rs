@@ -67,7 +67,7 @@ pub struct CellGrid {
 /// that quadratic in `1/c`, in the form that neither cancels nor overflows: a crowd spread
 /// over a long thin strip, or people far apart, get at most about `budget` cells, not one
 /// side's worth of them squared).
-fn cell_within_budget(cell: f64, span: [f64; 2], budget: f64) -> f64 {
+pub(crate) fn cell_within_budget(cell: f64, span: [f64; 2], budget: f64) -> f64 {
     let cells = |c: f64| (span[0] / c + 1.0) * (span[1] / c + 1.0);
     if cells(cell) <= budget {
         return cell;
