@@ -258,6 +258,27 @@ def test_tradeoff_at_a_tol_no_step_meets_ran_for_hours_without_a_word(tmp_path):
     assert "| 1e-12 |" in (out / "tradeoff.md").read_text()
 
 
+def test_bench_sizes_beyond_the_limit_were_refused_after_measuring_every_smaller_one(tmp_path):
+    """`bench --sizes 18446744073709551615` first measured the default comparison's 40,000
+    people (minutes for a crush), then refused the size when it built its scene; the studies'
+    "does not divide the sampling interval" printed 1e-301 with three hundred digits. Now the
+    size is refused before anything runs (exit 2, naming the limit), and the interval prints
+    short."""
+    for flag, value in (("--sizes", "18446744073709551615"), ("--sizes", "1000,10000001"),
+                        ("--compare-at", "20000000")):
+        start = time.monotonic()
+        proc = moreau("bench", flag, value, check=False, timeout=60)
+        assert proc.returncode == 2, (flag, value, proc.stderr)
+        bad = value.split(",")[-1]
+        assert f"'{bad}' for '{flag}" in proc.stderr and "limit of 1e7 people" in proc.stderr
+        assert "people" not in proc.stdout and time.monotonic() - start < 30, proc.stdout
+    proc = moreau("tradeoff", ROOT / "data" / "scenes" / "room-60.toml", "--horizon", "1e-300",
+                  "-o", tmp_path / "t", check=False, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "the sampling interval 1e-301 (T / samples)" in proc.stderr, proc.stderr
+    assert not re.search(r"\d{25}", proc.stderr), proc.stderr
+
+
 def test_the_studies_refuse_bad_numbers_before_the_reference_run(tmp_path):
     """Regression: `converge --samples 0` and `--eps-kappa -1` ran the reference run (minutes
     on a large scene) before refusing, `--h-min 0` failed after it on "step 0 does not

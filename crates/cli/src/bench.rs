@@ -35,7 +35,7 @@ pub enum BenchScene {
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
     /// Crowd sizes.
-    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000", value_parser = crate::at_least_one)]
+    #[arg(long, value_delimiter = ',', default_value = "1000,10000,100000", value_parser = crate::crowd_size)]
     sizes: Vec<usize>,
     /// The crowd.
     #[arg(long, value_enum, default_value_t = BenchScene::Hall)]
@@ -51,8 +51,9 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 5, value_parser = crate::at_least_one)]
     steps: usize,
     /// At this size (0: never), after the measured steps, one more step, then its projection
-    /// again from cold (a new solver, zero multipliers) by each of --compare.
-    #[arg(long, default_value_t = 40_000)]
+    /// again from cold (a new solver, zero multipliers) by each of --compare. A size not in
+    /// --sizes is added to them.
+    #[arg(long, default_value_t = 40_000, value_parser = crate::crowd_size_or_zero)]
     compare_at: usize,
     /// The solvers of the cold comparison.
     #[arg(long, value_delimiter = ',', default_value = "clarabel")]

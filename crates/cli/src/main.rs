@@ -231,6 +231,27 @@ pub fn at_least_one(text: &str) -> Result<usize, String> {
     }
 }
 
+/// A crowd size: at least one person, at most a scene's limit (`moreau bench --sizes
+/// 18446744073709551615` measured every smaller size, minutes of them, before refusing it).
+pub fn crowd_size(text: &str) -> Result<usize, String> {
+    let n = at_least_one(text)?;
+    if n as f64 > moreau_crowd::limits::MAX_PEOPLE {
+        return Err(format!(
+            "more than the limit of {:e} people a scene",
+            moreau_crowd::limits::MAX_PEOPLE
+        ));
+    }
+    Ok(n)
+}
+
+/// A crowd size, or 0 for none.
+pub fn crowd_size_or_zero(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Ok(0),
+        _ => crowd_size(text),
+    }
+}
+
 /// An error with its causes, each said once (a cause whose text its parent already quotes,
 /// as the OS's and HDF5's often are, is not repeated).
 pub fn error_text(e: &anyhow::Error) -> String {

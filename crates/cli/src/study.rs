@@ -113,7 +113,9 @@ pub fn sample(scene: &Scene, how: &How, samples: usize, leaving: Leaving) -> Res
             let per = interval / h;
             ensure!(
                 (per - per.round()).abs() < 1e-9 && per.round() >= 1.0,
-                "step {h} does not divide the sampling interval {interval} (T / samples)"
+                "step {} does not divide the sampling interval {} (T / samples)",
+                moreau_core::Num(*h),
+                moreau_core::Num(interval)
             );
             scene.time.step = *h;
             scene.time.tol = None;

@@ -269,11 +269,11 @@ pub struct Time {
 }
 
 impl Time {
-    /// What to tell the user when an adaptive step was accepted above `tol`:
-    /// only a step at the controller's smallest is (whatever its error), so a tolerance this
-    /// small keeps the run at that step, hours for a long horizon. `None` for steps within
-    /// the tolerance and for fixed steps. The CLI prints it once as a warning, the FMU logs
-    /// it once.
+    /// What to tell the user when an adaptive step was accepted above `tol`: only a step at
+    /// the controller's smallest is (whatever its error), so a tolerance this small keeps the
+    /// run at that step, hours for a long horizon. `None` for steps within the tolerance and
+    /// for fixed steps. `moreau run` and `moreau tradeoff` print it once a run, the FMU logs it
+    /// once an instance, the Python module warns once a simulation.
     pub fn unmet_tolerance(&self, report: &StepReport) -> Option<String> {
         let tol = self.tol?;
         let error = report.local_error.filter(|&e| e > tol)?;
