@@ -347,3 +347,31 @@ def test_the_plots_count_each_door_where_people_go_through_it(room_run, tmp_path
     exits = np.sort(room.exits["t"])
     assert np.all(n <= np.searchsorted(exits, t, side="right"))
     assert np.all(n >= np.searchsorted(exits, t - 1.0, side="right"))
+
+
+def test_a_horizon_off_the_output_times_lost_its_last_frame(tmp_path):
+    """Regression: the frame at a horizon that no output time reaches (0.25 s with frames
+    every 0.1 s), or reaches only by rounding (0.3 s: 3 × 0.1 = 0.30000000000000004), was
+    never written: `moreau run` ended its file at the frame of 0.2 s with the steps after it,
+    and the Python module's `run` failed on "a state saved between frames". Both now write
+    the frame at the horizon, the same file."""
+    import moreau as module
+
+    from conftest import ROOT
+
+    text = (ROOT / "data" / "scenes" / "room-60.toml").read_text()
+    for horizon, times in (("0.25", [0.0, 0.1, 0.2, 0.25]), ("0.3", [0.0, 0.1, 0.2, 0.3])):
+        scene = tmp_path / f"h{horizon}.toml"
+        scene.write_text(re.sub(r"(?m)^horizon = .*$", f"horizon = {horizon}", text))
+        cli, py = tmp_path / f"cli{horizon}.h5", tmp_path / f"py{horizon}.h5"
+        moreau("run", scene, "-q", "-o", cli)
+        summary = module.run(module.Scene.from_file(scene), py)
+        assert summary["frames"] == len(times), summary
+        with h5py.File(cli) as a, h5py.File(py) as b:
+            assert np.allclose(a["frames/time"][:], times, rtol=0, atol=1e-12), a["frames/time"][:]
+            assert a.attrs["status"] == b.attrs["status"] == "complete"
+            for name in ("frames/time", "frames/positions"):
+                assert np.array_equal(a[name][:], b[name][:], equal_nan=True), name
+            # The last step ends at the horizon, where the last frame is.
+            last = a["steps"][-1]
+            assert last["t"] == pytest.approx(float(horizon), abs=1e-12), last

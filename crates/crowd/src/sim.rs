@@ -838,14 +838,35 @@ impl Simulation {
         Some(self.next_output().min(horizon))
     }
 
-    /// The next time a frame is due: every output interval, and the horizon.
+    /// The next time a frame is due: frame `k` at `k × output_interval`, and a frame at the
+    /// horizon where no such time reaches it (a last frame cut short); past the horizon the
+    /// output times go on. It depends on the frames written only, so a restored run has the
+    /// same frames. (Until session 37 the horizon's frame was due only until the horizon was
+    /// reached, so it was never written: a horizon of 0.25 or 0.3 s with frames every 0.1 s
+    /// lost its last frame, as 3 × 0.1 = 0.30000000000000004 lies past 0.3.)
     fn next_output(&self) -> f64 {
         let time = &self.scene.time;
-        let next = self.frames as f64 * time.output_interval;
-        if next > time.horizon && !self.stepping.reached(self.t, time.horizon) {
-            time.horizon
+        let (horizon, interval) = (time.horizon, time.output_interval);
+        let at = |k: usize| k as f64 * interval;
+        // `n`: the first frame whose output time lies past the horizon by more than rounding.
+        let past = |k: usize| !self.stepping.reached(horizon, at(k));
+        let mut n = (horizon / interval).floor() as usize;
+        while !past(n) {
+            n += 1;
+        }
+        while n > 0 && past(n - 1) {
+            n -= 1;
+        }
+        // Whether frame `n` is the horizon's, the output times before it falling short of it.
+        let cut = n > 0 && !self.stepping.reached(at(n - 1), horizon);
+        let k = self.frames;
+        if k < n {
+            // An output time just past the horizon by rounding is the horizon's frame.
+            at(k).min(horizon)
+        } else if k == n && cut {
+            horizon
         } else {
-            next
+            at(k - usize::from(cut))
         }
     }
 

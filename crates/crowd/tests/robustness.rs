@@ -225,6 +225,69 @@ fn a_max_violation_of_1e300_let_people_overlap_by_0_4_m_as_certified() {
     Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
 }
 
+/// The times of the frames a run writes.
+#[derive(Default)]
+struct FrameTimes(Vec<f64>);
+
+impl moreau_crowd::Observer for FrameTimes {
+    fn frame(&mut self, f: &moreau_crowd::Frame<'_>) -> Result<(), moreau_crowd::ObserverError> {
+        self.0.push(f.t);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_horizon_of_0_3_s_with_frames_every_0_1_s_lost_its_last_frame() {
+    // The horizon's frame was due only until the horizon was reached, so it was never
+    // written: 0.25 s (a last frame cut short) and 0.3 s (3 × 0.1 = 0.30000000000000004 lies
+    // past it) both ended at the frame of 0.2 s, the steps after it in the file with no frame
+    // (and the Python module's `run` failed on "a state saved between frames").
+    for (horizon, interval, step, want) in [
+        (0.3, 0.1, 0.05, vec![0.0, 0.1, 0.2, 0.3]),
+        (0.25, 0.1, 0.05, vec![0.0, 0.1, 0.2, 0.25]),
+        (0.052, 0.1, 0.05, vec![0.0, 0.052]),
+        (0.7, 0.1, 0.03, vec![0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]),
+        (0.55, 0.5, 0.05, vec![0.0, 0.5, 0.55]),
+        (1.0, 0.5, 0.05, vec![0.0, 0.5, 1.0]),
+    ] {
+        let text = room(&[
+            ("horizon = 15.0", &format!("horizon = {horizon}")),
+            ("step = 0.05", &format!("step = {step}")),
+            (
+                "output_interval = 0.1",
+                &format!("output_interval = {interval}"),
+            ),
+        ]);
+        let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+        let mut frames = FrameTimes::default();
+        sim.run(&mut frames).unwrap();
+        assert_eq!(
+            frames.0.len(),
+            want.len(),
+            "{horizon} / {interval}: {:?}",
+            frames.0
+        );
+        for (t, w) in frames.0.iter().zip(&want) {
+            assert!(
+                (t - w).abs() < 1e-12,
+                "{horizon} / {interval}: {:?}",
+                frames.0
+            );
+        }
+        assert_eq!(sim.frames(), want.len());
+    }
+    // Past the horizon the output times go on (co-simulation hosts step past it).
+    let text = room(&[("horizon = 15.0", "horizon = 0.25")]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut frames = FrameTimes::default();
+    sim.advance_to(0.5, &mut frames).unwrap();
+    let want = [0.0, 0.1, 0.2, 0.25, 0.3, 0.4, 0.5];
+    assert_eq!(frames.0.len(), want.len(), "{:?}", frames.0);
+    for (t, w) in frames.0.iter().zip(&want) {
+        assert!((t - w).abs() < 1e-12, "{:?}", frames.0);
+    }
+}
+
 #[test]
 fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
     let text = room(&[]);
