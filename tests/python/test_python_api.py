@@ -274,7 +274,7 @@ def test_a_nan_speed_factor_raises_and_the_simulation_keeps_working():
     assert np.median(np.linalg.norm(slow.velocities, axis=1)) == pytest.approx(0.5, abs=0.02)
 
 
-def test_a_tol_no_step_meets_ran_at_the_smallest_step_without_a_python_warning():
+def test_a_tol_no_step_meets_ran_at_the_smallest_step_without_a_python_warning(tmp_path):
     """`time.tol = 1e-12` keeps every step at the smallest (10⁻⁶ s) whatever it errs: `moreau
     run` warned once, the FMU logged nothing and Python said nothing (only `local_error`
     showed it). Now one RuntimeWarning a simulation, and none for a tolerance steps meet."""
@@ -294,6 +294,11 @@ def test_a_tol_no_step_meets_ran_at_the_smallest_step_without_a_python_warning()
         met = moreau.Simulation(moreau.Scene.from_dict(d))
         met.advance_to(0.5)
         met.step()
+    # moreau.run (its file written by the CLI's observer) says it once too.
+    d["time"]["tol"], d["time"]["horizon"] = 1e-12, 0.052
+    with pytest.warns(RuntimeWarning, match=r"time\.tol = 1e-12 m") as said:
+        moreau.run(moreau.Scene.from_dict(d), tmp_path / "tol.h5")
+    assert len(said) == 1, [str(w.message) for w in said]
 
 
 def test_velocities_report_and_contacts_of_the_last_step(tmp_path):

@@ -115,16 +115,7 @@ impl Inner {
     /// Gives the pending warning, if any, as a `RuntimeWarning` (as `moreau run` prints it to
     /// stderr and the FMU logs it): an error if the host turned warnings into errors.
     fn warn(&mut self, py: Python<'_>) -> PyResult<()> {
-        let Some(message) = self.warning.take() else {
-            return Ok(());
-        };
-        let message = std::ffi::CString::new(message).unwrap_or_default();
-        PyErr::warn(
-            py,
-            &py.get_type::<pyo3::exceptions::PyRuntimeWarning>(),
-            &message,
-            1,
-        )
+        warn(py, self.warning.take())
     }
 
     fn velocities(&self) -> Vec<f64> {
@@ -141,6 +132,20 @@ impl Inner {
         }
         v
     }
+}
+
+/// `message`, if any, as a `RuntimeWarning`: an error if the host turned warnings into errors.
+fn warn(py: Python<'_>, message: Option<String>) -> PyResult<()> {
+    let Some(message) = message else {
+        return Ok(());
+    };
+    let message = std::ffi::CString::new(message).unwrap_or_default();
+    PyErr::warn(
+        py,
+        &py.get_type::<pyo3::exceptions::PyRuntimeWarning>(),
+        &message,
+        1,
+    )
 }
 
 /// A crowd run in this process: built from a `Scene`, stepped by the catching-up scheme,
@@ -601,10 +606,16 @@ pub fn run_to_file(
     let mut writer = RunWriter::create(&output, &header, overwrite).map_err(io_err)?;
     let people = sim.total_people();
     let mut interrupted: Option<PyErr> = None;
+    // Adaptive steps that miss `time.tol`: said once, as `Simulation` and `moreau run` say it.
+    let time = sim.scene().time;
+    let mut unmet: Option<String> = None;
     let (outcome, json, finished) = py.detach(|| {
         let start = Instant::now();
         let mut polled = Instant::now();
         let mut tell = |r: &StepReport, stats: &moreau_core::RunStats, left: usize| {
+            if unmet.is_none() {
+                unmet = time.unmet_tolerance(r);
+            }
             if polled.elapsed() < POLL {
                 return Ok(());
             }
@@ -646,6 +657,7 @@ pub fn run_to_file(
     if let Some(e) = interrupted {
         return Err(e);
     }
+    warn(py, unmet)?;
     if let Some(p) = &progress {
         p.call1(
             py,

@@ -30,7 +30,8 @@ def run(scene: Scene | str | os.PathLike[str], output: str | os.PathLike[str] = 
     attributes (``command`` says ``moreau.run(...)``). An existing ``output`` raises
     ``FileExistsError`` unless ``force``. With ``progress`` a tqdm bar shows the simulated
     time. Releases the GIL while it computes; Ctrl-C stops the run, and the file keeps every
-    frame so far (its ``status`` says why). Returns the run's summary (the file's
+    frame so far (its ``status`` says why). Adaptive steps that miss ``time.tol`` give one
+    ``RuntimeWarning``, as ``Simulation`` does. Returns the run's summary (the file's
     ``summary`` attribute) as a dict."""
     callback: Callable[[float, int, int], None] | None = None
     bar = None
