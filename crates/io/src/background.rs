@@ -327,6 +327,22 @@ impl RunSink for BackgroundWriter {
         self.send(Message::Frame(Box::new(batch)))
     }
     fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
+        // Between frames only, as `RunWriter::save_state` says: the steps batched here would
+        // otherwise reach the file after a state that does not count them (this writer let
+        // it pass while the frame at a horizon off the output times went unwritten).
+        let pending = &self.pending;
+        if !pending.steps.is_empty() || !pending.exits.is_empty() || !pending.entries.is_empty() {
+            return Err(IoError::Layout {
+                path: self.path.clone(),
+                what: format!(
+                    "a state saved between frames ({} steps, {} exits, {} people not yet \
+                     written)",
+                    pending.steps.len(),
+                    pending.exits.len(),
+                    pending.entries.len()
+                ),
+            });
+        }
         self.send(Message::State(bytes))
     }
 }

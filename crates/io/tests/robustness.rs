@@ -321,6 +321,19 @@ fn a_background_writer_writes_the_same_file_and_reports_its_failures() {
     }
     a.step(&report(99));
     b.step(&report(99));
+    // A state saved with a step not yet in a frame is refused by both (the background writer
+    // took it while the frame at a horizon off the output times went unwritten), and the
+    // file goes on.
+    for sink in [&mut a as &mut dyn RunSink, &mut b] {
+        let err = sink
+            .save_state(b"between".to_vec())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("a state saved between frames (1 steps"),
+            "{err}"
+        );
+    }
     a.finish("complete", "{}").unwrap();
     b.finish("complete", "{}").unwrap();
     let (fa, fb) = (
