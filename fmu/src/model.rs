@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use moreau_core::{Num, StepReport};
-use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation, Time};
+use moreau_crowd::{Observer, ObserverError, Scene, SimState, Simulation, ToleranceWarning};
 use serde::{Deserialize, Serialize};
 
 use crate::FmuError;
@@ -402,8 +402,8 @@ pub struct CrowdModel {
     targets: Vec<f64>,
     before: Vec<f64>,
     after: Vec<f64>,
-    /// Whether the instance was told that a step missed `time.tol` (said once).
-    warned: bool,
+    /// The one warning that adaptive steps miss `time.tol`.
+    unmet: ToleranceWarning,
     /// What to log after this communication step, if anything.
     warning: Option<String>,
 }
@@ -430,18 +430,18 @@ pub struct ModelState {
 pub const MAX_INTERNAL_STEPS: f64 = 1e6;
 
 /// Keeps the certified ε of the last step, and the first step's word of an adaptive step
-/// accepted above `time.tol` ([`moreau_crowd::Time::unmet_tolerance`]).
+/// accepted above `time.tol` ([`ToleranceWarning`]).
 struct StepWatch<'a> {
     eps: &'a mut f64,
-    time: Time,
-    unmet: Option<String>,
+    unmet: &'a mut ToleranceWarning,
+    said: Option<String>,
 }
 
 impl Observer for StepWatch<'_> {
     fn step(&mut self, report: &StepReport) -> Result<(), ObserverError> {
         *self.eps = report.eps;
-        if self.unmet.is_none() {
-            self.unmet = self.time.unmet_tolerance(report);
+        if let Some(message) = self.unmet.first(report) {
+            self.said = Some(message);
         }
         Ok(())
     }
@@ -508,6 +508,7 @@ impl CrowdModel {
             })
             .collect();
         let targets = moving.iter().map(MovingInput::start).collect();
+        let unmet = ToleranceWarning::new(&sim.scene().time);
         let mut model = Self {
             sim,
             time: settings.start_time,
@@ -519,7 +520,7 @@ impl CrowdModel {
             targets,
             before: Vec::new(),
             after: Vec::new(),
-            warned: false,
+            unmet,
             warning: None,
         };
         model.apply(settings)?;
@@ -699,13 +700,12 @@ impl CrowdModel {
         }
         let mut watch = StepWatch {
             eps: &mut self.eps,
-            time,
-            unmet: None,
+            unmet: &mut self.unmet,
+            said: None,
         };
         self.sim.advance_to(t_end, &mut watch)?;
-        if !self.warned && watch.unmet.is_some() {
-            self.warned = true;
-            self.warning = watch.unmet;
+        if watch.said.is_some() {
+            self.warning = watch.said;
         }
         self.time = t + h;
         // Mean speed of the people present before and after the communication step.

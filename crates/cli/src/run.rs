@@ -325,8 +325,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     };
 
     let start = Instant::now();
-    let time = sim.scene().time;
-    let mut warned = false;
+    let mut unmet = moreau_crowd::ToleranceWarning::new(&sim.scene().time);
     let mut progress = |report: &moreau_core::StepReport, stats: &moreau_core::RunStats, left| {
         // SIGINT or SIGTERM: stop after this step (the file is finished as interrupted).
         if let Some(signal) = signals.caught() {
@@ -334,8 +333,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         // A step accepted above the tolerance is one at the smallest step: a tolerance this
         // small keeps the run at that step (hours for a long horizon). Said once, not fatal.
-        if !warned && let Some(message) = time.unmet_tolerance(report) {
-            warned = true;
+        if let Some(message) = unmet.first(report) {
             bar.suspend(|| eprintln!("moreau: warning: {message}"));
         }
         if !bar.is_hidden() {

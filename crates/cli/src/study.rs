@@ -5,7 +5,9 @@ use std::time::Instant;
 
 use anyhow::{Result, ensure};
 use moreau_core::{RunStats, StepReport};
-use moreau_crowd::{ExitRecord, Frame, Observer, ObserverError, Scene, Simulation, Time};
+use moreau_crowd::{
+    ExitRecord, Frame, Observer, ObserverError, Scene, Simulation, ToleranceWarning,
+};
 
 use crate::run::{Estimate, adaptive};
 
@@ -49,9 +51,8 @@ struct Samples {
     through: Vec<bool>,
     exits: usize,
     stats: RunStats,
-    /// The run's time settings, for the one warning that adaptive steps miss `time.tol`.
-    time: Time,
-    warned: bool,
+    /// The one warning that adaptive steps miss `time.tol`.
+    unmet: ToleranceWarning,
 }
 
 /// Whether a study accepts people who leave the scene at an exit.
@@ -68,10 +69,7 @@ impl Observer for Samples {
         self.stats.add(report);
         // As `moreau run` says it: a tolerance no step meets keeps the run at the smallest
         // step, for hours on a long horizon.
-        if !self.warned
-            && let Some(message) = self.time.unmet_tolerance(report)
-        {
-            self.warned = true;
+        if let Some(message) = self.unmet.first(report) {
             eprintln!("moreau: warning: {message}");
         }
         Ok(())
@@ -132,8 +130,7 @@ pub fn sample(scene: &Scene, how: &How, samples: usize, leaving: Leaving) -> Res
         through: vec![false; sim.total_people()],
         exits: 0,
         stats: RunStats::default(),
-        time: sim.scene().time,
-        warned: false,
+        unmet: ToleranceWarning::new(&sim.scene().time),
     };
     let start = Instant::now();
     sim.run(&mut samples_seen)?;

@@ -44,7 +44,7 @@ pub use moving::{Drive, MovingBodies, PersonMovingWalls};
 pub use people::{ExitRecord, People, PeopleView, Place};
 pub use scene::{
     BroadPhaseChoice, DesiredVelocityKind, ExitAction, Keyframe, Model, MovingBody, Output, Scene,
-    SolverKind, SolverSettings, Time, limits,
+    SolverKind, SolverSettings, Time, ToleranceWarning, limits,
 };
 pub use sim::{ContactForce, Frame, Observer, ObserverError, Simulation};
 pub use state::SimState;

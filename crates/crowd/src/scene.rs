@@ -269,25 +269,6 @@ pub struct Time {
 }
 
 impl Time {
-    /// What to tell the user when an adaptive step was accepted above `tol`: only a step at
-    /// the controller's smallest is (whatever its error), so a tolerance this small keeps the
-    /// run at that step, hours for a long horizon. `None` for steps within the tolerance and
-    /// for fixed steps. `moreau run` and `moreau tradeoff` print it once a run, the FMU logs it
-    /// once an instance, the Python module warns once a simulation.
-    pub fn unmet_tolerance(&self, report: &StepReport) -> Option<String> {
-        let tol = self.tol?;
-        let error = report.local_error.filter(|&e| e > tol)?;
-        Some(format!(
-            "at t = {} s the smallest step, {} s, erred by {} m, more than time.tol = {} m: \
-             the run goes on at that step where the tolerance cannot be met (a larger tol runs \
-             faster)",
-            Num(report.t),
-            Num(report.mu),
-            Num(error),
-            Num(tol)
-        ))
-    }
-
     /// How the run chooses its steps: fixed steps of `step`, or with `tol` adaptive steps
     /// whose largest is the output interval (frames land on output times), asking `solver`'s
     /// projections no more than it certifies ([`SolverKind::certified_floor`]).
@@ -310,6 +291,43 @@ impl Time {
         }
         Stepping::adaptive(settings)
             .map_err(|e| CrowdError::invalid("time.tol", Num(tol), e.to_string()))
+    }
+}
+
+/// What to tell the user, once, when an adaptive step is accepted above `time.tol`: only a
+/// step at the controller's smallest is (whatever its error), so a tolerance this small keeps
+/// the run at that step, hours for a long horizon. Fixed steps never say it. `moreau run` and
+/// `moreau tradeoff` print it once a run, the FMU logs it once an instance, the Python module
+/// warns once a simulation.
+#[derive(Debug, Clone, Copy)]
+pub struct ToleranceWarning {
+    tol: Option<f64>,
+    said: bool,
+}
+
+impl ToleranceWarning {
+    /// Watching the steps of a run with `time`.
+    pub fn new(time: &Time) -> Self {
+        Self {
+            tol: time.tol,
+            said: false,
+        }
+    }
+
+    /// The message of the first step above the tolerance; `None` for every other step.
+    pub fn first(&mut self, report: &StepReport) -> Option<String> {
+        let tol = self.tol.filter(|_| !self.said)?;
+        let error = report.local_error.filter(|&e| e > tol)?;
+        self.said = true;
+        Some(format!(
+            "at t = {} s the smallest step, {} s, erred by {} m, more than time.tol = {} m: \
+             the run goes on at that step where the tolerance cannot be met (a larger tol runs \
+             faster)",
+            Num(report.t),
+            Num(report.mu),
+            Num(error),
+            Num(tol)
+        ))
     }
 }
 
@@ -715,12 +733,7 @@ impl Scene {
         // horizon of 1e-300 s failed its first step as "not certified, ε = 0e0 for target
         // 0e0").
         let stepping = t.stepping(s.kind)?;
-        let policy = match &stepping {
-            Stepping::Fixed { .. } => EpsPolicy::new(s.eps_kappa, 3.0).map_err(|e| {
-                CrowdError::invalid("solver.eps_kappa", Num(s.eps_kappa), e.to_string())
-            })?,
-            Stepping::Adaptive(c) => c.settings().eps_policy(),
-        };
+        let policy = self.eps_policy(&stepping)?;
         let (shortest, field) = [
             (t.step, "time.step"),
             (t.output_interval, "time.output_interval"),
@@ -946,6 +959,21 @@ impl Scene {
         }
         crate::events::validate(self)?;
         self.check_violation_bound()
+    }
+
+    /// The projections' `ε_k` with `stepping`: `solver.eps_kappa · μ³` for fixed steps, the
+    /// adaptive controller's, tied to its tolerance, for adaptive ones.
+    pub(crate) fn eps_policy(&self, stepping: &Stepping) -> Result<EpsPolicy, CrowdError> {
+        match stepping {
+            Stepping::Fixed { .. } => EpsPolicy::new(self.solver.eps_kappa, 3.0).map_err(|e| {
+                CrowdError::invalid(
+                    "solver.eps_kappa",
+                    Num(self.solver.eps_kappa),
+                    e.to_string(),
+                )
+            }),
+            Stepping::Adaptive(c) => Ok(c.settings().eps_policy()),
+        }
     }
 
     /// `solver.max_violation` is a tolerance on overlaps: one as large as the smallest person's

@@ -3,7 +3,7 @@
 //! observer the caller passes.
 
 use moreau_core::{ConstraintKey, ConstraintRows, Num, Parallelism, RunStats, StepReport};
-use moreau_integrate::{EpsPolicy, LinearizedProjection, LinearizedSettings, Scheme, Stepping};
+use moreau_integrate::{LinearizedProjection, LinearizedSettings, Scheme, Stepping};
 use moreau_solve::ProjectionSolver;
 
 use crate::broad::{BroadPhaseKind, choose_broad_phase};
@@ -309,11 +309,8 @@ impl Simulation {
             max_redo: 8,
         };
         let correction = LinearizedProjection::new(solver, settings)?;
-        let mut scheme = Scheme::new(correction, EpsPolicy::new(scene.solver.eps_kappa, 3.0)?);
         let stepping = scene.time.stepping(scene.solver.kind)?;
-        if let Stepping::Adaptive(c) = &stepping {
-            scheme.set_eps(c.settings().eps_policy());
-        }
+        let scheme = Scheme::new(correction, scene.eps_policy(&stepping)?);
         let helper = crate::bands::helper_for(Parallelism::threads(scene.solver.threads));
         Ok(Self {
             scene,

@@ -7,7 +7,9 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use moreau_core::{Num, StepReport};
-use moreau_crowd::{ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation};
+use moreau_crowd::{
+    ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation, ToleranceWarning,
+};
 use moreau_io::{IoError, Overwrite, RunWriter};
 use moreau_record::{Record, Summary};
 use numpy::{PyArray1, PyArrayMethods};
@@ -44,8 +46,8 @@ struct Inner {
     last: Option<LastStep>,
     recording: bool,
     frames: Vec<RecordedFrame>,
-    /// Whether Python was warned that adaptive steps miss `time.tol` (once a simulation).
-    warned: bool,
+    /// The one warning a simulation that adaptive steps miss `time.tol`.
+    unmet: ToleranceWarning,
     /// That warning, until it is given (stepping runs without the GIL).
     warning: Option<String>,
 }
@@ -84,11 +86,8 @@ impl Inner {
             frames: self.recording.then_some(&mut self.frames),
         };
         let report = self.sim.advance_step(t_end, &mut watch)?;
-        if let Some(r) = &report
-            && !self.warned
-        {
-            self.warning = self.sim.scene().time.unmet_tolerance(r);
-            self.warned = self.warning.is_some();
+        if let Some(message) = report.as_ref().and_then(|r| self.unmet.first(r)) {
+            self.warning = Some(message);
         }
         if let Some(r) = &report {
             self.last = Some(LastStep {
@@ -257,6 +256,7 @@ impl PySimulation {
         let sim = py
             .detach(move || Simulation::new(s))
             .map_err(|e| to_py(py, e))?;
+        let unmet = ToleranceWarning::new(&sim.scene().time);
         Ok(PySimulation {
             scene,
             inner: Mutex::new(Inner {
@@ -264,7 +264,7 @@ impl PySimulation {
                 last: None,
                 recording: record,
                 frames: Vec::new(),
-                warned: false,
+                unmet,
                 warning: None,
             }),
         })
@@ -607,14 +607,14 @@ pub fn run_to_file(
     let people = sim.total_people();
     let mut interrupted: Option<PyErr> = None;
     // Adaptive steps that miss `time.tol`: said once, as `Simulation` and `moreau run` say it.
-    let time = sim.scene().time;
+    let mut once = ToleranceWarning::new(&sim.scene().time);
     let mut unmet: Option<String> = None;
     let (outcome, json, finished) = py.detach(|| {
         let start = Instant::now();
         let mut polled = Instant::now();
         let mut tell = |r: &StepReport, stats: &moreau_core::RunStats, left: usize| {
-            if unmet.is_none() {
-                unmet = time.unmet_tolerance(r);
+            if let Some(message) = once.first(r) {
+                unmet = Some(message);
             }
             if polled.elapsed() < POLL {
                 return Ok(());
