@@ -489,6 +489,17 @@ def test_to_pedpy_from_a_run_file_and_from_memory(room_run):
         moreau.Simulation(ROOM).recorded_frames()
 
 
+def test_advance_to_0_6_recorded_the_frame_of_0_6_s_one_call_late():
+    """Frame 6 is due at 6 × 0.1 = 0.6000000000000001 s: `advance_to(0.6)` ended at 0.6 s
+    but recorded that frame only on the next call (so did 0.3 and 0.7 s)."""
+    sim = moreau.Simulation(short_room(1.0), record=True)
+    for k in range(1, 11):
+        sim.advance_to(k / 10)
+        frame, t, _, _, _ = sim.recorded_frames()
+        assert frame.max() == k, (k / 10, np.unique(t))
+        assert abs(t.max() - k / 10) < 1e-12, (k / 10, np.unique(t))
+
+
 def test_the_ensemble_runs_in_process_with_engine_python(tmp_path):
     from moreau_ensemble.task import run_variant
 

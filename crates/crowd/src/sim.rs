@@ -946,7 +946,10 @@ impl Simulation {
                     return Ok(Some(report));
                 }
                 None => {
-                    if stop == output {
+                    // The frame is due when the step reached its time, or `t_end` reached it
+                    // by rounding (`advance_to(0.6)` with 6 × 0.1 = 0.6000000000000001: the
+                    // frame came one call late).
+                    if stop == output || self.stepping.reached(self.t, output) {
                         observer
                             .frame(&self.frame())
                             .map_err(CrowdError::Observer)?;

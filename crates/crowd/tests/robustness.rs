@@ -289,6 +289,38 @@ fn a_horizon_of_0_3_s_with_frames_every_0_1_s_lost_its_last_frame() {
 }
 
 #[test]
+fn advance_to_0_6_gave_the_frame_of_0_6_s_one_call_late() {
+    // Frame 6 is due at 6 × 0.1 = 0.6000000000000001 s: `advance_to(0.6)` ended its last
+    // step at 0.6 s, within rounding of that frame, yet gave it only on the next call (so a
+    // host that reads the frames after each call missed it, as at 0.3 and 0.7 s).
+    let text = room(&[("horizon = 15.0", "horizon = 1.0")]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut frames = FrameTimes::default();
+    for k in 1..=10 {
+        let t = k as f64 / 10.0;
+        sim.advance_to(t, &mut frames).unwrap();
+        assert_eq!(
+            frames.0.len(),
+            k + 1,
+            "after advance_to({t}): {:?}",
+            frames.0
+        );
+        let last = *frames.0.last().unwrap();
+        assert!((last - t).abs() < 1e-12, "after advance_to({t}): {last}");
+        assert_eq!(sim.frames(), k + 1);
+    }
+    // The frames and the steps are those of one call to the horizon.
+    let mut once = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut all = FrameTimes::default();
+    once.run(&mut all).unwrap();
+    assert_eq!(all.0.len(), frames.0.len());
+    for (a, b) in all.0.iter().zip(&frames.0) {
+        assert!((a - b).abs() < 1e-12, "{:?} against {:?}", all.0, frames.0);
+    }
+    assert_eq!(once.steps(), sim.steps());
+}
+
+#[test]
 fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
     let text = room(&[]);
     let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
