@@ -194,6 +194,7 @@ def test_the_examples_refuse_bad_numbers_by_flag_not_in_a_step_or_as_an_unknown_
         (("example81", "--x0", "-1"), "--x0 must be finite and in C = [0, ∞), got -1.0"),
         (("example81", "--h", "1e-300"), "with --h 1e-300: the finest run"),
         (("example82", "--t-end", "-1"), "--t-end must be finite and > 0, got -1.0"),
+        (("example82", "--h", "1e-300"), "with --h 1e-300: the reference run (h / 512)"),
     ]:
         proc = moreau(*args, check=False, timeout=60)
         assert proc.returncode == 2 and said in proc.stderr, (args, proc.stderr)
@@ -206,10 +207,16 @@ def test_the_examples_printed_a_step_of_1e300_with_three_hundred_digits(tmp_path
     zeros and six decimals."""
     proc = moreau("example81", "--h", "1e300", timeout=120)
     assert "1e300" in proc.stdout and not re.search(r"\d{25}", proc.stdout), proc.stdout
-    proc = moreau("example82", "--h", "1e300", "--out", tmp_path, timeout=120)
+    proc = moreau("example82", "--h", "0.00001", "--t-end", "0.0001", "--out", tmp_path,
+                  timeout=120)
     table = (tmp_path / "example82.md").read_text()
     for text in (proc.stdout, table):
-        assert "1e300" in text and not re.search(r"\d{25}", text), text
+        assert "1e-5" in text and not re.search(r"\d{25}", text), text
+    # A step longer than the horizon is refused (the reference, h / 512, would be one step
+    # of t_end), the step printed in a few characters.
+    proc = moreau("example82", "--h", "1e300", "--out", tmp_path, check=False, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert "--h 1e300 is longer than --t-end 5" in proc.stderr, proc.stderr
     # Ordinary steps keep their six decimals.
     proc = moreau("example81", timeout=120)
     assert re.search(r"^\s+0\.\d{6}\s", proc.stdout, re.M), proc.stdout

@@ -144,6 +144,24 @@ fn run_8_2(
     Ok((states, start.elapsed().as_secs_f64(), iterations))
 }
 
+/// Example 8.2's error: the largest distance to the reference over the step times, `k h`
+/// (the reference's state `k × stride`) and `t_end`, where both runs end (a last step
+/// shortened to it lies on neither grid). Until session 38 the time `t_end` was left out
+/// where `h` does not divide it, so a step of `t_end` or more compared the start only: an
+/// error of 0 and an order of NaN.
+fn error_8_2(states: &[[f64; 3]], reference: &[[f64; 3]], stride: usize) -> f64 {
+    let distance =
+        |x: &[f64; 3], r: &[f64; 3]| (0..3).map(|i| (x[i] - r[i]).powi(2)).sum::<f64>().sqrt();
+    let (Some((x_end, before)), Some(r_end)) = (states.split_last(), reference.last()) else {
+        return 0.0;
+    };
+    before
+        .iter()
+        .enumerate()
+        .filter_map(|(k, x)| reference.get(k * stride).map(|r| distance(x, r)))
+        .fold(distance(x_end, r_end), f64::max)
+}
+
 /// `moreau example82`: Example 8.2 (dry friction in a box) by the explicit selection and by
 /// the semi-implicit prox, error against a fine semi-implicit reference and wall time for
 /// halving steps: one work–precision table and plot (DESIGN §6).
@@ -160,6 +178,24 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
     let levels = 7;
     let fine = 2usize.pow(levels + 2);
     let h_ref = h0 / fine as f64;
+    // The reference's step is h / 512: from a step longer than the horizon it would be no
+    // reference (`--h 1e300` compared every run with one step of `t_end`).
+    anyhow::ensure!(
+        h0 <= t_end,
+        "--h {} is longer than --t-end {}: the reference run (h / {fine}) would not be fine",
+        Num(h0),
+        Num(t_end)
+    );
+    // The reference run takes `fine × t_end / h` steps.
+    let steps = t_end / h_ref;
+    anyhow::ensure!(
+        steps <= moreau_integrate::MAX_STEPS,
+        "--t-end {} with --h {}: the reference run (h / {fine}) would take {steps:.3e} steps, \
+         more than the limit of {:e} steps a run",
+        Num(t_end),
+        Num(h0),
+        moreau_integrate::MAX_STEPS
+    );
     let (reference, _, _) =
         run_8_2(Selection::SemiImplicit, h_ref, t_end, 1e-6).context("the reference run")?;
     std::fs::create_dir_all(out).with_context(|| format!("creating '{}'", out.display()))?;
@@ -184,16 +220,13 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
             let h = h0 / 2f64.powi(j as i32);
             let (states, wall, iterations) = run_8_2(selection, h, t_end, 1.0)
                 .with_context(|| format!("{name}, h = {}", Num(h)))?;
-            let stride = fine >> j;
-            let error = states
-                .iter()
-                .enumerate()
-                .filter_map(|(k, x)| reference.get(k * stride).map(|r| (x, r)))
-                .map(|(x, r)| (0..3).map(|i| (x[i] - r[i]).powi(2)).sum::<f64>().sqrt())
-                .fold(0.0, f64::max);
-            let order = prev.map_or("-".to_string(), |(ph, pe)| {
-                format!("{:.2}", (pe / error).ln() / (ph / h).ln())
-            });
+            let error = error_8_2(&states, &reference, fine >> j);
+            let order = match prev {
+                Some((ph, pe)) if pe > 0.0 && error > 0.0 => {
+                    format!("{:.2}", (pe / error).ln() / (ph / h).ln())
+                }
+                _ => "-".to_string(),
+            };
             println!(
                 "{name:>14} {:>10} {:>7} {error:>12.4e} {order:>7} {wall:>10.4} {iterations:>10}",
                 step_cell(h),
@@ -223,4 +256,25 @@ pub fn example_8_2(h0: f64, t_end: f64, out: &std::path::Path) -> Result<()> {
     std::fs::write(out.join("example82.svg"), plot.render())?;
     println!("wrote {}/example82.md, example82.svg", out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_8_2;
+
+    #[test]
+    fn a_last_step_cut_short_was_left_out_of_example_8_2s_error() {
+        // A run of steps h to t_end = 2.5 h against a reference of h / 2: states at 0, h, 2h
+        // and t_end; the reference at 0, h/2, …, 2h and t_end (index 5). The state at t_end
+        // matched the reference's index 3 × 2 = 6, which is past its end, and was dropped.
+        let reference = [[0.0; 3], [9.0; 3], [1.0; 3], [9.0; 3], [2.0; 3], [3.0; 3]];
+        let exact = [[0.0; 3], [1.0; 3], [2.0; 3], [3.0; 3]];
+        assert_eq!(error_8_2(&exact, &reference, 2), 0.0);
+        let off_at_end = [[0.0; 3], [1.0; 3], [2.0; 3], [3.0, 3.0, 3.5]];
+        assert_eq!(error_8_2(&off_at_end, &reference, 2), 0.5);
+        let off_before = [[0.0; 3], [1.0, 1.25, 1.0], [2.0; 3], [3.0; 3]];
+        assert_eq!(error_8_2(&off_before, &reference, 2), 0.25);
+        // One step of the whole span: the start and the end.
+        assert_eq!(error_8_2(&[[0.0; 3], [3.0, 3.0, 4.0]], &reference, 6), 1.0);
+    }
 }

@@ -2,6 +2,7 @@
 //! and the separable absolute value `ψ(x) = Σ μ_i |x_i|` (dry friction).
 
 use crate::error::CoreError;
+use crate::num::Num;
 use crate::rows::ConstraintRows;
 use crate::traits::{ConstraintSet, ConvexPart, ConvexSet};
 
@@ -9,7 +10,7 @@ fn check_finite(field: &'static str, v: &[f64]) -> Result<(), CoreError> {
     match v.iter().find(|x| x.is_nan()) {
         Some(x) => Err(CoreError::InvalidParameter {
             field,
-            value: x.to_string(),
+            value: Num(*x).to_string(),
             reason: "NaN",
         }),
         None => Ok(()),
@@ -190,7 +191,7 @@ impl Ball {
         if !(radius >= 0.0) {
             return Err(CoreError::InvalidParameter {
                 field: "ball radius",
-                value: radius.to_string(),
+                value: Num(radius).to_string(),
                 reason: "must be ≥ 0",
             });
         }
@@ -232,7 +233,7 @@ impl SeparableAbs {
         if let Some(w) = weights.iter().find(|w| !(**w >= 0.0) || !w.is_finite()) {
             return Err(CoreError::InvalidParameter {
                 field: "friction level",
-                value: w.to_string(),
+                value: Num(*w).to_string(),
                 reason: "must be finite and ≥ 0",
             });
         }

@@ -20,7 +20,7 @@
 //! down to the `floor` double precision certifies ([`AdaptiveSettings::eps_policy`]):
 //! Definition 4.3 of `seeds/002` with `tol` as the parameter that goes to zero.
 
-use moreau_core::{Field, StepReport};
+use moreau_core::{Field, Num, StepReport};
 use serde::{Deserialize, Serialize};
 
 use crate::Correction;
@@ -93,7 +93,7 @@ impl AdaptiveSettings {
         let bad = |field: &'static str, value: f64, reason: &'static str| {
             Err(IntegrateError::InvalidSetting {
                 field,
-                value: value.to_string(),
+                value: Num(value).to_string(),
                 reason,
             })
         };
@@ -255,7 +255,7 @@ impl StepController {
         if !(remaining > 0.0) {
             return Err(IntegrateError::InvalidSetting {
                 field: "t_end",
-                value: t_end.to_string(),
+                value: Num(t_end).to_string(),
                 reason: "must be after the current time",
             });
         }

@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use moreau_core::{
-    ConstraintKey, ConstraintRows, ConstraintSet, ConvexSet, SolveStatus, StepReport,
+    ConstraintKey, ConstraintRows, ConstraintSet, ConvexSet, Num, SolveStatus, StepReport,
 };
 use moreau_solve::{ProjectionProblem, ProjectionSolution, ProjectionSolver, Target};
 
@@ -143,7 +143,7 @@ impl<S: ProjectionSolver> LinearizedProjection<S> {
         if !(settings.max_violation > 0.0) {
             return Err(IntegrateError::InvalidSetting {
                 field: "max_violation",
-                value: settings.max_violation.to_string(),
+                value: Num(settings.max_violation).to_string(),
                 reason: "must be > 0",
             });
         }

@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use moreau_core::{ConvexPart, Field, StepReport};
+use moreau_core::{ConvexPart, Field, Num, StepReport};
 
 use crate::correction::Correction;
 use crate::error::IntegrateError;
@@ -47,14 +47,14 @@ impl EpsPolicy {
         if !(kappa > 0.0 && kappa.is_finite()) {
             return Err(IntegrateError::InvalidSetting {
                 field: "eps kappa",
-                value: kappa.to_string(),
+                value: Num(kappa).to_string(),
                 reason: "must be finite and > 0",
             });
         }
         if !(power > 2.0 && power.is_finite()) {
             return Err(IntegrateError::InvalidSetting {
                 field: "eps power",
-                value: power.to_string(),
+                value: Num(power).to_string(),
                 reason: "must be > 2 so that ε/μ² → 0",
             });
         }
@@ -135,7 +135,7 @@ fn check_step(mu: f64) -> Result<(), IntegrateError> {
     } else {
         Err(IntegrateError::InvalidSetting {
             field: "step",
-            value: mu.to_string(),
+            value: Num(mu).to_string(),
             reason: "must be finite and > 0",
         })
     }
@@ -225,7 +225,7 @@ impl<C: Correction> Scheme<C> {
         if !(mu > 0.0 && mu.is_finite()) {
             return Err(IntegrateError::InvalidSetting {
                 field: "mu",
-                value: mu.to_string(),
+                value: Num(mu).to_string(),
                 reason: "the step must be finite and > 0",
             });
         }
@@ -297,7 +297,7 @@ impl<C: Correction> Scheme<C> {
                 if !(t_end.is_finite() && *t_end >= t0) {
                     return Err(IntegrateError::InvalidSetting {
                         field: "t_end",
-                        value: t_end.to_string(),
+                        value: Num(*t_end).to_string(),
                         reason: "must be finite and ≥ t0",
                     });
                 }
@@ -305,7 +305,11 @@ impl<C: Correction> Scheme<C> {
                 if !(steps <= crate::MAX_STEPS) {
                     return Err(IntegrateError::InvalidSetting {
                         field: "t_end",
-                        value: format!("{t_end} with steps h = {h} ({steps:.3e} steps)"),
+                        value: format!(
+                            "{} with steps h = {} ({steps:.3e} steps)",
+                            Num(*t_end),
+                            Num(*h)
+                        ),
                         reason: "more than the 10⁹ steps a run may take",
                     });
                 }

@@ -1,7 +1,7 @@
 //! How a run chooses its steps: fixed or adaptive, and the one place where "equal steps, the
 //! last one shortened to land on the stop" is written.
 
-use moreau_core::{Field, StepReport};
+use moreau_core::{Field, Num, StepReport};
 use serde::{Deserialize, Serialize};
 
 use crate::adaptive::{AdaptiveSettings, ControllerState, StepController};
@@ -62,7 +62,7 @@ impl Stepping {
         if !(step > 0.0 && step.is_finite()) {
             return Err(IntegrateError::InvalidSetting {
                 field: "step",
-                value: step.to_string(),
+                value: Num(step).to_string(),
                 reason: "must be finite and > 0",
             });
         }

@@ -413,3 +413,17 @@ fn a_step_at_the_floor_lengthened_to_land_was_tried_again_forever() {
     assert_eq!(mus[0], settings.mu_min);
     assert!((mus[1] - 1.3 * settings.mu_min).abs() < 1e-18, "{mus:?}");
 }
+
+/// The settings' errors printed a value of 1e-300 as "0.000…0001" (three hundred digits),
+/// through `f64`'s `Display`: every such value goes through `Num` now.
+#[test]
+fn a_setting_of_1e_minus_300_was_printed_with_three_hundred_digits() {
+    let mut s = AdaptiveSettings::new(1e-3);
+    s.mu_first = 1e-300;
+    let msg = StepController::new(s).unwrap_err().to_string();
+    assert!(msg.contains("1e-300") && msg.len() < 200, "{msg}");
+    let msg = moreau_integrate::Stepping::fixed(-1e-300)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("-1e-300") && msg.len() < 200, "{msg}");
+}

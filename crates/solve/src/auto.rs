@@ -7,7 +7,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use moreau_core::{ConstraintKey, Helper, Parallelism, SolveStatus};
+use moreau_core::{ConstraintKey, Helper, Num, Parallelism, SolveStatus};
 
 use crate::certificate::certify_given;
 use crate::components::{CheckScratch, Components, DisjointSolution, SubProblem};
@@ -187,14 +187,14 @@ impl AutoSettings {
         if !(self.set_aside_factor >= 1.0) {
             return Err(SolveError::InvalidSetting {
                 field: "set_aside_factor",
-                value: self.set_aside_factor.to_string(),
+                value: Num(self.set_aside_factor).to_string(),
                 reason: "must be at least 1 (or infinite: never)",
             });
         }
         if !(self.own_reach_ratio >= 1.0) {
             return Err(SolveError::InvalidSetting {
                 field: "own_reach_ratio",
-                value: self.own_reach_ratio.to_string(),
+                value: Num(self.own_reach_ratio).to_string(),
                 reason: "must be at least 1 (or infinite: never)",
             });
         }

@@ -2,7 +2,7 @@
 //! velocity kept equal to `w + Jᵀλ`, with optional over-relaxation, symmetric sweeps and
 //! momentum, certified from scratch after sweeps 1, 2, 4, 8, ….
 
-use moreau_core::{Parallelism, SolveStatus};
+use moreau_core::{Num, Parallelism, SolveStatus};
 
 use crate::certificate::gap_and_violation;
 use crate::error::SolveError;
@@ -97,7 +97,7 @@ impl GaussSeidelSettings {
         if !(self.relaxation > 0.0 && self.relaxation < 2.0) {
             return Err(SolveError::InvalidSetting {
                 field: "relaxation",
-                value: self.relaxation.to_string(),
+                value: Num(self.relaxation).to_string(),
                 reason: "must be in (0, 2)",
             });
         }

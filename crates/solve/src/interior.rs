@@ -18,7 +18,7 @@
 //! module is the interior-point loop, which also stops at the certificate's rounding floor
 //! ([`SolveStatus::RoundingFloor`]).
 
-use moreau_core::{ConstraintKey, ConstraintRows, Parallelism, SolveStatus};
+use moreau_core::{ConstraintKey, ConstraintRows, Num, Parallelism, SolveStatus};
 
 use crate::augmented::AugmentedSystem;
 use crate::certificate::{Certificate, certify};
@@ -142,28 +142,28 @@ impl InteriorPointSettings {
         if !(self.step_fraction > 0.0 && self.step_fraction < 1.0) {
             return Err(SolveError::InvalidSetting {
                 field: "step_fraction",
-                value: self.step_fraction.to_string(),
+                value: Num(self.step_fraction).to_string(),
                 reason: "must be in (0, 1)",
             });
         }
         if !(self.warm_scale >= 0.0 && self.warm_scale.is_finite()) {
             return Err(SolveError::InvalidSetting {
                 field: "warm_scale",
-                value: self.warm_scale.to_string(),
+                value: Num(self.warm_scale).to_string(),
                 reason: "must be finite and ≥ 0",
             });
         }
         if !(self.corrector_threshold >= 0.0) {
             return Err(SolveError::InvalidSetting {
                 field: "corrector_threshold",
-                value: self.corrector_threshold.to_string(),
+                value: Num(self.corrector_threshold).to_string(),
                 reason: "must be ≥ 0",
             });
         }
         if !(self.polish_penalty >= 0.0 && self.polish_penalty.is_finite()) {
             return Err(SolveError::InvalidSetting {
                 field: "polish_penalty",
-                value: self.polish_penalty.to_string(),
+                value: Num(self.polish_penalty).to_string(),
                 reason: "must be finite and ≥ 0",
             });
         }
@@ -177,14 +177,14 @@ impl InteriorPointSettings {
         if !(self.warm_iterate >= 0.0 && self.warm_iterate.is_finite()) {
             return Err(SolveError::InvalidSetting {
                 field: "warm_iterate",
-                value: self.warm_iterate.to_string(),
+                value: Num(self.warm_iterate).to_string(),
                 reason: "must be finite and ≥ 0",
             });
         }
         if !(0.0..=1.0).contains(&self.polish_changes) {
             return Err(SolveError::InvalidSetting {
                 field: "polish_changes",
-                value: self.polish_changes.to_string(),
+                value: Num(self.polish_changes).to_string(),
                 reason: "must be in [0, 1]",
             });
         }
