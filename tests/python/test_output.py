@@ -375,3 +375,40 @@ def test_a_horizon_off_the_output_times_lost_its_last_frame(tmp_path):
             # The last step ends at the horizon, where the last frame is.
             last = a["steps"][-1]
             assert last["t"] == pytest.approx(float(horizon), abs=1e-12), last
+
+
+def test_a_last_frame_cut_short_read_in_pedpy_as_the_next_frame(tmp_path):
+    """Regression: `/trajectory` numbered its rows by the frames written, and PedPy reads a
+    row's time as `frame / fps`: the frame at a horizon of 0.25 s (every 0.1 s) was frame 3,
+    read as 0.3 s, and with frames every 0.3 s to 1.0 s the last read as 1.2 s (speeds near
+    the end came out too low). Rows now sit at `t × fps`, a frame off that grid in `/frames`
+    only; `to_pedpy` of a recording Simulation the same."""
+    import moreau as module
+
+    from conftest import ROOT
+
+    text = (ROOT / "data" / "scenes" / "room-60.toml").read_text()
+    for horizon, interval, on_grid in (("0.25", "0.1", [0.0, 0.1, 0.2]),
+                                       ("1.0", "0.3", [0.0, 0.3, 0.6, 0.9])):
+        scene = tmp_path / f"h{horizon}.toml"
+        scene.write_text(re.sub(r"(?m)^output_interval = .*$", f"output_interval = {interval}",
+                                re.sub(r"(?m)^horizon = .*$", f"horizon = {horizon}", text)))
+        out = tmp_path / f"h{horizon}.h5"
+        moreau("run", scene, "-q", "-o", out)
+        with h5py.File(out) as f:
+            times = f["frames/time"][:]
+            positions = f["frames/positions"][:]
+        assert times[-1] == pytest.approx(float(horizon), abs=1e-12), times
+        traj, _ = module.to_pedpy(out)
+        sim = module.Simulation(module.Scene.from_file(scene), record=True)
+        sim.run()
+        mem, _ = module.to_pedpy(sim)
+        for data in (traj, mem):
+            frames = np.unique(data.data["frame"].to_numpy())
+            assert np.allclose(frames / data.frame_rate, on_grid, rtol=0, atol=1e-9), frames
+            # Each row is the dense frame at its time.
+            for k in frames:
+                rows = data.data[data.data["frame"] == k]
+                dense = positions[int(np.argmin(np.abs(times - k / data.frame_rate)))]
+                ids = rows["id"].to_numpy()
+                assert np.array_equal(rows["x"].to_numpy(), dense[ids, 0]), k

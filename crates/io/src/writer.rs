@@ -272,6 +272,8 @@ pub struct RunWriter {
     /// The radii of the people who entered since the last frame (ids `people..`).
     pending_people: Vec<f64>,
     frames: usize,
+    /// `trajectory.fps`: a frame's row in `/trajectory` is numbered `t × fps`.
+    fps: f64,
     trajectory_rows: usize,
     exit_rows: usize,
     step_rows: usize,
@@ -284,6 +286,16 @@ pub struct RunWriter {
     pending_contacts: Vec<ContactRow>,
     pending_pressure: Vec<f64>,
     pending_moving: Vec<f64>,
+}
+
+/// The number of the frame at time `t` in `/trajectory`, where PedPy reads its time as
+/// `frame / fps`: `t × fps` rounded, or `None` for a frame off that grid (the horizon's, where
+/// no output time reaches it: it is in `/frames` only). Until session 38 rows were numbered
+/// by the frames written, so such a frame at 2.05 s, after 2.0 s at 10 fps, read as 2.1 s.
+fn trajectory_frame(t: f64, fps: f64) -> Option<i64> {
+    let x = t * fps;
+    let k = x.round();
+    ((x - k).abs() <= 1e-6).then_some(k as i64)
 }
 
 fn text(s: &str) -> VarLenUnicode {
@@ -583,6 +595,7 @@ impl RunWriter {
             people: n,
             pending_people: Vec::new(),
             frames: 0,
+            fps: header.fps,
             trajectory_rows: 0,
             exit_rows: 0,
             step_rows: 0,
@@ -891,6 +904,7 @@ impl RunWriter {
             people: n,
             pending_people: Vec::new(),
             frames: marks.frames,
+            fps: header.fps,
             trajectory_rows: marks.trajectory_rows,
             exit_rows: marks.exits,
             step_rows: marks.steps,
@@ -928,6 +942,7 @@ impl RunWriter {
         }
         let frame = self.frames;
         let people = self.people();
+        let pedpy_frame = trajectory_frame(t, self.fps);
         self.rows.clear();
         self.dense.clear();
         self.dense.resize(2 * people, f64::NAN);
@@ -940,12 +955,14 @@ impl RunWriter {
                 )));
             }
             let (x, y) = (positions[2 * k], positions[2 * k + 1]);
-            self.rows.push(TrajectoryRow {
-                id: i as i64,
-                frame: frame as i64,
-                x,
-                y,
-            });
+            if let Some(frame) = pedpy_frame {
+                self.rows.push(TrajectoryRow {
+                    id: i as i64,
+                    frame,
+                    x,
+                    y,
+                });
+            }
             self.dense[2 * i] = x;
             self.dense[2 * i + 1] = y;
         }

@@ -58,7 +58,9 @@ def run(scene: Scene | str | os.PathLike[str], output: str | os.PathLike[str] = 
 
 def to_pedpy(run_or_sim: Simulation | str | os.PathLike[str]):
     """PedPy's ``(TrajectoryData, WalkableArea)`` of a run file (path) or of an in-memory
-    ``Simulation`` built with ``record=True`` (its frames, every ``time.output_interval``).
+    ``Simulation`` built with ``record=True`` (its frames, every ``time.output_interval``;
+    PedPy numbers frames ``t × fps``, so a last frame at a horizon off that grid is left
+    out, as in the run file's ``/trajectory``).
     For a run file this is ``pedpy.load_trajectory_from_ped_data_archive_hdf5`` and
     ``load_walkable_area_from_ped_data_archive_hdf5``."""
     import pathlib
@@ -69,10 +71,19 @@ def to_pedpy(run_or_sim: Simulation | str | os.PathLike[str]):
         import pandas as pd
         import shapely
 
-        frame, _t, ids, x, y = run_or_sim.recorded_frames()
+        import numpy as np
+
+        _frame, t, ids, x, y = run_or_sim.recorded_frames()
         scene = run_or_sim.scene
-        data = pd.DataFrame({"id": ids, "frame": frame, "x": x, "y": y})
-        traj = pedpy.TrajectoryData(data=data, frame_rate=1.0 / scene.output_interval)
+        # PedPy reads a row's time as frame / fps: frames at t × fps, as in the run file's
+        # /trajectory; a frame off that grid (a horizon no output time reaches) is left out.
+        fps = 1.0 / scene.output_interval
+        grid = t * fps
+        frame = np.rint(grid)
+        on = np.abs(grid - frame) <= 1e-6
+        data = pd.DataFrame({"id": ids[on], "frame": frame[on].astype(np.int64), "x": x[on],
+                             "y": y[on]})
+        traj = pedpy.TrajectoryData(data=data, frame_rate=fps)
         walkable = pedpy.WalkableArea(shapely.from_wkt(scene.wkt))
         return traj, walkable
     path = pathlib.Path(run_or_sim)
