@@ -44,13 +44,18 @@ pub struct Polygon {
 }
 
 impl Polygon {
-    /// Twice the signed area (positive when counter-clockwise).
+    /// Twice the signed area (positive when counter-clockwise), by the shoelace formula about
+    /// the first vertex: about the origin it cancelled every digit far from it (a door of
+    /// 0.5 m² at x = 3·10⁸ m had area −2, a room of 36 m² at 10⁹ m had none).
     pub fn signed_area2(&self) -> f64 {
         let v = &self.vertices;
-        (0..v.len())
+        let Some(&o) = v.first() else {
+            return 0.0;
+        };
+        (1..v.len().saturating_sub(1))
             .map(|i| {
-                let (p, q) = (v[i], v[(i + 1) % v.len()]);
-                p[0] * q[1] - q[0] * p[1]
+                let (p, q) = (v[i], v[i + 1]);
+                (p[0] - o[0]) * (q[1] - o[1]) - (q[0] - o[0]) * (p[1] - o[1])
             })
             .sum()
     }
@@ -75,7 +80,8 @@ impl Polygon {
 
     /// Two edges that cross (not neighbours sharing their common vertex), if any: a polygon
     /// whose boundary crosses itself has no clear inside (`(i, j)`: edges `v_i → v_{i+1}` and
-    /// `v_j → v_{j+1}`). Repeated consecutive vertices are ignored.
+    /// `v_j → v_{j+1}`). Edges of zero length are skipped, but their neighbours are then
+    /// taken as not adjacent: the scene refuses repeated vertices before asking.
     pub fn self_intersection(&self) -> Option<(usize, usize)> {
         let v = &self.vertices;
         let n = v.len();
@@ -128,6 +134,20 @@ impl Polygon {
     }
 }
 
+/// Whether segments `p1 → p2` and `q1 → q2` cross at one point inside both (each one's ends
+/// strictly on either side of the other's line): touching at an end or running along each
+/// other is not crossing.
+pub fn segments_cross(p1: [f64; 2], p2: [f64; 2], q1: [f64; 2], q2: [f64; 2]) -> bool {
+    // Which side of `a → b` the point `c` is on: 1, −1, or 0 on the line (`signum` gives 1
+    // for 0).
+    let side = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        let d = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+        (d > 0.0) as i8 - (d < 0.0) as i8
+    };
+    let strictly = |x: i8, y: i8| x * y == -1;
+    strictly(side(p1, p2, q1), side(p1, p2, q2)) && strictly(side(q1, q2, p1), side(q1, q2, p2))
+}
+
 /// Point in the polygon with vertices `v` (even–odd rule), without building a [`Polygon`].
 pub fn ring_contains(v: &[[f64; 2]], p: [f64; 2]) -> bool {
     let mut inside = false;
@@ -178,6 +198,58 @@ impl Polygon {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_door_far_from_the_origin_kept_its_area() {
+        // About the origin, the shoelace formula gave this 1 m² door at (3·10⁸, 3·10⁸) m
+        // twice an area of 0.
+        let x = 3e8;
+        let door = Polygon {
+            vertices: vec![
+                [x + 9.5, x + 4.0],
+                [x + 10.0, x + 4.0],
+                [x + 10.0, x + 6.0],
+                [x + 9.5, x + 6.0],
+            ],
+        };
+        assert_eq!(door.signed_area2(), 2.0);
+        assert_eq!(door.clone().oriented(false).signed_area2(), -2.0);
+    }
+
+    #[test]
+    fn segments_cross_only_through_both_interiors() {
+        assert!(segments_cross(
+            [0.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [2.0, 0.0]
+        ));
+        // Touching at an end, a T, and running along each other are not crossing.
+        assert!(!segments_cross(
+            [0.0, 0.0],
+            [1.0, 1.0],
+            [1.0, 1.0],
+            [2.0, 0.0]
+        ));
+        assert!(!segments_cross(
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [1.0, 0.0],
+            [1.0, 1.0]
+        ));
+        assert!(!segments_cross(
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [1.0, 0.0],
+            [3.0, 0.0]
+        ));
+        assert!(!segments_cross(
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [2.0, -1.0],
+            [2.0, 1.0]
+        ));
+    }
 
     #[test]
     fn square_containment_distance_and_orientation() {

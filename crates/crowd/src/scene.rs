@@ -10,7 +10,7 @@ pub use moreau_solve::SolverKind;
 
 use crate::error::CrowdError;
 use crate::events::Inflow;
-use crate::geometry::{Polygon, Segment, ring_contains};
+use crate::geometry::{Polygon, Segment, ring_contains, segments_cross};
 
 /// The bounds a scene must keep so that building and running it cannot exhaust the machine:
 /// each is checked before anything is allocated, and an error names the field, its value and
@@ -531,6 +531,24 @@ pub(crate) fn check_polygon(field: &str, v: &[[f64; 2]]) -> Result<Polygon, Crow
     for (i, p) in v.iter().enumerate() {
         check_point(&format!("{field}[{i}]"), *p)?;
     }
+    // A repeated vertex is an edge of zero length, which the walls and the crossing check
+    // cannot use (it was refused as "the boundary crosses itself").
+    let n = v.len();
+    if let Some(i) = (1..=n).find(|&i| v[i - 1] == v[i % n]) {
+        let (at, why) = if i == n {
+            (
+                n - 1,
+                "repeats the first vertex: a ring closes by itself (leave the closing vertex out)",
+            )
+        } else {
+            (i, "repeats the vertex before it (list each vertex once)")
+        };
+        return Err(CrowdError::invalid(
+            format!("{field}[{at}]"),
+            format!("{:?}", v[at]),
+            why,
+        ));
+    }
     let poly = Polygon {
         vertices: v.to_vec(),
     };
@@ -649,20 +667,102 @@ impl Scene {
         toml::to_string(self).expect("a scene serializes")
     }
 
-    /// Checks every value that can be checked without building the scene.
-    pub fn validate(&self) -> Result<(), CrowdError> {
-        self.area.check_read()?;
+    /// The walkable area's outer ring, checked with the holes: its rings simple, each hole inside the outer ring (on it is fine:
+    /// an obstacle against a wall) and clear of the other holes but for touching, as PedPy
+    /// and shapely need it (until session 38 a hole's vertex on the outer ring's right or top
+    /// edge was refused, and holes that overlapped, lay in each other or crossed the outer
+    /// ring between their vertices were taken, and the run file's area then failed in PedPy).
+    fn check_area(&self) -> Result<Polygon, CrowdError> {
         let outer = check_polygon("area.outer", &self.area.outer)?;
+        let on = |ring: &Polygon, p: [f64; 2]| {
+            ring.boundary_distance(p) <= 1e-9 * p[0].abs().max(p[1].abs()).max(1.0)
+        };
+        let inside = |ring: &Polygon, p: [f64; 2]| ring.contains(p) && !on(ring, p);
+        let crossing = |a: &Polygon, b: &Polygon| {
+            a.edges().find_map(|e| {
+                b.edges()
+                    .find(|f| segments_cross(e.a, e.b, f.a, f.b))
+                    .map(|f| (e, f))
+            })
+        };
+        // A hole's vertices and the midpoints of its edges: one of them lies strictly inside
+        // another hole that overlaps it without an edge crossing (one inside the other).
+        let points = |ring: &Polygon| {
+            let v = ring.vertices.clone();
+            let mids: Vec<[f64; 2]> = ring
+                .edges()
+                .map(|e| [0.5 * (e.a[0] + e.b[0]), 0.5 * (e.a[1] + e.b[1])])
+                .collect();
+            v.into_iter().chain(mids)
+        };
+        let mut holes: Vec<(Polygon, [f64; 2], [f64; 2])> = Vec::new();
         for (h, hole) in self.area.holes.iter().enumerate() {
-            let poly = check_polygon(&format!("area.holes[{h}]"), hole)?;
-            if let Some(p) = poly.vertices.iter().find(|p| !outer.contains(**p)) {
+            let f = format!("area.holes[{h}]");
+            let poly = check_polygon(&f, hole)?;
+            if let Some(p) = poly
+                .vertices
+                .iter()
+                .find(|p| !outer.contains(**p) && !on(&outer, **p))
+            {
                 return Err(CrowdError::invalid(
-                    format!("area.holes[{h}]"),
+                    f,
                     format!("{p:?}"),
                     "hole vertex outside the outer polygon",
                 ));
             }
+            if let Some((e, o)) = crossing(&poly, &outer) {
+                return Err(CrowdError::invalid(
+                    f,
+                    format!("{hole:?}"),
+                    format!(
+                        "its edge {:?} → {:?} crosses the outer boundary's edge {:?} → {:?} \
+                         (a hole lies inside the outer polygon)",
+                        e.a, e.b, o.a, o.b
+                    ),
+                ));
+            }
+            let (lo, hi) = poly.bounds();
+            for (g, (other, olo, ohi)) in holes.iter().enumerate() {
+                if lo[0] > ohi[0] || lo[1] > ohi[1] || olo[0] > hi[0] || olo[1] > hi[1] {
+                    continue;
+                }
+                let overlap = crossing(&poly, other)
+                    .map(|(e, o)| {
+                        format!(
+                            "its edge {:?} → {:?} crosses area.holes[{g}]'s edge {:?} → {:?}",
+                            e.a, e.b, o.a, o.b
+                        )
+                    })
+                    .or_else(|| {
+                        points(&poly)
+                            .any(|p| inside(other, p))
+                            .then(|| format!("it lies in area.holes[{g}]"))
+                    })
+                    .or_else(|| {
+                        points(other)
+                            .any(|p| inside(&poly, p))
+                            .then(|| format!("area.holes[{g}] lies in it"))
+                    });
+                if let Some(why) = overlap {
+                    return Err(CrowdError::invalid(
+                        f,
+                        format!("{hole:?}"),
+                        format!(
+                            "{why}: holes may touch but not overlap (obstacles that overlap \
+                             are one hole: merge them)"
+                        ),
+                    ));
+                }
+            }
+            holes.push((poly, lo, hi));
         }
+        Ok(outer)
+    }
+
+    /// Checks every value that can be checked without building the scene.
+    pub fn validate(&self) -> Result<(), CrowdError> {
+        self.area.check_read()?;
+        let outer = self.check_area()?;
         let t = &self.time;
         for (f, v) in [
             ("time.horizon", t.horizon),

@@ -115,7 +115,10 @@ impl Area {
                         format!("cannot read {}: {e}", path.display()),
                     )
                 })?;
-                polygon_rings(&text).map_err(|why| {
+                // Editors on Windows start UTF-8 files with a byte-order mark (the TOML
+                // reader skips it too); WKT readers refused it as "non-ascii word".
+                let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+                polygon_rings(text).map_err(|why| {
                     CrowdError::invalid(
                         "area.wkt_file",
                         name,
@@ -203,10 +206,15 @@ fn polygon_rings(text: &str) -> Result<Rings, String> {
         .enumerate()
         .map(|(k, ring)| {
             let mut points: Vec<[f64; 2]> = ring.coords().iter().map(|c| [c.x, c.y]).collect();
+            // WKT may repeat a point (OGC allows it; scene rings list each vertex once).
+            points.dedup();
             match (points.first(), points.last()) {
                 (Some(a), Some(b)) if points.len() > 1 && a == b => {
                     points.pop();
                     Ok(points)
+                }
+                (Some(a), Some(_)) if points.len() == 1 => {
+                    Err(format!("ring {k} is the one point ({} {})", a[0], a[1]))
                 }
                 (Some(a), Some(b)) => Err(format!(
                     "ring {k} ({}) is not closed: it ends at ({} {}), not at its first point \

@@ -114,6 +114,11 @@ fn a_wkt_file_is_read_relative_to_the_scene_file() {
         ],
     );
 
+    // A file that starts with a byte-order mark (as editors on Windows write UTF-8) was
+    // refused as "non-ascii word".
+    std::fs::write(dir.join("geometry/room.wkt"), format!("\u{feff}{WKT}\n")).unwrap();
+    assert_eq!(Scene::from_file(dir.join("scene.toml")).unwrap(), rings);
+
     // A file that holds something else says which file and what.
     std::fs::write(dir.join("geometry/room.wkt"), "POINT (1 2)").unwrap();
     let msg = Scene::from_file(dir.join("scene.toml"))
@@ -248,4 +253,157 @@ fn mutated_wkt_gives_an_error_or_a_scene_whose_wkt_reads_back_to_it() {
         "{accepted} accepted, {refused} refused"
     );
     eprintln!("{accepted} accepted, {refused} refused");
+}
+
+/// The 10 m room's `[area]` with `holes`, by their rings.
+fn with_holes(holes: &str) -> String {
+    format!(
+        "[area]\nouter = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]\nholes = {holes}\n"
+    )
+}
+
+#[test]
+fn an_obstacle_against_the_right_or_top_wall_was_refused_as_outside() {
+    // The even–odd test is half-open: a hole's vertex on the outer ring's right or top edge
+    // counted as outside ("hole vertex outside the outer polygon"), on its left or bottom edge
+    // as inside. Obstacles against walls are common (JuPedSim geometries).
+    for hole in [
+        "[[0.0, 2.0], [1.0, 2.0], [1.0, 3.0], [0.0, 3.0]]",
+        "[[9.0, 2.0], [10.0, 2.0], [10.0, 3.0], [9.0, 3.0]]",
+        "[[2.0, 0.0], [3.0, 0.0], [3.0, 1.0], [2.0, 1.0]]",
+        "[[2.0, 9.0], [3.0, 9.0], [3.0, 10.0], [2.0, 10.0]]",
+    ] {
+        read(&with_holes(&format!("[{hole}]"))).unwrap_or_else(|e| panic!("{hole}: {e}"));
+    }
+    // Two obstacles side by side touch; a corner of the room is still outside.
+    read(&with_holes(
+        "[[[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]], [[3.0, 2.0], [4.0, 2.0], [4.0, 3.0], [3.0, 3.0]]]",
+    ))
+    .unwrap();
+    assert_mentions(
+        &error(&with_holes(
+            "[[[9.0, 2.0], [10.5, 2.0], [10.5, 3.0], [9.0, 3.0]]]",
+        )),
+        &[
+            "at area.holes[0]",
+            "[10.5, 2.0]",
+            "outside the outer polygon",
+        ],
+    );
+}
+
+#[test]
+fn overlapping_and_nested_holes_ran_and_their_file_failed_in_pedpy() {
+    // Holes that overlap, lie in one another, or leave the room between their vertices were
+    // taken; the run file's area then failed in PedPy ("Holes need to be inside the walkable
+    // area"). Now refused by name.
+    assert_mentions(
+        &error(&with_holes(
+            "[[[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]], [[2.5, 2.5], [3.5, 2.5], [3.5, 3.5], [2.5, 3.5]]]",
+        )),
+        &[
+            "at area.holes[1]",
+            "crosses area.holes[0]'s edge",
+            "merge them",
+        ],
+    );
+    assert_mentions(
+        &error(&with_holes(
+            "[[[1.0, 1.0], [5.0, 1.0], [5.0, 5.0], [1.0, 5.0]], [[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]]]",
+        )),
+        &["at area.holes[1]", "it lies in area.holes[0]"],
+    );
+    assert_mentions(
+        &error(&with_holes(
+            "[[[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]], [[1.0, 1.0], [5.0, 1.0], [5.0, 5.0], [1.0, 5.0]]]",
+        )),
+        &["at area.holes[1]", "area.holes[0] lies in it"],
+    );
+    // A triangle inscribed in a square: no vertex inside it, no edge crossing.
+    assert_mentions(
+        &error(&with_holes(
+            "[[[1.0, 1.0], [5.0, 1.0], [5.0, 5.0], [1.0, 5.0]], [[3.0, 1.0], [5.0, 3.0], [1.0, 3.0]]]",
+        )),
+        &["at area.holes[1]", "it lies in area.holes[0]"],
+    );
+    // An L-shaped room whose triangular hole has its vertices inside but an edge through the
+    // notch.
+    let msg = error(
+        "[area]\nouter = [[0.0, 0.0], [8.0, 0.0], [8.0, 3.0], [3.0, 3.0], [3.0, 8.0], [0.0, 8.0]]\n\
+         holes = [[[2.0, 2.0], [5.0, 2.0], [2.0, 5.0]]]\n",
+    );
+    assert_mentions(
+        &msg,
+        &["at area.holes[0]", "crosses the outer boundary's edge"],
+    );
+}
+
+#[test]
+fn a_ring_with_its_closing_vertex_was_refused_as_crossing_itself() {
+    // A repeated vertex is an edge of zero length; the crossing check then took its
+    // neighbours for non-adjacent edges and said "the boundary crosses itself".
+    let msg =
+        error("[area]\nouter = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0], [0.0, 0.0]]\n");
+    assert_mentions(
+        &msg,
+        &[
+            "at area.outer[4]",
+            "repeats the first vertex",
+            "leave the closing vertex out",
+        ],
+    );
+    assert!(!msg.contains("crosses itself"), "{msg}");
+    let msg = error(
+        "[area]\nouter = [[0.0, 0.0], [10.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]\n",
+    );
+    assert_mentions(&msg, &["at area.outer[2]", "repeats the vertex before it"]);
+    // WKT may repeat a point (OGC allows it): the same scene as without it.
+    let repeated = read(
+        "area = \"POLYGON ((0 0, 10 0, 10 0, 10 10, 0 10, 0 0), (4 4, 6 4, 6 6, 4 6, 4 6, 4 4))\"",
+    )
+    .unwrap();
+    assert_eq!(repeated, read(RINGS).unwrap());
+    assert_mentions(
+        &error("area = \"POLYGON ((0 0, 0 0))\""),
+        &["at area = POLYGON", "ring 0 is the one point (0 0)"],
+    );
+}
+
+#[test]
+fn a_room_3e8_m_from_the_origin_had_a_door_of_zero_area() {
+    // The shoelace formula about the origin cancelled every digit of a small polygon far
+    // from it: a 0.5 m² door at x = 3·10⁸ m had area −2 or 0 ("polygon has zero area"), a
+    // 36 m² room at 10⁹ m none; scenes may lie within ±10¹⁵ m.
+    for shift in [3e8, 1e9, 1e12] {
+        let ring = |v: &[[f64; 2]]| {
+            let pts: Vec<String> = v
+                .iter()
+                .map(|p| format!("[{:?}, {:?}]", p[0] + shift, p[1] + shift))
+                .collect();
+            format!("[{}]", pts.join(", "))
+        };
+        let text = scene_text(&with_holes("[]"))
+            .replace(
+                "outer = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]",
+                &format!(
+                    "outer = {}",
+                    ring(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+                ),
+            )
+            .replace(
+                "area = [[9.5, 4.0], [10.0, 4.0], [10.0, 6.0], [9.5, 6.0]]",
+                &format!(
+                    "area = {}",
+                    ring(&[[9.5, 4.0], [10.0, 4.0], [10.0, 6.0], [9.5, 6.0]])
+                ),
+            )
+            .replace(
+                "spawn = [[0.5, 0.5], [3.0, 0.5], [3.0, 9.5], [0.5, 9.5]]",
+                &format!(
+                    "spawn = {}",
+                    ring(&[[0.5, 0.5], [3.0, 0.5], [3.0, 9.5], [0.5, 9.5]])
+                ),
+            );
+        Scene::from_toml(&text, "<test>").unwrap_or_else(|e| panic!("{shift}: {e}"));
+    }
 }
