@@ -854,17 +854,28 @@ impl Simulation {
         while n > 0 && past(n - 1) {
             n -= 1;
         }
+        // An output time within the shortest step of the horizon (before it, or past it by
+        // rounding) is the horizon's frame: a frame 10⁻⁹ s before it (0.7 s for a horizon of
+        // 0.700000001 s) left a last step too short to certify.
+        let near = |k: usize| k > 0 && horizon - at(k) <= self.shortest_span();
         // Whether frame `n` is the horizon's, the output times before it falling short of it.
-        let cut = n > 0 && !self.stepping.reached(at(n - 1), horizon);
+        let cut = n > 0 && !near(n - 1);
         let k = self.frames;
         if k < n {
-            // An output time just past the horizon by rounding is the horizon's frame.
-            at(k).min(horizon)
+            if near(k) { horizon } else { at(k) }
         } else if k == n && cut {
             horizon
         } else {
             at(k - usize::from(cut))
         }
+    }
+
+    /// The shortest span between two stops the driver makes a step of:
+    /// [`SHORTEST_LAST`](moreau_integrate::SHORTEST_LAST) of the longest step. A frame closer
+    /// than that to the stop after it is taken at that stop (a step of 10⁻⁹ s, between a frame
+    /// and a host's time stored in single precision, cannot be certified in doubles).
+    fn shortest_span(&self) -> f64 {
+        moreau_integrate::SHORTEST_LAST * self.stepping.largest_step()
     }
 
     /// Steps to `t_end` (fixed or adaptive, as the scene says), telling `observer` of every
@@ -932,9 +943,20 @@ impl Simulation {
         }
         loop {
             let output = self.next_output();
-            let stop = output.min(t_end);
+            // A `t_end` past the frame by more than rounding but less than the shortest span
+            // is where that frame is taken: the step after the frame would be too short to
+            // certify.
+            let merged = output < t_end
+                && !self.stepping.reached(output, t_end)
+                && t_end - output < self.shortest_span();
+            let (stop, at_frame) = if merged {
+                (t_end, true)
+            } else {
+                let stop = output.min(t_end);
+                (stop, stop == output)
+            };
             let seen = self.exit_log.len();
-            match self.step_towards(stop, stop == output)? {
+            match self.step_towards(stop, at_frame)? {
                 Some(report) => {
                     observer.step(&report).map_err(CrowdError::Observer)?;
                     for record in &self.exit_log[seen..] {
@@ -949,7 +971,7 @@ impl Simulation {
                     // The frame is due when the step reached its time, or `t_end` reached it
                     // by rounding (`advance_to(0.6)` with 6 × 0.1 = 0.6000000000000001: the
                     // frame came one call late).
-                    if stop == output || self.stepping.reached(self.t, output) {
+                    if at_frame || self.stepping.reached(self.t, output) {
                         observer
                             .frame(&self.frame())
                             .map_err(CrowdError::Observer)?;

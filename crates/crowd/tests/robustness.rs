@@ -321,6 +321,37 @@ fn advance_to_0_6_gave_the_frame_of_0_6_s_one_call_late() {
 }
 
 #[test]
+fn a_horizon_of_0_700000001_s_failed_its_last_step_of_1e_minus_9_s() {
+    // A stop just past a multiple of the step left a last step of 10⁻⁹ s, whose ε = κ μ³
+    // (~10⁻³⁰) no projection certifies in doubles: `moreau run` failed at the horizon, and a
+    // host whose communication step is 0.05 s in single precision failed at t = 1.65 s.
+    let text = room(&[("horizon = 15.0", "horizon = 0.700000001")]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut frames = FrameTimes::default();
+    sim.run(&mut frames).unwrap();
+    assert_eq!(sim.steps(), 14);
+    assert!((sim.time() - 0.700000001).abs() < 1e-15);
+    // The output time 0.7 s is the horizon's frame.
+    assert_eq!(frames.0.len(), 8, "{:?}", frames.0);
+    assert_eq!(*frames.0.last().unwrap(), 0.700000001);
+    // A horizon shorter than the shortest span keeps its frame (the first frame, at the
+    // start, is not the horizon's).
+    let text = room(&[("horizon = 15.0", "horizon = 0.0001")]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut frames = FrameTimes::default();
+    sim.run(&mut frames).unwrap();
+    assert_eq!(frames.0, [0.0, 0.0001]);
+    let text = room(&[]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let h = 0.05_f32 as f64;
+    for k in 1..=40 {
+        sim.advance_to(k as f64 * h, &mut ())
+            .unwrap_or_else(|e| panic!("advance_to({}): {e}", k as f64 * h));
+    }
+    assert_eq!(sim.steps(), 40, "one step a communication step");
+}
+
+#[test]
 fn advance_to_1e300_asked_for_10_to_the_301_steps_and_ran_until_killed() {
     let text = room(&[]);
     let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();

@@ -21,4 +21,4 @@ pub use correction::{
 };
 pub use error::IntegrateError;
 pub use scheme::{EpsPolicy, Scheme, Selection, StepSequence};
-pub use stepping::{MAX_STEPS, Stepping, SteppingState, fixed_step};
+pub use stepping::{MAX_STEPS, SHORTEST_LAST, Stepping, SteppingState, fixed_step};

@@ -17,15 +17,25 @@ pub const MAX_STEPS: f64 = 1e9;
 /// The next of equal steps `h` that cover `remaining` with the last one shortened: `h` while
 /// more than one step is left, then what is left (taken as `h` when within `10⁻⁹ h` of it:
 /// rounding in the sum of the steps, so that spans that are multiples of `h` are covered by steps of exactly
-/// `h`); `None` once what is left is below `10⁻⁹ h`. Callers pass an `h` no longer than the
-/// span they cover: of a span below `10⁻⁹ h` nothing is taken.
+/// `h`); `None` once what is left is below `10⁻⁹ h`. A last step shorter than
+/// [`SHORTEST_LAST`]` × h` is not taken: the step before it takes what is left, at most 1 %
+/// longer than `h` (so no step is shorter than `SHORTEST_LAST × h` unless the span is).
+/// Callers pass an `h` no longer than the span they cover: of a span below `10⁻⁹ h` nothing
+/// is taken.
 pub fn fixed_step(h: f64, remaining: f64) -> Option<f64> {
     let n = (remaining / h - 1e-9).ceil();
     if !(n >= 1.0) {
         return None;
     }
-    if n > 1.0 {
+    if n > 2.0 {
         return Some(h);
+    }
+    if n == 2.0 {
+        return Some(if remaining - h < SHORTEST_LAST * h {
+            remaining
+        } else {
+            h
+        });
     }
     Some(if (remaining - h).abs() <= 1e-9 * h {
         h
@@ -33,6 +43,14 @@ pub fn fixed_step(h: f64, remaining: f64) -> Option<f64> {
         remaining
     })
 }
+
+/// The shortest last step [`fixed_step`] takes, as a share of `h`. A stop just past a
+/// multiple of the step (a host's communication time stored in single precision, 0.05 s as
+/// 0.05000000074505806; a horizon of 0.700000001 s) left a last step of 10⁻⁹ s, whose
+/// `ε = κ μ³` (~10⁻³⁰) no projection certifies in doubles: the run failed there, and at every
+/// retry. (Stretching the step before, not halving the two last ones: such a host's every
+/// communication step is one step, as with 0.05 exactly.)
+pub const SHORTEST_LAST: f64 = 0.01;
 
 /// How steps are chosen, with what the next step depends on.
 #[derive(Debug, Clone)]
@@ -180,5 +198,40 @@ mod tests {
         assert!(steps.iter().all(|&mu| mu == 0.05));
         assert_eq!(fixed_step(0.1, 0.0), None);
         assert_eq!(fixed_step(0.1, 1e-12), None);
+    }
+
+    #[test]
+    fn a_stop_1e_minus_9_s_past_a_multiple_of_the_step_left_a_step_of_1e_minus_9_s() {
+        let cover = |h: f64, span: f64| {
+            let (mut t, mut steps) = (0.0, Vec::new());
+            while let Some(mu) = fixed_step(h, span - t) {
+                steps.push(mu);
+                t += mu;
+            }
+            (t, steps)
+        };
+        for (h, span) in [
+            (0.05, 0.700000001),
+            (0.05, 0.7 + 0.0004),
+            (0.05, 0.05 + 1e-8),
+        ] {
+            let (t, steps) = cover(h, span);
+            assert!((t - span).abs() < 1e-12, "{h} {span}: {steps:?}");
+            let n = steps.len();
+            assert_eq!(n, (span / h).floor() as usize, "{h} {span}: {steps:?}");
+            assert!(
+                steps[..n - 1].iter().all(|&mu| mu == h),
+                "{h} {span}: {steps:?}"
+            );
+            // The last step takes what is left: at most 1 % longer than h.
+            assert!(
+                steps[n - 1] > h && steps[n - 1] < 1.01 * h,
+                "{h} {span}: {steps:?}"
+            );
+        }
+        // From 1 % of h the last step is what is left, as before.
+        let (_, steps) = cover(0.05, 0.7 + 0.001);
+        assert!((steps[steps.len() - 1] - 0.001).abs() < 1e-12, "{steps:?}");
+        assert_eq!(steps[steps.len() - 2], 0.05);
     }
 }
