@@ -619,3 +619,62 @@ def test_advance_to_1e300_ran_until_killed():
     with pytest.raises(Exception, match=r"t_end = 1e300.*2\.000e301 steps.*limit of 1e9"):
         sim.advance_to(1e300)
     assert sim.time == 0.0 and sim.steps == 0
+
+
+def test_step_recorded_each_frame_one_call_late_and_never_the_horizons():
+    """Regression: `step()` gave the frame where it landed only at the next call, so stepping
+    to a horizon of 0.3 s recorded 0, 0.1 and 0.2 s (`advance_to` recorded 0.3 s too)."""
+    scene = short_room(0.3)
+    a = moreau.Simulation(scene, record=True)
+    while a.time < scene.horizon - 1e-12:
+        a.step()
+        assert abs(a.recorded_frames()[1].max() - a.time) < 0.05 + 1e-12
+    b = moreau.Simulation(scene, record=True)
+    b.advance_to(scene.horizon)
+    for x, y in zip(a.recorded_frames(), b.recorded_frames()):
+        assert np.array_equal(x, y)
+    assert np.allclose(np.unique(a.recorded_frames()[1]), [0.0, 0.1, 0.2, 0.3], atol=1e-12)
+
+
+def test_a_rollback_kept_the_frames_of_the_branch_it_gave_up():
+    """Regression: `restore` left the frames recorded after the saved state, so a roll-back
+    gave `recorded_frames` (and `to_pedpy`) two rows for each person at each frame after it."""
+    scene = short_room(0.8)
+    sim = moreau.Simulation(scene, record=True)
+    sim.advance_to(0.5)
+    saved = sim.state()
+    sim.set_speed_factor(0.0)
+    sim.advance_to(0.8)
+    sim.restore(saved)
+    sim.advance_to(0.8)
+    straight = moreau.Simulation(scene, record=True)
+    straight.advance_to(0.8)
+    for x, y in zip(sim.recorded_frames(), straight.recorded_frames()):
+        assert np.array_equal(x, y)
+    traj, _ = moreau.to_pedpy(sim)
+    assert not traj.data.duplicated(["id", "frame"]).any()
+
+
+def test_run_to_file_counted_people_left_past_zero_once_entrants_had_left(tmp_path):
+    """Regression: the last progress call counted the people at the start less everyone out:
+    once people from sources had left it wrapped to 18446744073709551569 (gate-inflow)."""
+    d = moreau.Scene.from_file(ROOT / "data" / "scenes" / "gate-inflow.toml").to_dict()
+    calls = []
+    moreau.run_to_file(moreau.Scene.from_dict(d), str(tmp_path / "g.h5"),
+                       progress=lambda t, steps, left: calls.append(left))
+    with h5py.File(tmp_path / "g.h5") as f:
+        everyone, out = len(f["people/id"]), len(f["exits"])
+    assert out > 20, "people from sources left"
+    assert calls[-1] == everyone - out, calls[-3:]
+
+
+def test_moreau_run_wrote_the_run_file_over_its_own_scene_file(tmp_path):
+    """Regression: `moreau.run("s.toml", "s.toml", force=True)` replaced the scene file by
+    the run file; `moreau run s.toml -o s.toml --force` refuses, and so does it now."""
+    path = tmp_path / "s.toml"
+    path.write_text(short_room(0.2).to_toml())
+    before = path.read_bytes()
+    for output in (path, tmp_path / "." / "s.toml"):
+        with pytest.raises(ValueError, match="a run never writes over its input"):
+            moreau.run(str(path), output, force=True)
+    assert path.read_bytes() == before

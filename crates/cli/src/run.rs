@@ -99,25 +99,6 @@ fn command_line() -> String {
     std::env::args().collect::<Vec<_>>().join(" ")
 }
 
-/// Whether two paths name the same file; for a path that does not exist yet, whether its
-/// directory and name are the other's.
-fn same_file(a: &Path, b: &Path) -> bool {
-    fn resolved(p: &Path) -> Option<PathBuf> {
-        if let Ok(c) = p.canonicalize() {
-            return Some(c);
-        }
-        let parent = match p.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        Some(parent.canonicalize().ok()?.join(p.file_name()?))
-    }
-    match (resolved(a), resolved(b)) {
-        (Some(x), Some(y)) => x == y,
-        _ => a == b,
-    }
-}
-
 /// Checks the output and the summary paths before anything is read or written: an output or
 /// a summary never replaces an input (the scene, the --from file) or each other, and a summary
 /// obeys the same rules as the output (its directory exists, --force to replace it).
@@ -129,7 +110,7 @@ fn check_paths(args: &RunArgs, overwrite: Overwrite) -> Result<()> {
     if let Some(path) = &args.output {
         // Before the (possibly long) set-up: a bad path fails at once.
         moreau_io::check_output(path, overwrite)?;
-        if let Some((what, _)) = inputs.iter().find(|(_, i)| same_file(path, i)) {
+        if let Some((what, _)) = inputs.iter().find(|(_, i)| moreau_io::same_file(path, i)) {
             bail!(
                 "--output '{}' is {what}: a run never writes over its input",
                 path.display()
@@ -139,14 +120,17 @@ fn check_paths(args: &RunArgs, overwrite: Overwrite) -> Result<()> {
     if let Some(summary) = &args.summary_json
         && summary.as_os_str() != "-"
     {
-        if let Some((what, _)) = inputs.iter().find(|(_, i)| same_file(summary, i)) {
+        if let Some((what, _)) = inputs
+            .iter()
+            .find(|(_, i)| moreau_io::same_file(summary, i))
+        {
             bail!(
                 "--summary-json '{}' is {what}: a run never writes over its input",
                 summary.display()
             );
         }
         if let Some(out) = &args.output
-            && same_file(summary, out)
+            && moreau_io::same_file(summary, out)
         {
             bail!(
                 "--summary-json '{}' is the --output file: give the summary its own file",

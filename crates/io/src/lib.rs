@@ -58,4 +58,6 @@ pub use background::{BackgroundWriter, RunSink};
 pub use error::IoError;
 pub use layout::{ContactRow, ExitRow, FORMAT, FORMATS_READ, RunHeader, StepRow, TrajectoryRow};
 pub use reader::RunFile;
-pub use writer::{FailPoint, Overwrite, Resumed, RunWriter, check_output, lock_path, partial_path};
+pub use writer::{
+    FailPoint, Overwrite, Resumed, RunWriter, check_output, lock_path, partial_path, same_file,
+};

@@ -322,6 +322,25 @@ pub(crate) fn without_locking() -> hdf5::FileBuilder {
     b
 }
 
+/// Whether two paths name the same file; for a path that does not exist yet, whether its
+/// directory and name are the other's.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    fn resolved(p: &Path) -> Option<PathBuf> {
+        if let Ok(c) = p.canonicalize() {
+            return Some(c);
+        }
+        let parent = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        Some(parent.canonicalize().ok()?.join(p.file_name()?))
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
+}
+
 /// Checks that `path` can be created, before anything is made: the parent is a directory
 /// that exists, the path is not a directory, and an existing file is replaced only if asked.
 pub fn check_output(path: &Path, overwrite: Overwrite) -> Result<(), IoError> {

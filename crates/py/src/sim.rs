@@ -277,7 +277,14 @@ impl PySimulation {
         let mut guard = self.lock()?;
         let inner: &mut Inner = &mut guard;
         let report = py
-            .detach(|| inner.one_step(f64::MAX))
+            .detach(|| -> Result<_, CrowdError> {
+                let report = inner.one_step(f64::MAX)?;
+                // The frames due where the step ended, as `advance_to` gives them: they came
+                // with the next call, and the horizon's not at all.
+                let t = inner.sim.time();
+                inner.one_step(t)?;
+                Ok(report)
+            })
             .map_err(crowd_err)?
             .expect("a step towards the next output time");
         inner.warn(py)?;
@@ -349,7 +356,7 @@ impl PySimulation {
         Ok(PyArray1::from_vec(py, v))
     }
 
-    /// People at the start.
+    /// Everyone so far: the people at the start and those who entered from sources.
     #[getter]
     fn total_people(&self) -> PyResult<usize> {
         Ok(self.lock()?.sim.total_people())
@@ -381,9 +388,10 @@ impl PySimulation {
     }
 
     /// The contact forces of the last step (multipliers `λ > 10⁻⁶` m/s, the run file's
-    /// `/contacts`): a dict of numpy arrays `kind` (uint8: 0 person–person, 1 person–wall),
-    /// `a` (uint32, a person id), `b` (uint32, the other person's id or the wall's row in
-    /// the run file's `/walls`), `lambda` (float64, m/s).
+    /// `/contacts`): a dict of numpy arrays `kind` (uint8: 0 person–person, 1 person–wall,
+    /// 2 person–moving wall), `a` (uint32, a person id), `b` (uint32, the other person's id,
+    /// the wall's row in the run file's `/walls`, or the moving segment's column in its
+    /// `/frames/moving_walls`), `lambda` (float64, m/s).
     fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let inner = self.lock()?;
         let frame = inner.sim.frame();
@@ -428,6 +436,10 @@ impl PySimulation {
         let state = SimState::from_bytes(state).map_err(|e| to_py(py, e))?;
         inner.sim.restore(&state).map_err(|e| to_py(py, e))?;
         inner.last = None;
+        // The frames recorded after the saved one belong to a branch given up: kept, a
+        // roll-back gave `to_pedpy` two rows for each person at each of their frames.
+        let frames = inner.sim.frames();
+        inner.frames.truncate(frames);
         Ok(())
     }
 
@@ -472,7 +484,9 @@ impl PySimulation {
             .map_err(|e| to_py(py, e))
     }
 
-    /// Whether each exit is open, in the scene's order.
+    /// Whether each exit is open, in the scene's order, as `set_exit_open` left it (an exit
+    /// with a panel, `closes` or `opens` in the scene, is also shut by the panel on its own
+    /// schedule, whatever this says).
     fn exits_open(&self) -> PyResult<Vec<bool>> {
         let inner = self.lock()?;
         Ok((0..self.scene.scene.exits.len())
@@ -582,6 +596,17 @@ pub fn run_to_file(
     command: Option<String>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<String> {
+    // A run never writes over its input (`moreau run` refuses it too): `moreau.run("s.toml",
+    // "s.toml", force=True)` replaced the scene file by the run file.
+    if scene.cast::<PyScene>().is_err()
+        && let Ok(path) = scene.extract::<PathBuf>()
+        && moreau_io::same_file(&output, &path)
+    {
+        return Err(PyValueError::new_err(format!(
+            "output '{}' is the scene file: a run never writes over its input",
+            output.display()
+        )));
+    }
     let scene = scene_of(scene)?;
     let origin = match scene.scene.name.as_str() {
         "" => "<python>".to_string(),
@@ -661,7 +686,14 @@ pub fn run_to_file(
     if let Some(p) = &progress {
         p.call1(
             py,
-            (sim.time(), sim.steps(), people - sim.exit_records().len()),
+            // Everyone so far (those who entered too) less those out, as the steps' calls
+            // count them: the people at the start less those out wrapped around once people
+            // from sources had left.
+            (
+                sim.time(),
+                sim.steps(),
+                sim.total_people().saturating_sub(sim.exit_records().len()),
+            ),
         )?;
     }
     outcome.map_err(|e| to_py(py, e))?;

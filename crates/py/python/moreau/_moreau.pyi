@@ -127,8 +127,10 @@ class Simulation:
     def exit_records(self) -> list[tuple[int, int, float]]:
         """``(id, exit index, t)`` of everyone who passed an exit, in order."""
     def contacts(self) -> Contacts:
-        """The last step's contact forces: ``kind`` (0 person–person, 1 person–wall), ``a``,
-        ``b`` (ids; for a wall its row in the run file's ``/walls``), ``lambda`` (m/s)."""
+        """The last step's contact forces: ``kind`` (0 person–person, 1 person–wall, 2
+        person–moving wall), ``a``, ``b`` (ids; for a wall its row in the run file's
+        ``/walls``, for a moving wall its column in ``/frames/moving_walls``), ``lambda``
+        (m/s)."""
     def desired_velocities(self) -> npt.NDArray[np.float64]: ...
     def state(self) -> bytes: ...
     def restore(self, state: bytes) -> None: ...
