@@ -28,6 +28,11 @@ impl Segment {
         ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt()
     }
 
+    /// The length.
+    pub fn length(&self) -> f64 {
+        (self.b[0] - self.a[0]).hypot(self.b[1] - self.a[1])
+    }
+
     /// The unit normal on the left of `a → b` (the walkable side of a wall).
     pub fn left_normal(&self) -> [f64; 2] {
         let d = [self.b[0] - self.a[0], self.b[1] - self.a[1]];

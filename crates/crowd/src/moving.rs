@@ -164,7 +164,14 @@ impl MovingBodies {
             .moving
             .iter()
             .cloned()
-            .chain(scene.exits.iter().filter_map(exit_panel))
+            .chain({
+                let walls = scene.walls();
+                scene
+                    .exits
+                    .iter()
+                    .filter_map(move |e| exit_panel(e, &walls))
+                    .collect::<Vec<_>>()
+            })
             .collect();
         Self {
             bodies: all.iter().map(Body::new).collect(),
@@ -310,7 +317,7 @@ impl MovingBodies {
 /// The panel of an exit that `closes` or `opens` over an interval: a body `exit:NAME` along the
 /// exit's closing line `a → b`, which is the line itself when closed and shifted by `a − b`
 /// (beyond `a`, into the wall of a door) when open.
-pub fn exit_panel(exit: &Exit) -> Option<MovingBody> {
+pub fn exit_panel(exit: &Exit, walls: &[Segment]) -> Option<MovingBody> {
     if exit.closes.is_none() && exit.opens.is_none() {
         return None;
     }
@@ -320,6 +327,7 @@ pub fn exit_panel(exit: &Exit) -> Option<MovingBody> {
     let line = crate::exits::closure(
         area.as_ref(),
         exit.segment.map(|s| Segment { a: s[0], b: s[1] }),
+        walls,
     );
     let open = [line.a[0] - line.b[0], line.a[1] - line.b[1]];
     let key = |t: f64, offset: [f64; 2]| Keyframe {

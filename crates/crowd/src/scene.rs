@@ -958,6 +958,37 @@ impl Scene {
                     format!("overlaps closes = {c:?}: the panel cannot move both ways at once"),
                 ));
             }
+            // A panel parks beside the door, beyond an end of the line across it: an area
+            // with no walls at the ends of that line is not in a doorway, and its panel
+            // would stand in the room while the exit is open (an invisible wall).
+            if let (Some(area), Some((name, _))) = (
+                &exit.area,
+                [("closes", exit.closes), ("opens", exit.opens)]
+                    .into_iter()
+                    .find(|(_, i)| i.is_some()),
+            ) {
+                let walls = self.walls();
+                let poly = Polygon {
+                    vertices: area.clone(),
+                };
+                let line = crate::exits::closure(Some(&poly), None, &walls);
+                let off = crate::exits::ends_off_walls(&line, &walls);
+                if !(off <= 0.05 * line.length()) {
+                    return Err(CrowdError::invalid(
+                        format!("{f}.{name}"),
+                        format!("{:?}", exit.closes.or(exit.opens).unwrap_or_default()),
+                        format!(
+                            "the exit's area is not in a doorway: the line across it, {:?} → \
+                             {:?}, ends {} m from the nearest wall, so its panel would stand \
+                             in the room while open (give the exit an area between the door's \
+                             jambs, or a segment across the door)",
+                            line.a,
+                            line.b,
+                            Num(off)
+                        ),
+                    ));
+                }
+            }
             match (exit.action, &exit.target) {
                 (ExitAction::Continue, Some(t)) => {
                     check_polygon(&format!("{f}.target"), t)?;

@@ -524,9 +524,9 @@ impl Simulation {
     }
 
     /// Opens or closes exit `e` (a scene change, from the next step on). A closed exit is a
-    /// wall: its segment, or for an area the mid-line of the area's bounding box along its
-    /// longer side; nobody passes it, and people standing in it are pushed out to the side
-    /// their centre is on. Reopening removes the wall.
+    /// wall: its segment, or for an area its mid-line across the doorway
+    /// (`exits::closure`); nobody passes it, and people standing in it are pushed out to the
+    /// side their centre is on. Reopening removes the wall.
     pub fn set_exit_open(&mut self, e: usize, open: bool) -> Result<(), CrowdError> {
         let count = self.exits.exits.len();
         let Some(exit) = self.exits.exits.get_mut(e) else {

@@ -754,3 +754,126 @@ fn a_body_too_fast_for_any_step_is_an_error_not_a_run_that_never_ends() {
         other => panic!("expected an error, got {other:?}"),
     }
 }
+
+/// A 10 m × 6 m room split by a wall 1 m thick (x from 6 to 7) with a door 0.9 m wide in it,
+/// the exit's area filling the doorway; `exit` edits that exit.
+fn thick_door(exit: &str) -> String {
+    format!(
+        r#"
+name = "thick-door"
+seed = 2
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 2.55], [7.0, 2.55], [7.0, 0.0], [10.0, 0.0],
+         [10.0, 6.0], [7.0, 6.0], [7.0, 3.45], [6.0, 3.45], [6.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "door"
+{exit}
+action = "remove"
+[[groups]]
+name = "g"
+count = 30
+spawn = [[0.5, 0.5], [5.5, 0.5], [5.5, 5.5], [0.5, 5.5]]
+radius = {{ min = 0.15, max = 0.2 }}
+speed = 1.2
+destination = "door"
+[time]
+horizon = 6.0
+step = 0.05
+output_interval = 0.1
+"#
+    )
+}
+
+#[test]
+fn a_deep_doors_panel_ran_along_its_passage_and_people_walked_through_it_closed() {
+    // The line that closes an exit area was the mid-line along the area's longer side: for a
+    // door 1 m deep and 0.9 m wide it ran along the passage, splitting it into two lanes, and
+    // people walked through the "closed" door (while open, the panel stood in the room).
+    let text = thick_door(
+        "area = [[6.0, 2.55], [7.0, 2.55], [7.0, 3.45], [6.0, 3.45]]\ncloses = [0.1, 0.5]",
+    );
+    let mut sim = Simulation::new(scene(&text)).unwrap();
+    let mut segments = Vec::new();
+    sim.moving().segments_at(0.0, &mut segments);
+    // Open, the panel is inside the wall below the door; closed, across it at x = 6.5.
+    let inside_wall = |p: [f64; 2]| (6.0..=7.0).contains(&p[0]) && p[1] <= 2.55 + 1e-12;
+    assert!(
+        inside_wall(segments[0].a) && inside_wall(segments[0].b),
+        "{segments:?}"
+    );
+    while sim.advance_step(6.0, &mut ()).unwrap().is_some() {
+        if sim.time() >= 0.5 {
+            let beyond = sim
+                .people()
+                .positions()
+                .chunks(2)
+                .filter(|p| p[0] > 6.5)
+                .count();
+            assert_eq!(
+                beyond,
+                0,
+                "t = {}: people beyond the closed panel",
+                sim.time()
+            );
+        }
+    }
+    sim.moving().segments_at(6.0, &mut segments);
+    let panel = segments[0];
+    assert!(
+        (panel.a[0] - 6.5).abs() < 1e-12 && (panel.b[0] - 6.5).abs() < 1e-12,
+        "{panel:?}"
+    );
+    assert!(sim.exit_records().iter().all(|r| r.t <= 0.5));
+    // A set_exit_open(false) closes the same line.
+    let text = thick_door("area = [[6.0, 2.55], [7.0, 2.55], [7.0, 3.45], [6.0, 3.45]]");
+    let mut sim = Simulation::new(scene(&text)).unwrap();
+    sim.set_exit_open(0, false).unwrap();
+    sim.advance_to(6.0, &mut ()).unwrap();
+    assert!(sim.exit_records().is_empty());
+    assert!(sim.people().positions().chunks(2).all(|p| p[0] <= 6.5));
+    // An area in the room, with no walls at the ends of the line across it: its panel
+    // would stand in the room while open. Refused.
+    let text =
+        thick_door("area = [[4.0, 2.5], [4.5, 2.5], [4.5, 3.5], [4.0, 3.5]]\ncloses = [5.0, 6.0]");
+    match Scene::from_toml(&text, "<test>") {
+        Err(CrowdError::Invalid { field, reason, .. }) => {
+            assert_eq!(field, "exits[0].closes");
+            assert!(reason.contains("not in a doorway"), "{reason}");
+        }
+        other => panic!("accepted: {other:?}"),
+    }
+}
+
+#[test]
+fn a_panel_leaving_2_5_cm_of_a_door_let_people_of_0_4_m_out() {
+    // An exit line partly covered by its panel counted everyone whose edge came near the part
+    // left open, however short: people of 0.4 m left through 8.7 mm and 2.5 cm.
+    let text = r#"
+name = "panel"
+seed = 3
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "door"
+segment = [[6.0, 2.5], [6.0, 3.5]]
+action = "remove"
+closes = [0.5, 4.5]
+[[groups]]
+name = "g"
+count = 40
+spawn = [[3.0, 0.5], [5.7, 0.5], [5.7, 5.5], [3.0, 5.5]]
+radius = 0.2
+speed = 1.5
+destination = "door"
+[time]
+horizon = 6.0
+step = 0.05
+output_interval = 0.05
+"#;
+    let mut sim = Simulation::new(scene(text)).unwrap();
+    sim.advance_to(6.0, &mut ()).unwrap();
+    // The panel covers the 1 m door linearly from 0.5 s to 4.5 s: 0.4 m is left at 2.9 s.
+    let times: Vec<f64> = sim.exit_records().iter().map(|r| r.t).collect();
+    assert!(!times.is_empty());
+    assert!(times.iter().all(|&t| t <= 2.9 + 1e-9), "{times:?}");
+}
