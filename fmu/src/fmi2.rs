@@ -189,7 +189,7 @@ pub extern "C" fn fmi2SetupExperiment(
                 "startTime = {start_time}: not a finite number"
             )));
         }
-        comp.instance.settings.start_time = start_time;
+        comp.instance.set_start_time(start_time);
         Ok(())
     })
 }

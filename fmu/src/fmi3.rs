@@ -218,7 +218,7 @@ pub extern "C" fn fmi3EnterInitializationMode(
         }
         comp.instance
             .expect("fmi3EnterInitializationMode", &[State::Instantiated])?;
-        comp.instance.settings.start_time = start_time;
+        comp.instance.set_start_time(start_time);
         comp.instance.enter_initialization()
     })
 }

@@ -95,6 +95,17 @@ impl std::fmt::Debug for Instance {
 }
 
 impl Instance {
+    /// Sets the start time (`fmi2SetupExperiment`, `fmi3EnterInitializationMode`, both in
+    /// Instantiated, before any step). A model already built (by reading `n_people` or setting
+    /// an input first) starts there too: it kept the time 0 it was built with, and the first
+    /// `doStep` at the start time was refused.
+    pub fn set_start_time(&mut self, t: f64) {
+        self.settings.start_time = t;
+        if let Some(model) = self.model.as_mut() {
+            model.set_start_time(t);
+        }
+    }
+
     /// A new instance in state `Instantiated`.
     pub fn new(name: String, resources: Option<PathBuf>, logging_on: bool, log: LogFn) -> Self {
         Self {

@@ -292,3 +292,89 @@ def test_fmi3_refuses_a_wrong_instantiation_token_and_the_host_survives(fmus, tm
     out = proc.stdout
     assert out.count("RESULT error") == 2 and out.rstrip().endswith("ALIVE"), out
     assert "wrong instantiation token" in out and "DoStep is not allowed in state Instantiated" in out, out
+
+
+def _instance(fmu, scene=None):
+    from fmpy import extract, instantiate_fmu, read_model_description
+
+    md = read_model_description(str(fmu))
+    inst = instantiate_fmu(extract(str(fmu)), md)
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    if scene is not None:
+        inst.setString([refs["scene"]], [str(scene)])
+    return inst, refs
+
+
+def test_a_start_time_given_after_the_model_was_built_was_lost(fmus):
+    """Regression: reading `n_people` (FMI 3) or setting an input (FMI 2) built the model at
+    time 0, and the start time given after it was kept in the settings only: the first
+    `doStep` at the start time was refused ("but the model is at t = 0")."""
+    inst, refs = _instance(FMU3)
+    inst.getUInt64([refs["n_people"]])
+    inst.enterInitializationMode(startTime=2.0)
+    inst.exitInitializationMode()
+    inst.doStep(2.0, 0.1)
+    assert inst.getFloat64([refs["time"]])[0] == pytest.approx(2.1)
+    inst.terminate()
+    inst.freeInstance()
+    inst, refs = _instance(FMU2)
+    inst.setBoolean([refs["door_open"]], [True])
+    inst.setupExperiment(startTime=2.0)
+    inst.enterInitializationMode()
+    inst.exitInitializationMode()
+    inst.doStep(2.0, 0.1)
+    inst.terminate()
+    inst.freeInstance()
+
+
+def test_a_host_at_a_large_start_time_skipped_a_second_unnoticed(fmus):
+    """Regression: the check that a communication point is where the last step ended allowed
+    10⁻⁹ |t|, 1.7 s at t = 1.7·10⁹ s (Unix time): a host that skipped 1 s was accepted and the
+    FMU simulated 1 s less than its clock said."""
+    from fmpy.fmi1 import FMICallException
+
+    t0 = 1.7e9
+    inst, refs = _instance(FMU2)
+    inst.setupExperiment(startTime=t0)
+    inst.enterInitializationMode()
+    inst.exitInitializationMode()
+    inst.doStep(t0, 0.5)
+    with pytest.raises(FMICallException):
+        inst.doStep(t0 + 1.5, 0.5)
+
+
+def test_people_from_sources_made_people_inside_negative(fmus):
+    """Regression: the FMU counted `people_inside` as the people at the start less those out,
+    which went negative (−34 on gate-inflow) once people from its sources had left, and left
+    them out of `mean_speed` (0 with dozens walking)."""
+    scene = ROOT / "data" / "scenes" / "gate-inflow.toml"
+    inst, refs = _instance(FMU2, scene)
+    inst.setupExperiment(startTime=0.0)
+    inst.enterInitializationMode()
+    inst.exitInitializationMode()
+    sim = moreau_module().Simulation(scene)
+    t, moving = 0.0, 0
+    while t < 26.0 - 1e-9:
+        before = dict(zip(sim.ids.tolist(), sim.positions))
+        inst.doStep(t, 2.0)
+        t += 2.0
+        sim.advance_to(t)
+        inside, evacuated = inst.getInteger([refs["people_inside"], refs["people_evacuated"]])
+        assert evacuated == len(sim.exit_records())
+        assert inside == sim.total_people - evacuated >= 0, t
+        # The mean speed of everyone present before and after the step, entrants too.
+        after = dict(zip(sim.ids.tolist(), sim.positions))
+        both = [i for i in after if i in before]
+        speed = (np.mean([np.hypot(*(after[i] - before[i])) for i in both]) / 2.0
+                 if both else 0.0)
+        assert inst.getReal([refs["mean_speed"]])[0] == pytest.approx(speed, abs=1e-12), t
+        moving += speed > 0.1
+    assert moving >= 5
+    inst.terminate()
+    inst.freeInstance()
+
+
+def moreau_module():
+    import moreau as module
+
+    return module
