@@ -486,3 +486,37 @@ def test_a_killed_million_person_run_had_to_start_over(tmp_path):
     # Nothing left to resume now.
     again = moreau("run", "--resume", out, "--quiet", check=False)
     assert again.returncode == 2 and "nothing to resume" in again.stderr
+
+
+def test_view_wrote_its_page_over_the_run_file_named_another_way(tmp_path, room_run):
+    """Regression: `moreau view run.h5 -o ./run.h5 --force` compared the paths as text and
+    replaced the run file by the HTML page."""
+    import shutil
+
+    run = tmp_path / "run.h5"
+    shutil.copy(room_run, run)
+    before = run.read_bytes()
+    for output in ("./run.h5", str(run)):
+        proc = moreau("view", "run.h5", "-o", output, "--force", check=False, cwd=tmp_path,
+                      timeout=60)
+        assert proc.returncode == 2 and "is the run file itself" in proc.stderr, proc.stderr
+    assert run.read_bytes() == before
+
+
+def test_run_said_0_people_for_a_scene_of_sources_only(tmp_path):
+    """Regression: `moreau run`'s summary line counted the people at the start (0 on a scene
+    whose people all come from sources) where `--summary-json` counted everyone."""
+    import json
+
+    scene = ROOT / "data" / "scenes" / "gate-inflow.toml"
+    proc = moreau("run", scene, "--summary-json", tmp_path / "s.json", timeout=300)
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["people"] > 20
+    assert f": {summary['people']} people," in proc.stdout, proc.stdout
+
+
+def test_run_tol_minus_1_was_an_unexpected_argument():
+    proc = moreau("run", ROOT / "data" / "scenes" / "room-60.toml", "--tol", "-1", "-q",
+                  check=False, timeout=60)
+    assert proc.returncode == 2 and "time.tol = -1: must be finite and > 0" in proc.stderr, \
+        proc.stderr

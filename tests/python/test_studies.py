@@ -169,3 +169,22 @@ def test_example82_compares_the_two_selections_on_one_work_precision_table(tmp_p
         # Both converge: the finest step is at least 20× more accurate than the coarsest.
         assert runs[-1][2] < runs[0][2] / 20
     assert (out / "example82.svg").read_text().startswith("<svg")
+
+
+def test_the_studies_left_out_everyone_who_entered_from_sources(tmp_path):
+    """Regression: `converge` and `tradeoff` compared the people at the start only: on a scene
+    of sources only `converge --count in-room` reported 0 people and an error of 0 at every
+    step (the people who entered were centimetres apart from run to run). Refused now."""
+    scene = ROOT / "data" / "scenes" / "gate-inflow.toml"
+    for args in (("converge", scene, "--steps", "0.05", "-o", tmp_path / "c"),
+                 ("tradeoff", scene, "--steps", "0.05", "-o", tmp_path / "t")):
+        proc = moreau(*args, check=False, timeout=60)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert "[[sources]] (gate)" in proc.stderr, proc.stderr
+
+
+def test_converge_printed_a_step_of_1e300_with_three_hundred_digits(tmp_path):
+    proc = moreau("converge", ROOT / "data" / "scenes" / "room-60.toml", "--horizon", "0.1",
+                  "--samples", "1", "--steps", "1e300", "-o", tmp_path, check=False, timeout=60)
+    text = proc.stdout + proc.stderr + (tmp_path / "converge.md").read_text()
+    assert "1e300" in text and not re.search(r"\d{25}", text), text

@@ -1,6 +1,7 @@
 //! `moreau converge`: the convergence experiment of Bernicot & Venel §5 (error (24) against a
 //! fine reference, fitted order), written as JSON, Markdown and a log–log SVG.
 
+use moreau_core::Num;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -111,6 +112,7 @@ struct Report {
 /// (recorded as failed, the others run).
 pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
     let mut scene = Scene::from_file(&args.scene)?;
+    crate::study::refuse_sources(&scene)?;
     if let Some(t) = args.horizon {
         scene.time.horizon = t;
     }
@@ -136,13 +138,13 @@ pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
             eprintln!("{s}");
         }
     };
-    say(format!("reference run, h_min = {} ...", args.h_min));
+    say(format!("reference run, h_min = {} ...", Num(args.h_min)));
     let leaving = match args.count {
         Count::All => Leaving::Refused,
         Count::InRoom => Leaving::Allowed,
     };
     let reference = sample(&scene, &How::Fixed(args.h_min), args.samples, leaving)
-        .with_context(|| format!("reference run with h_min = {}", args.h_min))?;
+        .with_context(|| format!("reference run with h_min = {}", Num(args.h_min)))?;
     say(format!("  {} steps", reference.steps));
     let n = reference.states[0].len() / 2;
     let mut report = Report {
@@ -168,7 +170,7 @@ pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
             Ok(run) => run,
             Err(e) => {
                 let why = format!("{e:#}");
-                say(format!("  h = {h:<7} failed: {why}"));
+                say(format!("  h = {:<7} failed: {why}", Num(h).to_string()));
                 report.rows.push(Row {
                     h,
                     steps: 0,
@@ -198,7 +200,8 @@ pub fn converge(args: &ConvergeArgs) -> Result<ExitCode> {
         let (steps, wall) = (run.steps, run.wall);
         let it = run.iterations as f64 / steps.max(1) as f64;
         say(format!(
-            "  h = {h:<7} e_h = {error:.4e}  ({steps} steps, {it:.0} iterations/step, {wall:.1} s)"
+            "  h = {:<7} e_h = {error:.4e}  ({steps} steps, {it:.0} iterations/step, {wall:.1} s)",
+            Num(h).to_string()
         ));
         report.rows.push(Row {
             h,
@@ -285,8 +288,8 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
         "Convergence on `{}` ({} people, T = {} s, h_min = {}, ε_k = {:e} μ³), error (24) at t_i = iT/{}, {}:\n",
         report.scene,
         report.people,
-        report.horizon,
-        report.h_min,
+        Num(report.horizon),
+        Num(report.h_min),
         report.eps_kappa,
         report.samples,
         match report.count {
@@ -302,13 +305,13 @@ fn write(dir: &Path, report: &Report) -> Result<()> {
     for r in &report.rows {
         let (Some(error), None) = (r.error, &r.failed) else {
             let why = r.failed.as_deref().unwrap_or("no error");
-            let _ = writeln!(md, "| {} | | failed: {} | | | | | | |", r.h, why);
+            let _ = writeln!(md, "| {} | | failed: {} | | | | | | |", Num(r.h), why);
             continue;
         };
         let _ = writeln!(
             md,
             "| {} | {} | {:.4e} | {:.4e} | {:.0} | {:.2e} | {:.2e} | {:.2} | {} |",
-            r.h,
+            Num(r.h),
             r.steps,
             error,
             r.error_per_person_max,

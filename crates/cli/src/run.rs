@@ -47,7 +47,7 @@ pub struct RunArgs {
     /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
     /// 1e-6 s and min(0.5 s, output interval), starting from the scene's step) and the projection
     /// accuracy ε_k = (θ·tol)² (μ_k/μ_max)³ with θ = 0.1. Without it, the scene's fixed step.
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
     tol: Option<f64>,
     /// The error estimate of the adaptive steps (velocity: cheaper at equal error on the
     /// measured crowds, see the README's work–precision).
@@ -365,9 +365,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     if !args.quiet {
         println!(
-            "{}: {people} people, {} steps in {wall:.2} s ({:.2} ms/step); {} passed an exit; \
+            "{}: {} people, {} steps in {wall:.2} s ({:.2} ms/step); {} passed an exit; \
              {:.0} solver iterations/step; max certified ε {:.2e} m², max violation {:.2e} m{}",
             summary.scene,
+            // Everyone in the run, those from sources too (the count at the start said 0 for
+            // a scene of sources only, where the summary said 6).
+            summary.people,
             stats.steps,
             summary.ms_per_step,
             summary.passed_exit,

@@ -101,6 +101,25 @@ impl Observer for Samples {
 
 /// Runs `scene` with `how`, sampled `samples` times; unless `leaving` allows it, everyone must
 /// stay in the scene (exits with `action = "continue"`) so that runs compare person by person.
+/// The studies compare the same people from run to run; people from a scene's sources enter
+/// at step times, so at other times in each run, and were left out of the comparison
+/// (`converge --count in-room` said 0 people and an error of 0 on a scene of sources only).
+/// Refused until they are compared.
+pub fn refuse_sources(scene: &Scene) -> Result<()> {
+    ensure!(
+        scene.sources.is_empty(),
+        "the scene has [[sources]] ({}): the studies compare the people at the start from run to \
+         run, and do not compare people who enter yet",
+        scene
+            .sources
+            .iter()
+            .map(|s| s.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
 pub fn sample(scene: &Scene, how: &How, samples: usize, leaving: Leaving) -> Result<Sampled> {
     ensure!(samples >= 1, "--samples must be ≥ 1");
     let mut scene = scene.clone();

@@ -90,6 +90,7 @@ struct Point {
 /// (recorded as failed, the others run).
 pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
     let mut scene = Scene::from_file(&args.scene)?;
+    crate::study::refuse_sources(&scene)?;
     if let Some(t) = args.horizon {
         scene.time.horizon = t;
     }
@@ -107,7 +108,7 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
     }
     let mut reference_scene = scene.clone();
     reference_scene.solver.eps_kappa = 1e-5;
-    eprintln!("reference run, h = {} ...", args.reference_step);
+    eprintln!("reference run, h = {} ...", Num(args.reference_step));
     let reference = sample(
         &reference_scene,
         &How::Fixed(args.reference_step),
@@ -246,8 +247,8 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
          e = max_i |q_ref(t_i) − q(t_i)| (error (24)), ΔN = max_i |N_ref(t_i) − N(t_i)| \
          (people through the exit), wall time of one thread:\n",
         args.scene.display(),
-        scene.time.horizon,
-        args.reference_step
+        Num(scene.time.horizon),
+        Num(args.reference_step)
     );
     let _ = writeln!(
         md,

@@ -262,7 +262,9 @@ pub fn view(args: &ViewArgs) -> Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| default_output(&args.file));
-    if out == args.file {
+    // The same file by another name too (`./run.h5`, an absolute path, a link): compared as
+    // text, `view run.h5 -o ./run.h5 --force` wrote the page over the run file.
+    if moreau_io::same_file(&out, &args.file) {
         bail!("the output '{}' is the run file itself", out.display());
     }
     let overwrite = if args.force {
