@@ -9,19 +9,26 @@ import pathlib
 import shutil
 
 from .sweep import Sweep
-from .task import OUTPUT, RESULT, run_variant
+from .task import OUTPUT, RESULT, SCENE, run_variant
 
 TABLE = "results.csv"
 
 
-def _done(run_dir: pathlib.Path) -> dict | None:
-    """The stored row of a finished run (complete with its output intact, or failed), else None."""
+def _done(run_dir: pathlib.Path, scene: str, engine: str) -> dict | None:
+    """The stored row of a finished run (complete with its output intact, or failed) of this
+    scene text by this engine, else None. (Matched by name alone, a sweep whose `[set]`
+    changed, the horizon say, reused every row run with the old scene.)"""
     result = run_dir / RESULT
     if not result.is_file():
+        return None
+    stored = run_dir / SCENE
+    if not stored.is_file() or stored.read_text() != scene:
         return None
     try:
         row = json.loads(result.read_text())
     except json.JSONDecodeError:
+        return None
+    if row.get("engine") != engine:
         return None
     if row.get("status") == "complete" and row.get("engine") in ("driver", "python"):
         import h5py
@@ -60,7 +67,7 @@ def run_sweep(sweep: Sweep, out, client=None, *, moreau: str | None = None,
         run_dir = runs / v.name
         if run_dir.resolve().parent != runs.resolve():
             raise ValueError(f"variant {v.name!r}: its directory would not be in {runs}")
-        done = _done(run_dir)
+        done = _done(run_dir, v.scene, engine)
         if done is not None and (done.get("status") == "complete" or not retry_failed):
             rows[v.name] = {**done, "reused": True}
             continue

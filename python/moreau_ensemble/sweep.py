@@ -187,8 +187,10 @@ def apply(scene: dict, key: str, value) -> None:
 
 def set_door_width(scene: dict, width: float) -> None:
     """Resizes the first exit, an axis-aligned rectangle in a gap of the walls: along its
-    longer side, every coordinate equal to the door's ends (in the exit's area and in the
-    walkable outline) moves to `centre ± width/2`."""
+    longer side, every coordinate equal to the door's ends (in the exit's area, and the
+    vertices of the walkable outline beside it: its jambs) moves to `centre ± width/2`.
+    (Every outline vertex at those coordinates moved until session 38: the other door of
+    room-two-exits, at the same height, narrowed too.)"""
     if not width > 0 or width != width or width == float("inf"):
         raise ValueError(f"door_width = {width}: must be finite and > 0")
     area = scene["exits"][0].get("area")
@@ -200,9 +202,11 @@ def set_door_width(scene: dict, width: float) -> None:
     lo, hi = (min(ys), max(ys)) if axis == 1 else (min(xs), max(xs))
     centre = 0.5 * (lo + hi)
     new = {lo: centre - width / 2, hi: centre + width / 2}
+    other = 1 - axis
+    depth = (min(p[other] for p in area), max(p[other] for p in area))
     for polygon in [area, scene["area"]["outer"], *scene["area"].get("holes", [])]:
         for point in polygon:
-            if point[axis] in new:
+            if point[axis] in new and depth[0] <= point[other] <= depth[1]:
                 point[axis] = new[point[axis]]
 
 

@@ -74,6 +74,15 @@ def test_a_sweep_runs_on_two_workers_records_failures_and_resumes(client, tmp_pa
     rerun = [r["name"] for r in third if not r["reused"]]
     assert rerun == [victim["name"]]
 
+    # Regression: a sweep whose `[set]` changed reused every row of the old scene (matched
+    # by name alone): the rows of a 1 s horizon were kept for a 0.5 s one.
+    spec = sweep_file(tmp_path)
+    spec.write_text(spec.read_text().replace('"time.horizon" = 1.0', '"time.horizon" = 0.5'))
+    fourth = run_sweep(load_sweep(spec), out, client, log=lambda *a: None)
+    assert not any(r["reused"] for r in fourth)
+    for r in fourth:
+        assert 'horizon = 0.5' in (out / "runs" / r["name"] / "scene.toml").read_text()
+
 
 def test_door_width_resizes_the_door_and_its_walls():
     import tomllib
@@ -90,3 +99,20 @@ def test_evacuation_time_and_flow():
     assert evacuation([1.0, 2.0, 3.0], 3) == (3.0, 1.0)
     evac, flow = evacuation([1.0, 3.0], 5)
     assert evac != evac and flow == 0.5  # NaN: two of five never got out
+
+
+def test_door_width_narrowed_the_other_door_at_the_same_height():
+    """Regression: every outline vertex at the first door's ends moved, so the east door of
+    room-two-exits (at the same height) narrowed with the west one and its exit area reached
+    into the wall."""
+    import tomllib
+
+    from conftest import ROOT
+
+    scene = tomllib.loads((ROOT / "data" / "scenes" / "room-two-exits.toml").read_text())
+    east_before = [p[:] for p in scene["area"]["outer"] if p[0] >= 12.0]
+    set_door_width(scene, 0.8)
+    assert sorted({p[1] for p in scene["exits"][0]["area"]}) == [3.6, 4.4]
+    assert [p for p in scene["area"]["outer"] if p[0] >= 12.0] == east_before
+    west = {p[1] for p in scene["area"]["outer"] if p[0] <= 0.0}
+    assert {3.6, 4.4} <= west and not {3.4, 4.6} & west
