@@ -76,14 +76,21 @@ def door_counts(run, traj) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
 def evacuation(ax, run, counts):
     """N(t): people not yet through an exit (from the run's exit records) and, where an exit
     is counted by PedPy, the people not yet through a door by the exits' counts."""
-    total = len(run.radius)
+    # Everyone who had entered by t (people from sources enter at the frame they first
+    # appear in; with everyone counted from t = 0, N(t) of a scene with sources started at
+    # everyone who ever came), less those out.
+    present = np.isfinite(run.positions[:, :, 0])
+    seen = present.any(axis=0)
+    t_enter = np.sort(run.time[present.argmax(axis=0)[seen]])
     t_exit = np.sort(run.exits["t"])
-    ts = np.concatenate([[0.0], t_exit, [run.time[-1]]])
-    left = total - np.concatenate([[0], np.arange(1, len(t_exit) + 1), [len(t_exit)]])
+    ts = np.union1d(np.union1d(t_enter, t_exit), [0.0, run.time[-1]])
+    left = (np.searchsorted(t_enter, ts, side="right")
+            - np.searchsorted(t_exit, ts, side="right"))
     ax.step(ts, left, where="post", label="not yet out (exit records)")
     if any(source == PEDPY for *_, source in counts):
         through = sum(n for _, _, n, _ in counts)
-        ax.plot(run.time, total - through, "--",
+        entered = np.searchsorted(t_enter, run.time, side="right")
+        ax.plot(run.time, entered - through, "--",
                 label="not yet across a door line (PedPy N–t)")
     ax.set(xlabel="t (s)", ylabel="people", title="Evacuation curve N(t)")
     ax.legend(fontsize=8)
@@ -109,6 +116,11 @@ def flow(ax, run, counts):
 
 def density(ax, traj, walkable, cell=0.5):
     """Mean classic density on a grid (PedPy density profile) over the whole run."""
+    if traj.data.empty:
+        # Nobody in any frame: PedPy's profile of nothing failed inside matplotlib.
+        ax.text(0.5, 0.5, "nobody in the run", ha="center", va="center", transform=ax.transAxes)
+        ax.set_title("Density map (PedPy)")
+        return
     profiles = pedpy.compute_density_profile(
         data=traj.data, walkable_area=walkable, grid_size=cell,
         density_method=pedpy.DensityMethod.CLASSIC)
@@ -123,6 +135,10 @@ def speed(ax, run):
     dt = np.diff(run.time)[:, None]
     v = np.linalg.norm(np.diff(p, axis=0), axis=2) / dt
     tm = 0.5 * (run.time[1:] + run.time[:-1])
+    if v.size == 0:
+        ax.text(0.5, 0.5, "nobody in the run", ha="center", va="center", transform=ax.transAxes)
+        ax.set(xlabel="t (s)", ylabel="speed (m/s)", title="Speed over time")
+        return
     # Frames after everyone left have no speeds: NaN there, without numpy's warnings (which
     # np.errstate does not reach).
     with np.errstate(all="ignore"), warnings.catch_warnings():

@@ -412,3 +412,60 @@ def test_a_last_frame_cut_short_read_in_pedpy_as_the_next_frame(tmp_path):
                 dense = positions[int(np.argmin(np.abs(times - k / data.frame_rate)))]
                 ids = rows["id"].to_numpy()
                 assert np.array_equal(rows["x"].to_numpy(), dense[ids, 0]), k
+
+
+def test_plot_run_counted_everyone_from_sources_at_the_start_and_failed_on_nobody(tmp_path):
+    """Regression: the evacuation curve of a run with sources started at everyone who ever
+    entered (420 on a scene with 60 at the start), and a run with nobody in it (a source that
+    starts after the horizon) failed in PedPy's density profile."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import sys
+
+    from conftest import ROOT
+
+    sys.path.insert(0, str(ROOT / "python"))
+    import plot_run
+
+    text = (ROOT / "data" / "scenes" / "gate-inflow.toml").read_text()
+    scene = tmp_path / "gate.toml"
+    scene.write_text(re.sub(r"(?m)^horizon = .*$", "horizon = 8.0", text))
+    out = tmp_path / "gate.h5"
+    moreau("run", scene, "-q", "-o", out)
+    run = moreau_run.load(out)
+
+    class Axes:
+        def __init__(self):
+            self.curves = []
+
+        def step(self, x, y, **kw):
+            self.curves.append((np.asarray(x), np.asarray(y)))
+
+        def plot(self, *a, **kw):
+            pass
+
+        def set(self, **kw):
+            pass
+
+        def legend(self, **kw):
+            pass
+
+    ax = Axes()
+    plot_run.evacuation(ax, run, [])
+    ts, left = ax.curves[0]
+    with h5py.File(out) as f:
+        count, times = f["frames/count"][:], f["frames/time"][:]
+    # With "remove" exits, the people not yet out are those present at each frame.
+    for t, n in zip(times, count):
+        assert left[np.searchsorted(ts, t, side="right") - 1] == n, (t, n)
+
+    # Nobody: no group, and a source that starts after the horizon.
+    nobody = re.sub(r"(?s)\[\[groups\]\].*?release = 5\.0\n", "", text)
+    nobody = re.sub(r"(?m)^horizon = .*$", "horizon = 1.0", nobody)
+    nobody = nobody.replace("rate = 3.0\nstop = 20.0", "rate = 3.0\nstart = 5.0\nstop = 20.0")
+    assert "[[groups]]" not in nobody and "start = 5.0" in nobody
+    (tmp_path / "nobody.toml").write_text(nobody)
+    moreau("run", tmp_path / "nobody.toml", "-q", "-o", tmp_path / "nobody.h5")
+    assert plot_run.main([str(tmp_path / "nobody.h5"), "-o", str(tmp_path / "plots")]) == 0
+    assert (tmp_path / "plots" / "density.png").is_file()
