@@ -124,6 +124,13 @@ def test_tradeoff_reports_the_error_its_runs_have(tmp_path):
     assert clarabel[0]["error"] == pytest.approx(error_24(ref, run), rel=1e-12)
     # Fixed and adaptive steps, with the scene's solver and with Clarabel.
     assert any(m.startswith("adaptive") for m in by_method), by_method.keys()
+    # Regression: --replot wrote the horizon and reference step of its own command line
+    # (the scene's T = 15 s here), not those measured.
+    table = (out / "tradeoff.md").read_text()
+    (out / "tradeoff.md").unlink()
+    moreau("tradeoff", SCENE, "-o", out, "--replot")
+    assert (out / "tradeoff.md").read_text() == table
+    assert f"(T = {T:g} s) against a reference with h = 0.01 " in table, table
 
 
 def test_a_tradeoff_run_that_fails_is_recorded_and_the_others_still_run(tmp_path):

@@ -69,6 +69,15 @@ pub struct TradeoffArgs {
     replot: bool,
 }
 
+/// What a measurement was made with, beside its points (`tradeoff-settings.json`), so that
+/// `--replot` writes the horizon and reference step that were measured, not those of its own
+/// command line (a replot of T = 0.7 s said "T = 3 s", the scene's horizon).
+#[derive(Debug, Serialize, serde::Deserialize)]
+struct Measured {
+    horizon: f64,
+    reference_step: f64,
+}
+
 #[derive(Debug, Serialize, serde::Deserialize)]
 struct Point {
     method: String,
@@ -102,7 +111,17 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
             .with_context(|| format!("reading '{}'", json.display()))?;
         let points: Vec<Point> =
             serde_json::from_str(&text).with_context(|| format!("parsing '{}'", json.display()))?;
-        write(args, &scene, &points)?;
+        let settings = args.out.join(SETTINGS);
+        let measured = match std::fs::read_to_string(&settings) {
+            Ok(text) => serde_json::from_str(&text)
+                .with_context(|| format!("parsing '{}'", settings.display()))?,
+            // Written before the settings were kept: the command line's, as then.
+            Err(_) => Measured {
+                horizon: scene.time.horizon,
+                reference_step: args.reference_step,
+            },
+        };
+        write(args, &measured, &points)?;
         println!("wrote {}/tradeoff.md, tradeoff.svg", args.out.display());
         return Ok(ExitCode::SUCCESS);
     }
@@ -229,17 +248,29 @@ pub fn tradeoff(args: &TradeoffArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Writes tradeoff.json, then tradeoff.md and tradeoff.svg, from the points measured so far.
+/// The file beside tradeoff.json that says what it was measured with.
+const SETTINGS: &str = "tradeoff-settings.json";
+
+/// Writes tradeoff.json and its settings, then tradeoff.md and tradeoff.svg, from the points
+/// measured so far.
 fn save(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
+    let measured = Measured {
+        horizon: scene.time.horizon,
+        reference_step: args.reference_step,
+    };
     std::fs::write(
         args.out.join("tradeoff.json"),
         serde_json::to_string_pretty(points)? + "\n",
     )?;
-    write(args, scene, points)
+    std::fs::write(
+        args.out.join(SETTINGS),
+        serde_json::to_string_pretty(&measured)? + "\n",
+    )?;
+    write(args, &measured, points)
 }
 
 /// Writes tradeoff.md and tradeoff.svg from the measured points.
-fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
+fn write(args: &TradeoffArgs, measured: &Measured, points: &[Point]) -> Result<()> {
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -247,8 +278,8 @@ fn write(args: &TradeoffArgs, scene: &Scene, points: &[Point]) -> Result<()> {
          e = max_i |q_ref(t_i) − q(t_i)| (error (24)), ΔN = max_i |N_ref(t_i) − N(t_i)| \
          (people through the exit), wall time of one thread:\n",
         args.scene.display(),
-        Num(scene.time.horizon),
-        Num(args.reference_step)
+        Num(measured.horizon),
+        Num(measured.reference_step)
     );
     let _ = writeln!(
         md,

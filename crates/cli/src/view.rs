@@ -72,22 +72,37 @@ struct PlayerData {
 }
 
 /// Which frames and people a page of at most `max_values` numbers shows: strides
-/// `(frames, people)`.
+/// `(frames, people)`. Every k-th frame, the smallest k that fits but never fewer than
+/// [`MIN_FRAMES`] frames (k ≤ frames / 100); then every k-th person, the smallest k that
+/// fits. The rule of `python/player_data.py`'s `strides`, which makes the same page data.
+/// (Until session 38 the frame stride was rounded up from 100 frames: 150 frames kept 75.)
 fn strides(frames: usize, people: usize, per_person: usize, max_values: usize) -> (usize, usize) {
-    let all = frames * people * per_person;
-    if all <= max_values || frames == 0 || people == 0 {
+    let size = |sf: usize, sp: usize| frames.div_ceil(sf) * people.div_ceil(sp) * per_person;
+    if frames == 0 || people == 0 || size(1, 1) <= max_values {
         return (1, 1);
     }
-    let per_frame = people * per_person;
-    let keep_frames = (max_values / per_frame).max(1);
-    if keep_frames >= 100.min(frames) {
-        return (frames.div_ceil(keep_frames), 1);
+    let sf_max = (frames / MIN_FRAMES).max(1);
+    let keep_frames = max_values / (people * per_person);
+    if keep_frames >= 1 {
+        let sf = frames.div_ceil(keep_frames);
+        if sf <= sf_max {
+            return (sf, 1);
+        }
     }
-    let frame_stride = frames.div_ceil(100.min(frames));
-    let shown_frames = frames.div_ceil(frame_stride);
-    let keep_people = (max_values / (shown_frames * per_person)).max(1);
-    (frame_stride, people.div_ceil(keep_people))
+    let sf = sf_max;
+    let keep_people = (max_values / (frames.div_ceil(sf) * per_person)).max(1);
+    let mut sp = people.div_ceil(keep_people).max(1);
+    while sp > 1 && size(sf, sp - 1) <= max_values {
+        sp -= 1;
+    }
+    while sp < people && size(sf, sp) > max_values {
+        sp += 1;
+    }
+    (sf, sp)
 }
+
+/// The fewest frames a decimated page keeps before it drops people.
+const MIN_FRAMES: usize = 100;
 
 /// Base64 (standard alphabet, padded) of `values` as little-endian float32.
 fn base64_f32(values: &[f32]) -> String {
@@ -326,5 +341,18 @@ mod tests {
         assert_eq!(ps, 5);
         // Frames alone suffice: 1,000 frames of 100,000 people → 200 frames.
         assert_eq!(strides(1000, 100_000, 2, 40_000_000), (5, 1));
+    }
+
+    #[test]
+    fn a_page_of_150_frames_kept_75_where_the_readme_says_100() {
+        // 150 frames of 60 people in 17,000 values: the frame stride was 150 / 100 rounded
+        // up, 2, leaving 75 frames; it is 1 (every frame, every 2nd person), as
+        // player_data.py makes it.
+        let (fs, ps) = strides(150, 60, 2, 17_000);
+        assert_eq!((fs, ps), (1, 2));
+        // 601 frames in 20,000 values: at least 100 frames.
+        let (fs, ps) = strides(601, 60, 2, 20_000);
+        assert!(601usize.div_ceil(fs) >= 100, "{fs}");
+        assert!(601usize.div_ceil(fs) * 60usize.div_ceil(ps) * 2 <= 20_000);
     }
 }
