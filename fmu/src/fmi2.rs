@@ -55,16 +55,19 @@ pub extern "C" fn fmi2GetVersion() -> *const c_char {
 }
 
 /// `fmi2SetDebugLogging`.
+///
+/// # Safety
+/// `categories` holds `n` NUL-terminated strings, as the standard defines them.
 #[unsafe(no_mangle)]
-pub extern "C" fn fmi2SetDebugLogging(
+pub unsafe extern "C" fn fmi2SetDebugLogging(
     c: *mut c_void,
     logging_on: c_int,
-    _n: usize,
-    _categories: *const *const c_char,
+    n: usize,
+    categories: *const *const c_char,
 ) -> Status {
-    with(c, "fmi2SetDebugLogging", |comp| {
-        comp.instance.logging_on = logging_on != 0;
-        Ok(())
+    // SAFETY: the host's `n` category names.
+    with(c, "fmi2SetDebugLogging", |comp| unsafe {
+        crate::glue::set_debug_logging(comp, logging_on != 0, n, categories)
     })
 }
 

@@ -98,16 +98,19 @@ pub extern "C" fn fmi3GetVersion() -> *const c_char {
 }
 
 /// `fmi3SetDebugLogging`.
+///
+/// # Safety
+/// `categories` holds `n` NUL-terminated strings, as the standard defines them.
 #[unsafe(no_mangle)]
-pub extern "C" fn fmi3SetDebugLogging(
+pub unsafe extern "C" fn fmi3SetDebugLogging(
     c: *mut c_void,
     logging_on: bool,
-    _n: usize,
-    _categories: *const *const c_char,
+    n: usize,
+    categories: *const *const c_char,
 ) -> Status {
-    with(c, "fmi3SetDebugLogging", |comp| {
-        comp.instance.logging_on = logging_on;
-        Ok(())
+    // SAFETY: the host's `n` category names.
+    with(c, "fmi3SetDebugLogging", |comp| unsafe {
+        crate::glue::set_debug_logging(comp, logging_on, n, categories)
     })
 }
 

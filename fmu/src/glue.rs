@@ -223,6 +223,39 @@ pub(crate) unsafe fn text<'a>(s: *const c_char, what: &'static str) -> Result<&'
         .map_err(|_| FmuError::Setting(format!("{what} is not UTF-8")))
 }
 
+/// `fmi2SetDebugLogging` / `fmi3SetDebugLogging`: logging on or off, for the `n` categories
+/// at `categories` (all of them for none). The categories were ignored: with only
+/// `logStatusError` asked for, informational lines still came, and an unknown category was
+/// taken.
+///
+/// # Safety
+/// `categories` holds `n` NUL-terminated strings (the host's contract).
+pub(crate) unsafe fn set_debug_logging(
+    comp: &mut Component,
+    on: bool,
+    n: usize,
+    categories: *const *const c_char,
+) -> Result<(), FmuError> {
+    // SAFETY: the host's `n` pointers.
+    let names = unsafe { values(categories, n) }?;
+    let mut all = names.is_empty();
+    for &name in names {
+        // SAFETY: each a NUL-terminated string.
+        match unsafe { text(name, "categories") }? {
+            "logAll" => all = true,
+            "logStatusWarning" | "logStatusError" => {}
+            other => {
+                return Err(FmuError::Setting(format!(
+                    "log category '{other}': the categories are logStatusWarning, \
+                     logStatusError and logAll"
+                )));
+            }
+        }
+    }
+    comp.instance.logging_on = on && all;
+    Ok(())
+}
+
 /// Reads one value per scalar reference: `nvr` references at `vr`, `n_values` slots at
 /// `value` (FMI 2 passes `nvr` for both), each filled by `get`.
 ///
@@ -533,6 +566,37 @@ mod tests {
             strings: Vec::new(),
         });
         (comp, lines)
+    }
+
+    #[test]
+    fn debug_logging_ignored_its_categories() {
+        // Only logStatusError asked for: informational lines kept coming, and an unknown
+        // category was taken.
+        let (mut comp, lines) = component(None);
+        let names = |v: &[&std::ffi::CStr]| v.iter().map(|c| c.as_ptr()).collect::<Vec<_>>();
+        let errors_only = names(&[c"logStatusError"]);
+        // SAFETY: our array of NUL-terminated strings.
+        unsafe { set_debug_logging(&mut comp, true, 1, errors_only.as_ptr()) }.unwrap();
+        comp.instance.info("an informational line");
+        assert!(lines.borrow().is_empty(), "{:?}", lines.borrow());
+        comp.instance.error("an error");
+        assert_eq!(lines.borrow().len(), 1);
+        let all = names(&[c"logStatusWarning", c"logAll"]);
+        // SAFETY: as above.
+        unsafe { set_debug_logging(&mut comp, true, 2, all.as_ptr()) }.unwrap();
+        comp.instance.info("an informational line");
+        assert_eq!(lines.borrow().len(), 2);
+        // No categories: all of them.
+        // SAFETY: no names are read.
+        unsafe { set_debug_logging(&mut comp, true, 0, std::ptr::null()) }.unwrap();
+        assert!(comp.instance.logging_on);
+        let unknown = names(&[c"logEverything"]);
+        // SAFETY: as above.
+        let e = unsafe { set_debug_logging(&mut comp, true, 1, unknown.as_ptr()) }.unwrap_err();
+        assert!(
+            e.to_string().contains("log category 'logEverything'"),
+            "{e}"
+        );
     }
 
     fn stepping(scene: Option<&str>) -> (Box<Component>, Rc<RefCell<Vec<String>>>) {
