@@ -73,6 +73,23 @@ pub trait ConstraintSet {
         false
     }
 
+    /// After a step that moved the state farther than the margin: how many constraints that
+    /// were *not* assembled the step passed through on its way from `q` to `q_next`,
+    /// satisfied at both ends (a disk pushed through a thin wall it never saw lands on the
+    /// free side, and no check at `q_next` sees it). A nonzero answer means the step must be
+    /// redone with a wider margin, as for [`ConstraintSet::crossed_outside`]. The default
+    /// finds none: for a convex set no step passes through a constraint it satisfies at both
+    /// ends.
+    fn passed_through(
+        &mut self,
+        _t: f64,
+        _q: &[f64],
+        _q_next: &[f64],
+        _assembled: &ConstraintRows,
+    ) -> usize {
+        0
+    }
+
     /// After a step: how many constraints that were *not* assembled are violated at `(t, q)`
     /// by more than `tol`. A nonzero answer means the step must be redone with a wider margin.
     ///

@@ -307,6 +307,7 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
                 && !constraints.left_out_stay_feasible(t_next, q, q_next, margin, tol)
             {
                 constraints.crossed_outside(t_next, q_next, &self.rows, tol)
+                    + constraints.passed_through(t_next, q, q_next, &self.rows)
             } else {
                 0
             };
