@@ -178,16 +178,18 @@ impl Stepping {
 mod tests {
     use super::*;
 
+    /// The steps `fixed_step` takes over `span`, and where they end.
+    fn cover(h: f64, span: f64) -> (f64, Vec<f64>) {
+        let (mut t, mut steps) = (0.0, Vec::new());
+        while let Some(mu) = fixed_step(h, span - t) {
+            steps.push(mu);
+            t += mu;
+        }
+        (t, steps)
+    }
+
     #[test]
     fn fixed_steps_cover_a_span_with_the_last_one_shortened() {
-        let cover = |h: f64, span: f64| {
-            let (mut t, mut steps) = (0.0, Vec::new());
-            while let Some(mu) = fixed_step(h, span - t) {
-                steps.push(mu);
-                t += mu;
-            }
-            (t, steps)
-        };
         let (t, steps) = cover(0.3, 1.0);
         assert_eq!(steps.len(), 4);
         assert_eq!(&steps[..3], &[0.3, 0.3, 0.3]);
@@ -202,14 +204,6 @@ mod tests {
 
     #[test]
     fn a_stop_1e_minus_9_s_past_a_multiple_of_the_step_left_a_step_of_1e_minus_9_s() {
-        let cover = |h: f64, span: f64| {
-            let (mut t, mut steps) = (0.0, Vec::new());
-            while let Some(mu) = fixed_step(h, span - t) {
-                steps.push(mu);
-                t += mu;
-            }
-            (t, steps)
-        };
         for (h, span) in [
             (0.05, 0.700000001),
             (0.05, 0.7 + 0.0004),
