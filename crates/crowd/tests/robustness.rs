@@ -341,6 +341,17 @@ fn a_horizon_of_0_700000001_s_failed_its_last_step_of_1e_minus_9_s() {
     let mut frames = FrameTimes::default();
     sim.run(&mut frames).unwrap();
     assert_eq!(frames.0, [0.0, 0.0001]);
+    // Frames every 0.1 ms, ten in the last 1 % of a 0.05 s step: each its own, none doubled
+    // at the horizon.
+    let text = room(&[
+        ("horizon = 15.0", "horizon = 0.002"),
+        ("output_interval = 0.1", "output_interval = 0.0001"),
+    ]);
+    let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
+    let mut frames = FrameTimes::default();
+    sim.run(&mut frames).unwrap();
+    assert_eq!(frames.0.len(), 21, "{:?}", frames.0);
+    assert!(frames.0.windows(2).all(|w| w[1] > w[0]), "{:?}", frames.0);
     let text = room(&[]);
     let mut sim = Simulation::new(Scene::from_toml(&text, "<test>").unwrap()).unwrap();
     let h = 0.05_f32 as f64;
