@@ -51,7 +51,7 @@ pub struct Polygon {
 impl Polygon {
     /// Twice the signed area (positive when counter-clockwise), by the shoelace formula about
     /// the first vertex: about the origin it cancelled every digit far from it (a door of
-    /// 0.5 m² at x = 3·10⁸ m had area −2, a room of 36 m² at 10⁹ m had none).
+    /// 1 m² at (3·10⁸, 3·10⁸) m had area 0, a room of 36 m² at 10⁹ m too).
     pub fn signed_area2(&self) -> f64 {
         let v = &self.vertices;
         let Some(&o) = v.first() else {

@@ -667,11 +667,12 @@ impl Scene {
         toml::to_string(self).expect("a scene serializes")
     }
 
-    /// The walkable area's outer ring, checked with the holes: its rings simple, each hole inside the outer ring (on it is fine:
-    /// an obstacle against a wall) and clear of the other holes but for touching, as PedPy
-    /// and shapely need it (until session 38 a hole's vertex on the outer ring's right or top
-    /// edge was refused, and holes that overlapped, lay in each other or crossed the outer
-    /// ring between their vertices were taken, and the run file's area then failed in PedPy).
+    /// The walkable area's outer ring, checked with the holes: its rings simple, each hole
+    /// inside the outer ring (on it is fine: an obstacle against a wall) and clear of the
+    /// other holes but for touching, as PedPy and shapely need it (until session 38 a hole's
+    /// vertex on the outer ring's right or top edge was refused, and holes that overlapped,
+    /// lay in each other or crossed the outer ring between their vertices were taken, and the
+    /// run file's area then failed in PedPy).
     fn check_area(&self) -> Result<Polygon, CrowdError> {
         let outer = check_polygon("area.outer", &self.area.outer)?;
         let on = |ring: &Polygon, p: [f64; 2]| {
@@ -687,14 +688,10 @@ impl Scene {
         };
         // A hole's vertices and the midpoints of its edges: one of them lies strictly inside
         // another hole that overlaps it without an edge crossing (one inside the other).
-        let points = |ring: &Polygon| {
-            let v = ring.vertices.clone();
-            let mids: Vec<[f64; 2]> = ring
-                .edges()
-                .map(|e| [0.5 * (e.a[0] + e.b[0]), 0.5 * (e.a[1] + e.b[1])])
-                .collect();
-            v.into_iter().chain(mids)
-        };
+        fn points(ring: &Polygon) -> impl Iterator<Item = [f64; 2]> + '_ {
+            let mid = |e: Segment| [0.5 * (e.a[0] + e.b[0]), 0.5 * (e.a[1] + e.b[1])];
+            ring.vertices.iter().copied().chain(ring.edges().map(mid))
+        }
         let mut holes: Vec<(Polygon, [f64; 2], [f64; 2])> = Vec::new();
         for (h, hole) in self.area.holes.iter().enumerate() {
             let f = format!("area.holes[{h}]");
@@ -961,7 +958,7 @@ impl Scene {
             // A panel parks beside the door, beyond an end of the line across it: an area
             // with no walls at the ends of that line is not in a doorway, and its panel
             // would stand in the room while the exit is open (an invisible wall).
-            if let (Some(area), Some((name, _))) = (
+            if let (Some(area), Some((name, Some(interval)))) = (
                 &exit.area,
                 [("closes", exit.closes), ("opens", exit.opens)]
                     .into_iter()
@@ -976,7 +973,7 @@ impl Scene {
                 if !(off <= 0.05 * line.length()) {
                     return Err(CrowdError::invalid(
                         format!("{f}.{name}"),
-                        format!("{:?}", exit.closes.or(exit.opens).unwrap_or_default()),
+                        format!("{interval:?}"),
                         format!(
                             "the exit's area is not in a doorway: the line across it, {:?} → \
                              {:?}, ends {} m from the nearest wall, so its panel would stand \

@@ -99,6 +99,17 @@ impl Inner {
         Ok(report)
     }
 
+    /// Gives the frames due at the current time, as `advance_to` does where it ends
+    /// (`advance_step` to the current time takes no step): after `step()` they came with the
+    /// next call, and the horizon's not at all.
+    fn frames_due_now(&mut self) -> Result<(), CrowdError> {
+        let t = self.sim.time();
+        let mut watch = Watch {
+            frames: self.recording.then_some(&mut self.frames),
+        };
+        self.sim.advance_step(t, &mut watch).map(|_| ())
+    }
+
     /// Steps to `t_end`, looking for Ctrl-C every [`POLL`].
     fn advance(&mut self, t_end: f64) -> Result<(), Stop> {
         let mut polled = Instant::now();
@@ -279,10 +290,7 @@ impl PySimulation {
         let report = py
             .detach(|| -> Result<_, CrowdError> {
                 let report = inner.one_step(f64::MAX)?;
-                // The frames due where the step ended, as `advance_to` gives them: they came
-                // with the next call, and the horizon's not at all.
-                let t = inner.sim.time();
-                inner.one_step(t)?;
+                inner.frames_due_now()?;
                 Ok(report)
             })
             .map_err(crowd_err)?
