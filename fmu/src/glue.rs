@@ -111,10 +111,12 @@ pub(crate) fn allowed(function: &str) -> &'static [State] {
         "DoStep" => &[Stepping],
         "Terminate" => &[Stepping],
         // FMI 2.0's state table allows its getters in the error state too ("values usable
-        // for debugging only", as the Reference FMUs' masks have it): the values are those
-        // of the last step that succeeded. FMI 3's stay as they were.
-        "GetReal" | "GetInteger" | "GetBoolean" | "GetString" => ANY,
-        "GetFloat64" | "GetInt32" | "GetUInt64" => ALIVE,
+        // for debugging only", as the Reference FMUs' masks have it); FMI 3.0 (§2.3.1) puts
+        // an FMU whose call returned fmi3Error in Terminated, where its getters are allowed
+        // ("retrieved values should only be used for debugging purposes"). The values are
+        // those of the last step that succeeded.
+        "GetReal" | "GetInteger" | "GetBoolean" | "GetString" | "GetFloat64" | "GetInt32"
+        | "GetUInt64" => ANY,
         "SetReal" | "SetInteger" | "SetBoolean" | "SetString" | "SetFloat64" | "SetInt32"
         | "SetUInt64" => SETTABLE,
         // Nothing sound to save once a call failed; but going back to a saved state is how a
@@ -669,17 +671,20 @@ mod tests {
         comp.instance.state = State::Error;
         let c = ptr(&mut comp);
         for refused in [
-            "fmi3GetFloat64",
             "fmi2DoStep",
+            "fmi3DoStep",
             "fmi2GetFMUstate",
             "fmi3GetFMUState",
         ] {
             assert_eq!(with(c, refused, |_| Ok(())), ERROR, "{refused}");
         }
         for fine in [
-            // FMI 2.0 allows its getters after an error, for debugging; they were refused.
+            // FMI 2.0 allows its getters after an error, for debugging, and FMI 3.0 puts the
+            // FMU in Terminated, where its getters are allowed; both were refused.
             "fmi2GetReal",
             "fmi2GetInteger",
+            "fmi3GetFloat64",
+            "fmi3GetUInt64",
             "fmi2SetFMUstate",
             "fmi2FreeFMUstate",
             "fmi2DeSerializeFMUstate",
