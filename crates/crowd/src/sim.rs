@@ -958,13 +958,18 @@ impl Simulation {
             let seen = self.exit_log.len();
             match self.step_towards(stop, at_frame)? {
                 Some(report) => {
-                    observer.step(&report).map_err(CrowdError::Observer)?;
+                    // The step is taken: its exits and entries are told even when the
+                    // observer stops the run at the step (an interrupt), or a file would
+                    // hold people gone from its frames with no exit, or present with no
+                    // entry.
+                    let told = observer.step(&report);
                     for record in &self.exit_log[seen..] {
                         observer.exit(record).map_err(CrowdError::Observer)?;
                     }
                     for record in self.events.entered() {
                         observer.enter(record).map_err(CrowdError::Observer)?;
                     }
+                    told.map_err(CrowdError::Observer)?;
                     return Ok(Some(report));
                 }
                 None => {

@@ -150,7 +150,16 @@ pub fn run_to_horizon(
     record: &mut Record<'_>,
 ) -> Result<(), moreau_crowd::CrowdError> {
     while let Some(t) = sim.next_frame_time() {
-        sim.advance_to(t, record)?;
+        if let Err(e) = sim.advance_to(t, record) {
+            if record.stopped {
+                // Stopped after a step (an interrupt): the frame that step reached is
+                // written too. A SIGTERM at a step on an output time left the file a frame
+                // short of its steps. A failure to write it is the writer's to report when
+                // the file is finished; the run's error is the stop.
+                let _ = sim.advance_step(sim.time(), record);
+            }
+            return Err(e);
+        }
         if record.writer.is_some() && state_due(sim.frames(), sim.people().len()) {
             record
                 .save_state_bytes(sim.state().to_bytes())
@@ -200,6 +209,8 @@ pub struct Record<'a> {
     pub exits: usize,
     /// Everyone so far: at the start, and every entry seen.
     people: usize,
+    /// Whether `progress` stopped the run after a step.
+    stopped: bool,
     pressure: Vec<f64>,
     moving: Vec<[f64; 4]>,
 }
@@ -224,6 +235,7 @@ impl<'a> Record<'a> {
             frames: 0,
             exits: 0,
             people,
+            stopped: false,
             pressure: Vec::new(),
             moving: Vec::new(),
         }
@@ -252,7 +264,9 @@ impl Observer for Record<'_> {
             w.step(report);
         }
         if let Some(progress) = self.progress.as_deref_mut() {
-            progress(report, &self.stats, self.people - self.exits)?;
+            let told = progress(report, &self.stats, self.people - self.exits);
+            self.stopped = told.is_err();
+            told?;
         }
         Ok(())
     }
