@@ -78,8 +78,10 @@ def test_run_writes_the_file_of_moreau_run(room_run, tmp_path):
     out = tmp_path / "py.h5"
     summary = moreau.run(moreau.Scene.from_file(ROOM), out)
     assert summary["status"] == "complete" and summary["people"] == 150
-    with pytest.raises(FileExistsError):
+    # The message told Python callers to "pass --force", the CLI's flag.
+    with pytest.raises(FileExistsError, match=r"pass force=True to overwrite") as e:
         moreau.run(ROOM, out)
+    assert "--force" not in str(e.value)
     compared = []
     with h5py.File(room_run) as cli, h5py.File(out) as py:
         names = []
@@ -191,8 +193,16 @@ def test_bad_scenes_raise_scene_error_naming_the_field(tmp_path):
 
     d = moreau.Scene.from_file(ROOM).to_dict()
     d["time"]["horizn"] = 3.0
-    with pytest.raises(moreau.SceneError, match="horizn"):
+    with pytest.raises(moreau.SceneError, match="horizn") as e:
         moreau.Scene.from_dict(d)
+    # A scene that does not parse had no `field`, `value` or `reason` at all (AttributeError),
+    # although the README promises them: the parser's message is the reason, and no value is
+    # at fault.
+    assert e.value.field is None and e.value.value is None, (e.value.field, e.value.value)
+    assert "horizn" in e.value.reason and e.value.reason in str(e.value)
+    with pytest.raises(moreau.SceneError) as e:
+        moreau.Scene.from_toml("seed = 1")
+    assert e.value.field is None and "area" in e.value.reason
     d = moreau.Scene.from_file(ROOM).to_dict()
     d["time"]["step"] = float("nan")
     with pytest.raises(moreau.SceneError, match=r"time\.step"):

@@ -13,13 +13,20 @@ pyo3::create_exception!(
     SceneError,
     pyo3::exceptions::PyValueError,
     "A scene that cannot be read or is invalid; the message names the field and the value \
-     (as `moreau run` says it). Attributes `field`, `value`, `reason` when a value is at fault."
+     (as `moreau run` says it). Attributes `field`, `value`, `reason`: the field and value at \
+     fault and why, `None` where there is none (a text that is no scene has only a `reason`)."
 );
 
 /// The extension module.
 #[pymodule]
 fn _moreau(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("SceneError", m.py().get_type::<SceneError>())?;
+    let scene_error = m.py().get_type::<SceneError>();
+    // Every instance has the three attributes; those raised where no field is at fault
+    // (a text that does not parse, a state of another scene) read them as `None`.
+    for attribute in ["field", "value", "reason"] {
+        scene_error.setattr(attribute, m.py().None())?;
+    }
+    m.add("SceneError", scene_error)?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<sim::PySimulation>()?;
     m.add_function(wrap_pyfunction!(sim::run_to_file, m)?)?;

@@ -625,9 +625,13 @@ pub fn run_to_file(
     } else {
         Overwrite::Never
     };
-    let io_err = |e: IoError| match e {
-        IoError::Exists { .. } => PyFileExistsError::new_err(e.to_string()),
-        e => PyOSError::new_err(e.to_string()),
+    // The writer's messages name the CLI's `--force`; here it is the keyword.
+    let io_err = |e: IoError| {
+        let message = e.to_string().replace("pass --force", "pass force=True");
+        match e {
+            IoError::Exists { .. } => PyFileExistsError::new_err(message),
+            _ => PyOSError::new_err(message),
+        }
     };
     moreau_io::check_output(&output, overwrite).map_err(io_err)?;
     let s = scene.scene.clone();

@@ -9,7 +9,8 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 use crate::SceneError;
 
 /// A crowd error as a Python exception: scene errors as `SceneError` (with `field`, `value`
-/// and `reason` when a value is at fault), an unreadable file as `OSError`, the rest (a step
+/// and `reason` when a value is at fault; only `reason`, the parser's message, when the text
+/// is no scene), an unreadable file as `OSError`, the rest (a step
 /// that failed, an observer that stopped the run) as `RuntimeError`.
 pub fn to_py(py: Python<'_>, e: CrowdError) -> PyErr {
     let message = e.to_string();
@@ -26,7 +27,15 @@ pub fn to_py(py: Python<'_>, e: CrowdError) -> PyErr {
             let _ = v.setattr("reason", reason);
             err
         }
-        CrowdError::Parse { .. } => SceneError::new_err(message),
+        CrowdError::Parse {
+            message: reason, ..
+        } => {
+            // No value at fault (`field` and `value` stay the class's `None`); the parser's
+            // message, which names the key and line, is the reason.
+            let err = SceneError::new_err(message);
+            let _ = err.value(py).setattr("reason", reason);
+            err
+        }
         CrowdError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
             PyFileNotFoundError::new_err(message)
         }

@@ -12,11 +12,13 @@ __version__: str
 
 class SceneError(ValueError):
     """A scene that cannot be read or is invalid; the message names the field and the value
-    (as ``moreau run`` says it)."""
+    (as ``moreau run`` says it). ``field`` and ``value`` are ``None`` where no value is at
+    fault (a text that does not parse as a scene: a misspelt or missing key); ``reason`` is
+    then the parser's message, or ``None`` where there is none."""
 
-    field: str
-    value: str
-    reason: str
+    field: str | None
+    value: str | None
+    reason: str | None
 
 class Timings(TypedDict):
     predict: float
