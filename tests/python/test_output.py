@@ -469,3 +469,22 @@ def test_plot_run_counted_everyone_from_sources_at_the_start_and_failed_on_nobod
     moreau("run", tmp_path / "nobody.toml", "-q", "-o", tmp_path / "nobody.h5")
     assert plot_run.main([str(tmp_path / "nobody.h5"), "-o", str(tmp_path / "plots")]) == 0
     assert (tmp_path / "plots" / "density.png").is_file()
+
+
+def test_tol_on_the_command_line_replaced_the_scenes_error_estimate(tmp_path):
+    from conftest import ROOM
+
+    text = ROOM.read_text().replace("horizon = 20.0", "horizon = 1.0")
+    text = text.replace("[time]\n", '[time]\ntol = 0.01\nestimate = "step-doubling"\n')
+    scene = tmp_path / "doubling.toml"
+    scene.write_text(text)
+    # --tol alone keeps the scene's estimate; it was replaced by the flag's default.
+    out = tmp_path / "kept.h5"
+    moreau("run", scene, "-o", out, "--quiet", "--tol", "0.02")
+    run = moreau_run.load(out)
+    assert run.scene["time"]["estimate"] == "step-doubling"
+    assert run.scene["time"]["tol"] == 0.02
+    # --estimate names another.
+    out = tmp_path / "named.h5"
+    moreau("run", scene, "-o", out, "--quiet", "--tol", "0.02", "--estimate", "velocity")
+    assert moreau_run.load(out).scene["time"]["estimate"] == "velocity-change"

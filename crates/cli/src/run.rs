@@ -45,14 +45,16 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     summary_json: Option<PathBuf>,
     /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
-    /// 1e-6 s and min(0.5 s, output interval), starting from the scene's step) and the projection
-    /// accuracy ε_k = (θ·tol)² (μ_k/μ_max)³ with θ = 0.1. Without it, the scene's fixed step.
+    /// 1e-6 s and min(0.5 s, output interval, horizon), starting from the scene's step) and
+    /// the projection accuracy ε_k = (θ·tol)² (μ_k/μ_max)³ with θ = 0.1. Without it, the
+    /// scene's fixed step.
     #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
     tol: Option<f64>,
     /// The error estimate of the adaptive steps (velocity: cheaper at equal error on the
-    /// measured crowds, see the README's work–precision).
-    #[arg(long, value_enum, default_value_t = Estimate::Velocity, requires = "tol")]
-    estimate: Estimate,
+    /// measured crowds, see the README's work–precision) [default: the scene's
+    /// `time.estimate`, else velocity].
+    #[arg(long, value_enum, requires = "tol")]
+    estimate: Option<Estimate>,
 }
 
 /// The error estimate of `--tol` runs.
@@ -229,7 +231,13 @@ fn started(
 ) -> Result<(Simulation, Option<RunWriter>, String)> {
     let (mut scene, origin) = load_scene(args)?;
     if let Some(tol) = args.tol {
-        scene = adaptive(&scene, tol, args.estimate);
+        // The scene's own estimate stays unless --estimate names another (--tol alone put
+        // the flag's default in place of a scene's `step-doubling`).
+        let estimate = args.estimate.unwrap_or(match scene.time.estimate {
+            Some(ErrorEstimate::StepDoubling) => Estimate::Doubling,
+            _ => Estimate::Velocity,
+        });
+        scene = adaptive(&scene, tol, estimate);
         scene.validate().context("--tol")?;
     }
     let sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;

@@ -779,6 +779,18 @@ impl Scene {
                 "must be finite and > 0",
             ));
         }
+        // An estimate with fixed steps was taken and ignored (`--estimate` without `--tol`
+        // is refused on the command line).
+        if let (Some(estimate), None) = (t.estimate, t.tol) {
+            return Err(CrowdError::invalid(
+                "time.estimate",
+                match estimate {
+                    ErrorEstimate::StepDoubling => "step-doubling",
+                    ErrorEstimate::VelocityChange => "velocity-change",
+                },
+                "chooses the error estimate of adaptive steps: give time.tol too, or drop it",
+            ));
+        }
         // Fixed steps take horizon / step steps; adaptive ones at least horizon / their
         // largest step (0.5 s, the output interval, the horizon).
         let (steps, field, value) = match t.tol {
