@@ -190,7 +190,11 @@ impl Exits {
             FieldError::NoGoal => CrowdError::invalid(
                 field,
                 value,
-                format!("no walkable cell of the distance grid lies in the {what}"),
+                format!(
+                    "no walkable cell of the distance grid lies in the {what}: make the {what} \
+                     wider than a cell or solver.grid_cell (now {}) smaller",
+                    moreau_core::Num(cell)
+                ),
             ),
             other => CrowdError::invalid(
                 "solver.grid_cell",

@@ -92,6 +92,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
             "unreachable-destination.toml",
             &["groups[0].destination", "door", "unreachable"],
         ),
+        (
+            "exit-narrower-than-a-cell.toml",
+            &["exits[0]", "door", "solver.grid_cell (now 0.1) smaller"],
+        ),
+        (
+            "estimate-without-tol.toml",
+            &["time.estimate", "step-doubling", "give time.tol too"],
+        ),
         ("unknown-key.toml", &["unknown field", "colour"]),
         (
             "solver-interior-step-fraction.toml",

@@ -98,7 +98,9 @@ pub enum SolverKind {
     Newton,
     /// Projected Gauss–Seidel on the dual ([`GaussSeidel`]: one row at a time, the velocity
     /// kept alongside, warm-started from the previous step's multipliers), with our interior
-    /// point, then the large-problem fallback, as fallbacks.
+    /// point, then the large-problem fallback, as fallbacks. `gauss_seidel`, the spelling of
+    /// its settings table (`[solver.gauss_seidel]`), is taken too.
+    #[serde(alias = "gauss_seidel")]
     GaussSeidel,
     /// Chosen for each part of each projection ([`AutoSolver`]): the projection split into
     /// its connected components, Gauss–Seidel on those it has been finishing within its
@@ -312,6 +314,11 @@ mod tests {
             let alone = kind.build_alone(Parallelism::SEQUENTIAL).unwrap();
             assert_eq!(alone.name(), solver.name());
         }
+        // Refused, although `[solver.gauss_seidel]` is how its settings table is spelt.
+        assert_eq!(
+            "gauss_seidel".parse::<SolverKind>(),
+            Ok(SolverKind::GaussSeidel)
+        );
         assert!(
             "simplex"
                 .parse::<SolverKind>()
