@@ -290,6 +290,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         Overwrite::Never
     };
     check_paths(args, overwrite)?;
+    // Caught before the output is created: a signal in the first milliseconds ended the
+    // process with its default action, leaving a partial file nothing could open.
+    let signals = Signals::install()?;
     let (mut sim, writer, origin) = match &args.resume {
         Some(out) => resumed(out, overwrite)?,
         None => started(args, overwrite)?,
@@ -298,7 +301,6 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let output = args.output.as_ref().or(args.resume.as_ref());
     // The file is written on a thread of its own: the steps do not wait for the disk.
     let mut writer = writer.map(BackgroundWriter::new);
-    let signals = Signals::install()?;
 
     let bar = if args.quiet || !std::io::stderr().is_terminal() {
         ProgressBar::hidden()

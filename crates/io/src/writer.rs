@@ -407,13 +407,27 @@ impl RunWriter {
                 reason: format!("cannot remove '{}': {e}", partial.display()),
             })?;
         }
+        // Laid out under a name of its own and renamed once flushed, so that `.NAME.partial`
+        // is never a file HDF5 cannot open: a run killed while creating it left 96 bytes
+        // there that neither `inspect`, `--resume` nor h5py could read. What such a kill
+        // leaves under the other name is removed here, under the lock, by the next run.
+        let new = hidden_sibling(path, "new");
+        let _ = std::fs::remove_file(&new);
         let created = without_locking()
-            .create_excl(&partial)
+            .create_excl(&new)
             .map_err(|e| IoError::Create {
                 path: path.to_path_buf(),
                 reason: e.to_string(),
             })
-            .and_then(|file| Self::layout(path, &partial, file, header));
+            .and_then(|file| Self::layout(path, &partial, file, header))
+            .and_then(|writer| {
+                std::fs::rename(&new, &partial)
+                    .map(|()| writer)
+                    .map_err(|e| IoError::Create {
+                        path: path.to_path_buf(),
+                        reason: format!("cannot rename '{}': {e}", new.display()),
+                    })
+            });
         match created {
             Ok(mut writer) => {
                 writer.overwrite = overwrite;
@@ -421,7 +435,7 @@ impl RunWriter {
                 Ok(writer)
             }
             Err(e) => {
-                let _ = std::fs::remove_file(&partial);
+                let _ = std::fs::remove_file(&new);
                 Err(e)
             }
         }
@@ -810,6 +824,12 @@ impl RunWriter {
             let what = what.to_string();
             move || what
         };
+        // A run killed inside `finish` may have written `people/exit_time`, which `finish`
+        // creates: the resumed run's `finish` failed on it ("unknown library error").
+        if file.link_exists(PEOPLE_EXIT_TIME) {
+            file.unlink(PEOPLE_EXIT_TIME)
+                .at(&partial, at("removing the unfinished 'people/exit_time'"))?;
+        }
         let state = StateSlots::open(&file).at(&partial, at("opening 'state'"))?;
         let (bytes, marks) = state.load().at(&partial, at("reading the saved state"))?;
         let Some(marks) = marks else {

@@ -283,6 +283,66 @@ fn a_killed_run_resumes_from_the_state_saved_with_its_last_frame() {
     assert!(err.to_string().contains("nothing to resume"), "{err}");
 }
 
+/// A run killed inside `finish`, after it wrote `people/exit_time`: the resumed run's
+/// `finish` failed on the dataset already there ("unknown library error"), and the file was
+/// moved to its name half finished.
+#[test]
+fn a_run_killed_while_finishing_failed_to_resume() {
+    let (n, path) = (3, scratch("killed-finishing.h5"));
+    let h = header(n, false);
+    {
+        let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+        for k in 0..2 {
+            write_frame(&mut w, k, n).unwrap();
+            w.save_state(b"state").unwrap();
+        }
+        std::mem::forget(w);
+    }
+    let _ = std::fs::remove_file(moreau_io::lock_path(&path));
+    {
+        // As the killed run's `finish` left it (its writer still open in this process).
+        let mut b = hdf5::File::with_options();
+        b.with_fapl(|p| p.file_locking(false));
+        let f = b.open_rw(partial_path(&path)).unwrap();
+        f.new_dataset_builder()
+            .with_data(&[f64::NAN; 3])
+            .create("people/exit_time")
+            .unwrap();
+    }
+    let mut w = RunWriter::resume(&path, Overwrite::Never).unwrap().writer;
+    write_frame(&mut w, 2, n).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.frame_times().unwrap().len(), 3);
+    assert_eq!(f.exits().unwrap().len(), 2);
+}
+
+/// `.NAME.partial` appears only once laid out and flushed: a run killed while creating it left
+/// 96 bytes there that nothing could open. What a kill leaves under the name it is laid out
+/// under is removed by the next run.
+#[test]
+fn a_run_killed_while_creating_its_file_left_a_partial_nothing_could_open() {
+    let (n, path) = (3, scratch("killed-creating.h5"));
+    let new = path.with_file_name(".killed-creating.h5.new");
+    std::fs::write(&new, [0u8; 96]).unwrap();
+    let mut w = RunWriter::create(&path, &header(n, false), Overwrite::Never).unwrap();
+    assert!(!new.exists(), "the leftover of a killed creation stays");
+    assert!(partial_path(&path).exists());
+    // Readable as soon as it has its name, before any frame.
+    assert_eq!(
+        RunFile::open(&partial_path(&path))
+            .unwrap()
+            .frame_times()
+            .unwrap()
+            .len(),
+        0
+    );
+    write_frame(&mut w, 0, n).unwrap();
+    w.finish("complete", "{}").unwrap();
+    assert!(!new.exists() && !partial_path(&path).exists());
+    assert_eq!(RunFile::open(&path).unwrap().frame_times().unwrap().len(), 1);
+}
+
 /// The same frames through a writer on its own thread give the same file as through one in
 /// the caller's thread; a write that fails there stops the run at a later frame or at the
 /// end, and the file keeps its whole frames.
