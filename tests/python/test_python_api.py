@@ -688,3 +688,32 @@ def test_moreau_run_wrote_the_run_file_over_its_own_scene_file(tmp_path):
         with pytest.raises(ValueError, match="a run never writes over its input"):
             moreau.run(str(path), output, force=True)
     assert path.read_bytes() == before
+
+
+def test_ctrl_c_in_moreau_run_wrote_status_failed(tmp_path):
+    """Ctrl-C (a KeyboardInterrupt, here raised by the progress callback, as SIGINT raises it
+    in Python code or the signal check between steps) finishes the file as `interrupted`, as
+    `moreau run` does; it said "failed: stopped from Python: KeyboardInterrupt"."""
+    from conftest import DENSE
+    import moreau_run
+    from moreau._moreau import run_to_file
+
+    out = tmp_path / "stopped.h5"
+
+    def progress(t, steps, left):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_to_file(str(DENSE), str(out), progress=progress)
+    run = moreau_run.load(out)
+    assert run.status == "interrupted", run.status
+    assert 0 < len(run.steps["t"]) < 200
+    # Another exception from the callback is a failure that names it.
+    out = tmp_path / "failed.h5"
+
+    def broken(t, steps, left):
+        raise ValueError("no plot")
+
+    with pytest.raises(ValueError):
+        run_to_file(str(DENSE), str(out), progress=broken)
+    assert moreau_run.load(out).status.startswith("failed: stopped from Python: ValueError")

@@ -590,6 +590,18 @@ impl PySimulation {
     }
 }
 
+/// What stops `run_to_file` on Ctrl-C (a `KeyboardInterrupt` from the signal check).
+#[derive(Debug)]
+struct CtrlC;
+
+impl std::fmt::Display for CtrlC {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("interrupted by Ctrl-C (KeyboardInterrupt)")
+    }
+}
+
+impl std::error::Error for CtrlC {}
+
 /// Runs `scene` (a `Scene` or a path) to its horizon into the HDF5 run file `output`,
 /// with `moreau run`'s observer: the same datasets and attributes (`command` says
 /// `command`). `progress(t, steps, people_left)` is called about every 0.2 s; Ctrl-C stops
@@ -666,15 +678,24 @@ pub fn run_to_file(
             })
             .map_err(|e| -> ObserverError {
                 let message = e.to_string();
+                let ctrl_c = Python::attach(|py| {
+                    e.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py)
+                });
                 interrupted = Some(e);
-                format!("stopped from Python: {message}").into()
+                match ctrl_c {
+                    true => Box::new(CtrlC),
+                    false => format!("stopped from Python: {message}").into(),
+                }
             })
         };
         let mut record = Record::new(Some(&mut writer as &mut dyn moreau_io::RunSink), people)
             .with_progress(&mut tell);
         let outcome = moreau_record::run_to_horizon(&mut sim, &mut record);
+        // Ctrl-C is `interrupted`, as `moreau run` writes it (it was "failed: stopped from
+        // Python: KeyboardInterrupt").
         let status = match &outcome {
             Ok(()) => "complete".to_string(),
+            Err(CrowdError::Observer(e)) if e.is::<CtrlC>() => "interrupted".to_string(),
             Err(e) => format!("failed: {e:#}"),
         };
         let wall = start.elapsed().as_secs_f64();
