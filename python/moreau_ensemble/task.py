@@ -108,7 +108,9 @@ def _fmu(directory: pathlib.Path, fmu: str | None, row: dict) -> None:
                        start_values={"scene": str(directory / SCENE)})
     write_csv(str(directory / "outputs.csv"), result)
     evacuated = result["people_evacuated"]
-    people = int(evacuated[0] + result["people_inside"][0])
+    # Everyone in the run by its end: out plus inside, at the last row (at the first, before
+    # anyone entered from a source, a late source made the evacuation look finished).
+    people = int(evacuated[-1] + result["people_inside"][-1])
     # Passage times at the output resolution: when the count first reaches k.
     times = [float(result["time"][np.argmax(evacuated >= k)]) for k in range(1, int(evacuated[-1]) + 1)]
     row["people"] = people

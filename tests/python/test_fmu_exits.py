@@ -167,3 +167,56 @@ def test_a_failed_fmu_run_of_the_ensemble_left_its_instance_and_extracted_fmu_be
     ok = run_variant("ok", {}, 1, short, str(tmp_path / "ok"), engine="fmu", fmu=fmu)
     assert ok["status"] == "complete" and ok["people"] == PEOPLE, ok
     assert len(freed) == 2 and list(extracted.iterdir()) == []
+
+
+LATE = """
+name = "late-arrivals"
+seed = 9
+[area]
+outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 3.0], [0.0, 3.0]]
+[[exits]]
+name = "end"
+area = [[11.5, 0.0], [12.0, 0.0], [12.0, 3.0], [11.5, 3.0]]
+action = "remove"
+[[groups]]
+name = "near"
+count = 4
+spawn = [[8.0, 0.5], [10.0, 0.5], [10.0, 2.5], [8.0, 2.5]]
+radius = 0.2
+speed = 1.2
+destination = "end"
+[[sources]]
+name = "late"
+area = [[0.2, 0.2], [1.5, 0.2], [1.5, 2.8], [0.2, 2.8]]
+rate = 2.0
+start = 3.0
+count = 3
+radius = 0.2
+speed = 1.0
+destination = "end"
+[time]
+horizon = 8.0
+step = 0.05
+output_interval = 0.1
+[solver]
+grid_cell = 0.1
+"""
+
+
+def test_the_ensembles_fmu_engine_counted_only_the_people_at_the_start(tmp_path):
+    """Four people leave by 3 s, three more enter from 3 s and are still inside at 8 s: the
+    FMU engine took the people from its first row (4), so its evacuation looked finished at
+    2.8 s; the driver engine said 7 and no evacuation time."""
+    import math
+
+    from conftest import MOREAU
+    from moreau_ensemble.task import run_variant
+
+    rows = {engine: run_variant(engine, {}, 1, LATE, str(tmp_path / engine),
+                                moreau=str(MOREAU), engine=engine,
+                                fmu=str(ROOT / "target" / "fmu" / "moreau-crowd-fmi2.fmu"))
+            for engine in ("driver", "fmu")}
+    for engine, row in rows.items():
+        assert row["status"] == "complete", row
+        assert (row["people"], row["passed_exit"]) == (7, 4), (engine, row)
+        assert math.isnan(row["evacuation_time"]), (engine, row)
