@@ -44,6 +44,10 @@ impl ApgdSettings {
 
     /// Checks every setting.
     pub fn validate(&self) -> Result<(), SolveError> {
+        crate::error::check_budgets(&[
+            ("max_iterations", self.max_iterations),
+            ("power_iterations", self.power_iterations),
+        ])?;
         if self.max_iterations == 0 {
             return Err(SolveError::InvalidSetting {
                 field: "max_iterations",
@@ -258,10 +262,19 @@ impl ProjectionSolver for Apgd {
                     let (ln, un, uy) = (&self.lam_next, &self.u_next, &self.u_y);
                     let d_sq = wk.sum(m, |i| (ln[i] - y[i]) * (ln[i] - y[i]));
                     let jd_sq = wk.sum(n, |c| (un[c] - uy[c]) * (un[c] - uy[c]));
-                    if jd_sq <= lip * d_sq * (1.0 + 1e-12) || d_sq == 0.0 {
+                    // A NaN stops the search too (the test `jd_sq <= …` never held, and a
+                    // one-row problem with coefficients of 1e80 doubled `lip` forever).
+                    if !(jd_sq > lip * d_sq * (1.0 + 1e-12)) || d_sq == 0.0 {
                         break;
                     }
                     lip *= 2.0;
+                    if !lip.is_finite() {
+                        break;
+                    }
+                }
+                if !lip.is_finite() {
+                    status = SolveStatus::NumericalError;
+                    break;
                 }
                 (gap, viol) = gap_and_violation(wk, &self.lam_next, &self.s_next);
                 let (y, ln) = (&self.y, &self.lam_next);

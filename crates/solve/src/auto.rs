@@ -184,6 +184,13 @@ pub struct AutoSettings {
 impl AutoSettings {
     /// Checks every field; the error names the first one out of its domain.
     pub fn validate(&self) -> Result<(), SolveError> {
+        crate::error::check_budgets(&[
+            ("first_order_passes", self.first_order_passes),
+            (
+                "round_newton_factorizations",
+                self.round_newton_factorizations,
+            ),
+        ])?;
         if !(self.set_aside_factor >= 1.0) {
             return Err(SolveError::InvalidSetting {
                 field: "set_aside_factor",

@@ -48,7 +48,15 @@ pub(crate) fn certify_given(
     let mut active = 0;
     for i in 0..problem.rows() {
         let s = problem.b[i] + scratch[i];
-        let relax = (-s).max(0.0);
+        // A NaN slack (a NaN or ∞ in `J` or `v`) is no satisfied row: `f64::max` dropped
+        // it, and an answer of NaN was certified perfect (gap 0, violation 0).
+        let relax = if s >= 0.0 {
+            0.0
+        } else if s < 0.0 {
+            -s
+        } else {
+            f64::INFINITY
+        };
         violation = violation.max(relax);
         let l = lambda[i].max(0.0);
         if l > 0.0 {
@@ -86,7 +94,11 @@ pub(crate) fn certify_given(
         .sum();
     let gap = 0.5 * dv_sq + 0.5 * jtl_sq + lam_bprime + lam_jw;
     Certificate {
-        gap: gap.max(0.0),
+        gap: if gap.is_nan() {
+            f64::INFINITY
+        } else {
+            gap.max(0.0)
+        },
         violation,
         active,
     }
@@ -97,6 +109,15 @@ pub(crate) fn certify_given(
 /// `w`'s threads in fixed chunks.
 pub(crate) fn gap_and_violation(w: &Workers, lam: &[f64], s: &[f64]) -> (f64, f64) {
     let gap = w.sum(s.len(), |i| lam[i] * s[i].max(0.0));
-    let viol = (-w.min(s.len(), |i| s[i])).max(0.0);
-    (gap, viol)
+    // A NaN slack is an infinite violation (`f64::min` and `max` drop NaN: a NaN answer was
+    // certified perfect).
+    let lowest = w.min(s.len(), |i| {
+        if s[i].is_nan() {
+            f64::NEG_INFINITY
+        } else {
+            s[i]
+        }
+    });
+    let viol = (-lowest).max(0.0);
+    (if gap.is_nan() { f64::INFINITY } else { gap }, viol)
 }

@@ -40,3 +40,21 @@ pub enum SolveError {
     #[error("clarabel: {0}")]
     Clarabel(String),
 }
+
+/// The largest an iteration, pass, solve or update budget may be set to: `power_iterations =
+/// 1e15` was taken and ran inside one solve until killed, deaf to SIGTERM (which a run checks
+/// between steps). A million is far beyond any default (APGD's 20,000 iterations the largest).
+pub const MAX_BUDGET: usize = 1_000_000;
+
+/// Refuses each `(field, budget)` above [`MAX_BUDGET`] (the settings' own lower bounds are
+/// checked beside it).
+pub(crate) fn check_budgets(budgets: &[(&'static str, usize)]) -> Result<(), SolveError> {
+    match budgets.iter().find(|&&(_, b)| b > MAX_BUDGET) {
+        Some(&(field, b)) => Err(SolveError::InvalidSetting {
+            field,
+            value: b.to_string(),
+            reason: "must be at most 10⁶ (MAX_BUDGET)",
+        }),
+        None => Ok(()),
+    }
+}

@@ -87,6 +87,10 @@ impl GaussSeidelSettings {
 
     /// Checks every setting.
     pub fn validate(&self) -> Result<(), SolveError> {
+        crate::error::check_budgets(&[
+            ("max_passes", self.max_passes),
+            ("certify_every", self.certify_every),
+        ])?;
         if self.max_passes == 0 {
             return Err(SolveError::InvalidSetting {
                 field: "max_passes",

@@ -132,6 +132,11 @@ impl InteriorPointSettings {
 
     /// Checks every setting.
     pub fn validate(&self) -> Result<(), SolveError> {
+        crate::error::check_budgets(&[
+            ("max_iterations", self.max_iterations),
+            ("max_correctors", self.max_correctors),
+            ("polish_updates", self.polish_updates),
+        ])?;
         if self.max_iterations == 0 {
             return Err(SolveError::InvalidSetting {
                 field: "max_iterations",

@@ -35,7 +35,7 @@ pub use auto::{AutoSettings, AutoSolver, Reach, ScreenReport};
 pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings, infeasibility_certificate};
-pub use error::SolveError;
+pub use error::{MAX_BUDGET, SolveError};
 pub use gauss_seidel::{GaussSeidel, GaussSeidelSettings, GaussSeidelSettingsBuilder, RowOrder};
 pub use interior::{InteriorPoint, InteriorPointSettings, InteriorPointSettingsBuilder};
 pub use newton::{Newton, NewtonSettings, NewtonSettingsBuilder};

@@ -95,6 +95,12 @@ impl NewtonSettings {
 
     /// Checks every setting.
     pub fn validate(&self) -> Result<(), SolveError> {
+        crate::error::check_budgets(&[
+            ("max_iterations", self.max_iterations),
+            ("max_solves", self.max_solves),
+            ("dual_iterations", self.dual_iterations),
+            ("max_updates", self.max_updates),
+        ])?;
         let invalid = |field, value: String, reason| {
             Err(SolveError::InvalidSetting {
                 field,

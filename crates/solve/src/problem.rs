@@ -43,7 +43,10 @@ impl ProjectionProblem<'_> {
                 got: self.b.len(),
             });
         }
-        for (what, v) in [("w", self.w), ("b", self.b)] {
+        // The Jacobian's coefficients too (index: into `ConstraintRows::coefficients`): a row
+        // of [NaN, 1] was certified as a perfect answer, the step ending inside the obstacle.
+        let j = self.jacobian.coefficients();
+        for (what, v) in [("w", self.w), ("b", self.b), ("jacobian coefficient", j)] {
             if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
                 return Err(SolveError::NonFinite { what, index, value });
             }

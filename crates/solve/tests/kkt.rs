@@ -3,7 +3,7 @@
 use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
 use moreau_solve::{
     Apgd, ApgdSettings, AutoSettings, AutoSolver, ClarabelReference, ClarabelSettings, GaussSeidel,
-    GaussSeidelSettings, InteriorPoint, InteriorPointSettings, Newton, NewtonSettings,
+    GaussSeidelSettings, InteriorPoint, InteriorPointSettings, MAX_BUDGET, Newton, NewtonSettings,
     ProjectionProblem, ProjectionSolution, ProjectionSolver, Reach, RowOrder, SolveReport, Target,
     certify,
 };
@@ -1762,6 +1762,31 @@ fn settings_are_validated() {
     }
     let e = gs().max_passes(0).build().unwrap_err();
     assert!(e.to_string().contains("max_passes"), "{e}");
+    // Budgets above 10⁶ are refused by name: `power_iterations = 1e15` was taken and ran
+    // inside one solve until killed.
+    let e = ApgdSettings::builder()
+        .power_iterations(1_000_000_000_000_000)
+        .build()
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("power_iterations = 1000000000000000"),
+        "{e}"
+    );
+    assert!(
+        ApgdSettings::builder()
+            .power_iterations(MAX_BUDGET)
+            .build()
+            .is_ok()
+    );
+    let e = gs().max_passes(MAX_BUDGET + 1).build().unwrap_err();
+    assert!(e.to_string().contains("max_passes"), "{e}");
+    let e = AutoSolver::new(AutoSettings {
+        first_order_passes: usize::MAX,
+        ..AutoSettings::default()
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("first_order_passes"), "{e}");
     let e = gs().certify_every(0).build().unwrap_err();
     assert!(e.to_string().contains("certify_every"), "{e}");
     let bad = GaussSeidelSettings {
@@ -1787,6 +1812,86 @@ fn settings_are_validated() {
         )
         .unwrap_err();
     assert!(e.to_string().contains("non-finite w at index 0"), "{e}");
+}
+
+/// A NaN or ∞ in the Jacobian was certified as a perfect answer (gap 0, violation 0) by every
+/// kind, and through the integrator a step ended inside its obstacle, "converged"; a NaN
+/// velocity too. Now the problem is refused by name, and the certificate of a NaN answer is
+/// infinite.
+#[test]
+fn a_nan_in_the_jacobian_was_certified_as_a_perfect_answer() {
+    use moreau_core::Parallelism;
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut rows = ConstraintRows::new(2);
+        rows.push(0, 0.0, [(0, bad), (1, 1.0)]);
+        let p = ProjectionProblem {
+            w: &[-1.0, 0.0],
+            jacobian: &rows,
+            b: &[0.0],
+        };
+        let target = Target {
+            gap: 1e-9,
+            violation: 1e-9,
+        };
+        for kind in moreau_solve::SolverKind::ALL {
+            let mut solver = kind.build(Parallelism::SEQUENTIAL, 2).unwrap();
+            let e = solver
+                .solve(&p, target, &mut ProjectionSolution::default())
+                .unwrap_err();
+            assert!(
+                e.to_string().contains("jacobian coefficient at index 0"),
+                "{kind:?}: {e}"
+            );
+        }
+    }
+    let mut rows = ConstraintRows::new(2);
+    rows.push(0, 0.0, [(0, 1.0), (1, 1.0)]);
+    let p = ProjectionProblem {
+        w: &[-1.0, 0.0],
+        jacobian: &rows,
+        b: &[0.0],
+    };
+    let (mut sm, mut sn) = (vec![0.0; 1], vec![0.0; 2]);
+    let c = certify(&p, &[f64::NAN, 0.0], &[0.5], &mut sm, &mut sn);
+    assert!(
+        c.violation == f64::INFINITY && c.gap == f64::INFINITY,
+        "{c:?}"
+    );
+    let c = certify(&p, &[-0.5, 0.5], &[0.5], &mut sm, &mut sn);
+    assert!(c.violation == 0.0 && c.gap.abs() < 1e-15, "{c:?}");
+}
+
+/// APGD's backtracking on a one-row problem with coefficients of 1e80 and more doubled its
+/// Lipschitz estimate forever (its test never held once the products overflowed): the solve
+/// never returned. Now it ends, with an honest status, and the chain's fallback answers.
+#[test]
+fn apgd_never_returned_on_a_row_with_huge_coefficients() {
+    use std::sync::mpsc;
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for c in [1e80, 1e100, 1e155, 1e160] {
+            let mut rows = ConstraintRows::new(2);
+            rows.push(0, 0.0, [(0, c), (1, 0.0)]);
+            let p = ProjectionProblem {
+                w: &[-1.0, 0.0],
+                jacobian: &rows,
+                b: &[0.0],
+            };
+            let target = Target {
+                gap: 1e-9,
+                violation: 1e-9,
+            };
+            let r = Apgd::default().solve(&p, target, &mut ProjectionSolution::default());
+            tx.send((c, r.map(|r| r.status))).unwrap();
+        }
+    });
+    for _ in 0..4 {
+        let (c, status) = rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .expect("APGD did not return within 2 minutes");
+        // Converged only with its certificate, which the solve computes; whatever the status.
+        assert!(status.is_ok(), "c = {c}: {status:?}");
+    }
 }
 
 /// On 1 and 2 threads: APGD and Gauss–Seidel give the same bits (their parallel loops sum in
