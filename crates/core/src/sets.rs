@@ -73,13 +73,15 @@ impl ConstraintSet for BoxSet {
         self.lo.len()
     }
     fn assemble(&mut self, _t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {
+        // An infinite bound is no row: with the default infinite margin `∞ ≤ ∞` pushed a row
+        // of value ∞, which every solver refuses (a box on the half-line could not run).
         for i in 0..q.len() {
             let below = q[i] - self.lo[i];
-            if below <= margin {
+            if below <= margin && self.lo[i] != f64::NEG_INFINITY {
                 rows.push(2 * i as u64, below, [(i, 1.0)]);
             }
             let above = self.hi[i] - q[i];
-            if above <= margin {
+            if above <= margin && self.hi[i] != f64::INFINITY {
                 rows.push(2 * i as u64 + 1, above, [(i, -1.0)]);
             }
         }

@@ -306,3 +306,67 @@ fn a_step_of_1e300_over_a_span_of_1_took_no_step() {
     // One explicit step of the span: x0 + 1.0 · (−(a + 1) x0 + b) = 3 − 4 = −1, projected on C.
     assert_eq!(x, [0.0]);
 }
+
+#[test]
+fn a_box_with_an_infinite_bound_could_not_be_linearized() {
+    // `BoxSet`'s upper bound ∞, under the default infinite margin, pushed a row of value ∞,
+    // which every solver refuses: a box on the half-line ran only with the exact projection.
+    // It is the half-space x ≥ 0, and runs as it does.
+    for (a, b, x0) in CASES {
+        let steps = StepSequence::Fixed {
+            h: 0.01,
+            t_end: 3.0,
+        };
+        let boxed = max_error(
+            a,
+            b,
+            x0,
+            &steps,
+            linearized(),
+            &mut BoxSet::new(vec![0.0], vec![f64::INFINITY]).unwrap(),
+        );
+        let half = max_error(a, b, x0, &steps, linearized(), &mut half_line());
+        assert_eq!(boxed, half, "(a, b, x0) = ({a}, {b}, {x0})");
+        assert!(boxed < 0.05, "{boxed}");
+    }
+}
+
+#[test]
+fn steps_below_the_times_resolution_never_advanced_it() {
+    // From t0 = 1.7e9 (a Unix time) with h = 1e-7, t + h rounded back to t: the run stepped
+    // forever at the same time. Now refused by name; steps the time resolves still run.
+    let field = FnField::new(1, |_t, x: &[f64], out: &mut [f64]| out[0] = -x[0]);
+    let mut scheme = Scheme::new(ExactProjection::new(), EpsPolicy::new(1e-2, 3.0).unwrap());
+    let mut set = BoxSet::new(vec![0.0], vec![f64::INFINITY]).unwrap();
+    let t0 = 1.7e9;
+    let mut x = [1.0];
+    let e = scheme
+        .run(
+            &field,
+            &mut set,
+            t0,
+            &mut x,
+            &StepSequence::Fixed {
+                h: 1e-7,
+                t_end: t0 + 1e-5,
+            },
+            |_, _| {},
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("invalid setting h = 1e-7"), "{e}");
+    let mut steps = 0;
+    scheme
+        .run(
+            &field,
+            &mut set,
+            t0,
+            &mut x,
+            &StepSequence::Fixed {
+                h: 1e-3,
+                t_end: t0 + 0.01,
+            },
+            |_, _| steps += 1,
+        )
+        .unwrap();
+    assert!((10..=11).contains(&steps), "{steps}");
+}
