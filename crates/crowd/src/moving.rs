@@ -37,9 +37,15 @@ impl Body {
             ),
             (None, None) => (Vec::new(), false),
         };
-        let pivot = b
-            .pivot
-            .unwrap_or(points.first().copied().unwrap_or([0.0; 2]));
+        // The first point as the scene file writes it (a clockwise polygon's points are
+        // reversed above: it turned about its last vertex, and the scene's checks about
+        // another pivot than the one that ran).
+        let first = b
+            .line
+            .as_ref()
+            .or(b.polygon.as_ref())
+            .and_then(|p| p.first());
+        let pivot = b.pivot.unwrap_or(first.copied().unwrap_or([0.0; 2]));
         let n = points.len();
         let segments: Vec<Segment> = if closed {
             (0..n)
@@ -431,6 +437,37 @@ mod tests {
         assert!((beta - (1.0 + std::f64::consts::PI / 2.0)).abs() < 1e-12);
         assert_eq!(b.max_speed(3.0, 10.0), 0.0);
         assert_eq!(b.max_speed(0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn a_counter_clockwise_polygon_turned_about_its_last_vertex() {
+        // No pivot: the first point as written, (10, 5). The points are stored clockwise, so
+        // a counter-clockwise polygon's were reversed, and it turned about (10, 6).
+        let b = Body::new(&MovingBody {
+            name: "b".into(),
+            line: None,
+            polygon: Some(vec![[10.0, 5.0], [12.0, 5.0], [12.0, 6.0], [10.0, 6.0]]),
+            pivot: None,
+            keyframes: vec![
+                Keyframe {
+                    t: 0.0,
+                    offset: [0.0, 0.0],
+                    angle: 0.0,
+                },
+                Keyframe {
+                    t: 1.0,
+                    offset: [0.0, 0.0],
+                    angle: 90.0,
+                },
+            ],
+        });
+        assert_eq!(b.pivot, [10.0, 5.0]);
+        assert_eq!(b.place(b.pose(1.0), [10.0, 5.0]), [10.0, 5.0]);
+        let far = b.place(b.pose(1.0), [12.0, 6.0]);
+        assert!(
+            (far[0] - 9.0).abs() < 1e-12 && (far[1] - 7.0).abs() < 1e-12,
+            "{far:?}"
+        );
     }
 
     #[test]
