@@ -739,6 +739,13 @@ impl Scene {
                         points(other)
                             .any(|p| inside(&poly, p))
                             .then(|| format!("area.holes[{g}] lies in it"))
+                    })
+                    // The same ring twice (either way round): every point on the other's
+                    // boundary, none strictly inside, and the file's area was invalid.
+                    .or_else(|| {
+                        points(&poly)
+                            .all(|p| on(other, p))
+                            .then(|| format!("it is area.holes[{g}] again"))
                     });
                 if let Some(why) = overlap {
                     return Err(CrowdError::invalid(
@@ -922,6 +929,13 @@ impl Scene {
                     "duplicate exit name",
                 ));
             }
+            if exit.name.trim().is_empty() {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    format!("{:?}", exit.name),
+                    "an exit needs a name (destinations, the run file and the FMU name it)",
+                ));
+            }
             match (&exit.area, &exit.segment) {
                 (Some(a), None) => {
                     check_polygon(&format!("{f}.area"), a)?;
@@ -970,27 +984,33 @@ impl Scene {
             // A panel parks beside the door, beyond an end of the line across it: an area
             // with no walls at the ends of that line is not in a doorway, and its panel
             // would stand in the room while the exit is open (an invisible wall).
-            if let (Some(area), Some((name, Some(interval)))) = (
-                &exit.area,
-                [("closes", exit.closes), ("opens", exit.opens)]
-                    .into_iter()
-                    .find(|(_, i)| i.is_some()),
-            ) {
+            // The same for a segment exit, whose panel runs along the segment (one from the
+            // middle of a corridor to its wall parked its panel in the corridor).
+            if let Some((name, Some(interval))) = [("closes", exit.closes), ("opens", exit.opens)]
+                .into_iter()
+                .find(|(_, i)| i.is_some())
+                && (exit.area.is_some() || exit.segment.is_some())
+            {
                 let walls = self.walls();
-                let poly = Polygon {
-                    vertices: area.clone(),
-                };
-                let line = crate::exits::closure(Some(&poly), None, &walls);
+                let poly = exit.area.as_ref().map(|a| Polygon {
+                    vertices: a.clone(),
+                });
+                let segment = exit.segment.map(|s| Segment { a: s[0], b: s[1] });
+                let line = crate::exits::closure(poly.as_ref(), segment, &walls);
                 let off = crate::exits::ends_off_walls(&line, &walls);
                 if !(off <= 0.05 * line.length()) {
+                    let what = match segment {
+                        Some(_) => "segment",
+                        None => "area: the line across it,",
+                    };
                     return Err(CrowdError::invalid(
                         format!("{f}.{name}"),
                         format!("{interval:?}"),
                         format!(
-                            "the exit's area is not in a doorway: the line across it, {:?} → \
-                             {:?}, ends {} m from the nearest wall, so its panel would stand \
-                             in the room while open (give the exit an area between the door's \
-                             jambs, or a segment across the door)",
+                            "the exit's {what} {:?} → {:?}, is not in a doorway: it ends {} m \
+                             from the nearest wall, so its panel would stand in the room while \
+                             open (give the exit an area between the door's jambs, or a \
+                             segment across the door from jamb to jamb)",
                             line.a,
                             line.b,
                             Num(off)
@@ -1158,6 +1178,15 @@ impl Scene {
                     format!("{f}.name"),
                     &body.name,
                     "duplicate moving body name",
+                ));
+            }
+            // The panels of exits that open or close are the bodies `exit:NAME`: a body of that
+            // name made two of them in the run file and in infeasibility reports.
+            if body.name.starts_with("exit:") {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    &body.name,
+                    "names starting with \"exit:\" are the panels of exits that open or close",
                 ));
             }
             match (&body.line, &body.polygon) {

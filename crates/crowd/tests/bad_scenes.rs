@@ -100,6 +100,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
             "estimate-without-tol.toml",
             &["time.estimate", "step-doubling", "give time.tol too"],
         ),
+        (
+            "exit-empty-name.toml",
+            &["exits[0].name", "\"\"", "an exit needs a name"],
+        ),
+        (
+            "moving-named-like-a-panel.toml",
+            &["moving[0].name", "exit:door", "the panels of exits"],
+        ),
         ("unknown-key.toml", &["unknown field", "colour"]),
         (
             "solver-interior-step-fraction.toml",

@@ -842,6 +842,22 @@ fn a_deep_doors_panel_ran_along_its_passage_and_people_walked_through_it_closed(
         }
         other => panic!("accepted: {other:?}"),
     }
+    // The same for a segment from the middle of the room to its top wall: it was taken, and
+    // its panel parked at (4, 0.5)–(4, 3), a wall in the room while the exit was open.
+    let text = thick_door("segment = [[4.0, 3.0], [4.0, 6.0]]\nopens = [5.0, 6.0]");
+    match Scene::from_toml(&text, "<test>") {
+        Err(CrowdError::Invalid { field, reason, .. }) => {
+            assert_eq!(field, "exits[0].opens");
+            assert!(
+                reason.contains("segment [4.0, 3.0] → [4.0, 6.0], is not in a doorway"),
+                "{reason}"
+            );
+        }
+        other => panic!("accepted: {other:?}"),
+    }
+    // Across the door from jamb to jamb it is taken.
+    let text = thick_door("segment = [[6.5, 2.55], [6.5, 3.45]]\nopens = [5.0, 6.0]");
+    Scene::from_toml(&text, "<test>").unwrap();
 }
 
 #[test]

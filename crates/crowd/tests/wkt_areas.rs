@@ -326,6 +326,19 @@ fn overlapping_and_nested_holes_ran_and_their_file_failed_in_pedpy() {
         )),
         &["at area.holes[1]", "it lies in area.holes[0]"],
     );
+    // The same hole twice, either way round: every point of each on the other's boundary,
+    // none inside, and it ran (the file's area then had a self-intersection in shapely).
+    for second in [
+        "[[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]]",
+        "[[2.0, 3.0], [3.0, 3.0], [3.0, 2.0], [2.0, 2.0]]",
+    ] {
+        assert_mentions(
+            &error(&with_holes(&format!(
+                "[[[2.0, 2.0], [3.0, 2.0], [3.0, 3.0], [2.0, 3.0]], {second}]"
+            ))),
+            &["at area.holes[1]", "it is area.holes[0] again"],
+        );
+    }
     // An L-shaped room whose triangular hole has its vertices inside but an edge through the
     // notch.
     let msg = error(
