@@ -322,6 +322,26 @@ pub(crate) fn without_locking() -> hdf5::FileBuilder {
     b
 }
 
+// The one foreign call of this crate: the `hdf5` crate does not bind it.
+#[allow(unsafe_code)]
+unsafe extern "C" {
+    /// HDF5 ≥ 1.10 (`H5Fpublic.h`): sets the file's end of allocation to the larger of it and
+    /// the end of the file, plus `increment` (what `h5clear --increment` does).
+    fn H5Fincrement_filesize(file_id: i64, increment: u64) -> std::ffi::c_int;
+}
+
+/// A run killed while HDF5 flushed can leave a chunk written past the end of allocation the
+/// superblock records ("addr overflow … eoa" on reading the last frame, and a resume's first
+/// flush failed, moving the file to its name as failed and unresumable): the end of
+/// allocation is moved to the end of the file, as `h5clear --increment 0` would. A file
+/// whose end of allocation is already there is left as it is.
+#[allow(unsafe_code)]
+fn end_of_allocation_at_end_of_file(file: &File) {
+    // SAFETY: `file` is an open file identifier; the call only moves its end of allocation,
+    // under the library's lock as every call of the `hdf5` crate.
+    let _ = hdf5::sync::sync(|| unsafe { H5Fincrement_filesize(file.id(), 0) });
+}
+
 /// Whether two paths name the same file; for a path that does not exist yet, whether its
 /// directory and name are the other's.
 pub fn same_file(a: &Path, b: &Path) -> bool {
@@ -807,6 +827,7 @@ impl RunWriter {
         let file = without_locking()
             .open_rw(&partial)
             .at(&partial, || "opening for writing".into())?;
+        end_of_allocation_at_end_of_file(&file);
         let format = file
             .attr("format")
             .and_then(|a| a.read_scalar::<VarLenUnicode>())

@@ -340,7 +340,10 @@ fn a_run_killed_while_creating_its_file_left_a_partial_nothing_could_open() {
     write_frame(&mut w, 0, n).unwrap();
     w.finish("complete", "{}").unwrap();
     assert!(!new.exists() && !partial_path(&path).exists());
-    assert_eq!(RunFile::open(&path).unwrap().frame_times().unwrap().len(), 1);
+    assert_eq!(
+        RunFile::open(&path).unwrap().frame_times().unwrap().len(),
+        1
+    );
 }
 
 /// The same frames through a writer on its own thread give the same file as through one in
