@@ -485,6 +485,41 @@ impl Output {
     }
 }
 
+/// Every array of numbers in a scene is a pair (a point `[x, y]`, `[t0, t1]`, an offset) and
+/// every `segment` is two points: toml hands serde the first two elements of a longer array
+/// and drops the rest without a word (a position `[1, 1, 5]` was read as `[1, 1]`, a segment
+/// of three points as its first two). The first that is not, named with its value.
+fn check_pairs(path: &str, value: &toml::Value) -> Result<(), CrowdError> {
+    let toml::Value::Array(items) = value else {
+        if let toml::Value::Table(t) = value {
+            for (key, v) in t {
+                check_pairs(&format!("{path}.{key}"), v)?;
+            }
+        }
+        return Ok(());
+    };
+    let numbers = !items.is_empty()
+        && items
+            .iter()
+            .all(|v| matches!(v, toml::Value::Integer(_) | toml::Value::Float(_)));
+    let segment = path.ends_with(".segment");
+    if (numbers || segment) && items.len() != 2 {
+        let what = match segment {
+            true => "a segment is two points [[x, y], [x, y]]",
+            false => "a pair of numbers ([x, y], [t0, t1], [dx, dy])",
+        };
+        return Err(CrowdError::invalid(
+            path,
+            value.to_string(),
+            format!("{} elements given: {what}", items.len()),
+        ));
+    }
+    for (i, v) in items.iter().enumerate() {
+        check_pairs(&format!("{path}[{i}]"), v)?;
+    }
+    Ok(())
+}
+
 /// A whole scene, as read from TOML; [`Scene::validate`] checks it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -630,10 +665,15 @@ impl Scene {
     /// [`Scene::from_toml`], with an `[area] wkt_file` read relative to `dir` (what
     /// [`Scene::from_file`] gives: the scene file's directory).
     pub fn from_toml_in(text: &str, origin: &str, dir: &Path) -> Result<Self, CrowdError> {
-        let mut scene: Scene = toml::from_str(text).map_err(|e| CrowdError::Parse {
+        let parse_error = |e: toml::de::Error| CrowdError::Parse {
             path: origin.to_string(),
             message: e.to_string(),
-        })?;
+        };
+        let mut scene: Scene = toml::from_str(text).map_err(parse_error)?;
+        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        for (key, value) in &table {
+            check_pairs(key, value)?;
+        }
         scene.area.read_wkt(dir)?;
         scene.validate()?;
         Ok(scene)

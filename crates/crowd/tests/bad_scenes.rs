@@ -108,6 +108,21 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
             "moving-named-like-a-panel.toml",
             &["moving[0].name", "exit:door", "the panels of exits"],
         ),
+        (
+            "position-three-numbers.toml",
+            &[
+                "groups[0].positions[0]",
+                "[1.0, 1.0, 5.0]",
+                "3 elements given",
+            ],
+        ),
+        (
+            "segment-three-points.toml",
+            &[
+                "exits[0].segment",
+                "3 elements given: a segment is two points",
+            ],
+        ),
         ("unknown-key.toml", &["unknown field", "colour"]),
         (
             "solver-interior-step-fraction.toml",
