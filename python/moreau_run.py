@@ -70,20 +70,51 @@ def load(path, *, locking: bool | None = None) -> Run:
         )
 
 
-def exit_line(scene: dict, index: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
-    """A measurement line through exit `index`: its segment, or the mid-line of its area's
-    bounding box along the box's longer side."""
+def walls_of(scene: dict) -> np.ndarray:
+    """The walls `(n, 4)` (x0, y0, x1, y1) of a scene's area given as rings (`outer`,
+    `holes`): every edge, as the run file's `/walls` has them; empty for an area in WKT."""
+    area = scene.get("area", {})
+    rings = [area.get("outer", [])] + list(area.get("holes", [])) if isinstance(area, dict) else []
+    edges = [(*ring[i], *ring[(i + 1) % len(ring)]) for ring in rings for i in range(len(ring))]
+    return np.asarray(edges, dtype=float).reshape(-1, 4)
+
+
+def _ends_off_walls(a, b, walls: np.ndarray) -> float:
+    """How far the farther end of the line a–b lies from the nearest wall (as
+    `crates/crowd/src/exits.rs`' `ends_off_walls`)."""
+    if len(walls) == 0:
+        return np.inf
+    p0, d = walls[:, :2], walls[:, 2:] - walls[:, :2]
+    far = 0.0
+    for p in (np.asarray(a, dtype=float), np.asarray(b, dtype=float)):
+        length2 = np.maximum((d * d).sum(axis=1), 1e-300)
+        s = np.clip(((p - p0) * d).sum(axis=1) / length2, 0.0, 1.0)
+        far = max(far, float(np.hypot(*(p0 + s[:, None] * d - p).T).min()))
+    return far
+
+
+def exit_line(scene: dict, index: int = 0, walls: np.ndarray | None = None
+              ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A measurement line through exit `index`: its segment; for an area, the mid-line of its
+    bounding box across the doorway it fills, the one whose ends lie nearer the walls (the
+    door's jambs), and along the box's longer side when that does not tell: the line
+    `moreau` closes the exit with (`crates/crowd/src/exits.rs`, `closure`). `walls` are the
+    run file's `/walls`; by default those of the scene's rings. (The line along the longer
+    side ran along the passage of a door deeper than wide, and PedPy counted nobody.)"""
     exit_ = scene["exits"][index]
     if "segment" in exit_:
         a, b = exit_["segment"]
         return (tuple(a), tuple(b))
+    walls = walls_of(scene) if walls is None else np.asarray(walls, dtype=float).reshape(-1, 4)
     pts = np.asarray(exit_["area"], dtype=float)
     (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
-    if y1 - y0 >= x1 - x0:
-        xm = 0.5 * (x0 + x1)
-        return ((xm, y0), (xm, y1))
-    ym = 0.5 * (y0 + y1)
-    return ((x0, ym), (x1, ym))
+    xm, ym = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    across_x = ((float(xm), float(y0)), (float(xm), float(y1)))
+    across_y = ((float(x0), float(ym)), (float(x1), float(ym)))
+    off_x, off_y = _ends_off_walls(*across_x, walls), _ends_off_walls(*across_y, walls)
+    if off_x < off_y or (off_x == off_y and y1 - y0 >= x1 - x0):
+        return across_x
+    return across_y
 
 
 def upstream_area(scene: dict, depth: float = 2.0, index: int = 0) -> list[tuple[float, float]]:

@@ -33,6 +33,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import h5py  # noqa: E402
 import numpy as np  # noqa: E402
 import pedpy  # noqa: E402
 
@@ -53,12 +54,14 @@ def door_counts(run, traj) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
     exit (run files of format moreau-run/4 on say which; in older ones every record is the
     first exit's)."""
     out = []
+    with h5py.File(run.path) as f:
+        walls = f["walls"][()] if "walls" in f else None
     t_frames = np.asarray(run.time, dtype=float)
     which = run.exits["exit"] if "exit" in (run.exits.dtype.names or ()) else None
     for k, exit_ in enumerate(run.scene.get("exits", [])):
         name = exit_.get("name", f"exit {k}")
         if exit_.get("action", "remove") == "continue":
-            line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene, k))
+            line = pedpy.MeasurementLine(moreau_run.exit_line(run.scene, k, walls))
             nt, _ = pedpy.compute_n_t(traj_data=traj, measurement_line=line)
             # PedPy's count at each frame (its times are the frames', to rounding).
             at = np.searchsorted(nt["time"].to_numpy(), t_frames + 1e-9, side="right") - 1

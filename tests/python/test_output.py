@@ -488,3 +488,23 @@ def test_tol_on_the_command_line_replaced_the_scenes_error_estimate(tmp_path):
     out = tmp_path / "named.h5"
     moreau("run", scene, "-o", out, "--quiet", "--tol", "0.02", "--estimate", "velocity")
     assert moreau_run.load(out).scene["time"]["estimate"] == "velocity-change"
+
+
+def test_a_deep_doors_measurement_line_ran_along_its_passage():
+    """The measurement line of an exit area was the mid-line along its longer side: for a door
+    1 m deep and 0.9 m wide it ran along the passage and PedPy counted nobody through a
+    `continue` exit. It is the line moreau closes the exit with: across, between the jambs."""
+    outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 2.55], [7.0, 2.55], [7.0, 0.0], [10.0, 0.0],
+             [10.0, 6.0], [7.0, 6.0], [7.0, 3.45], [6.0, 3.45], [6.0, 6.0], [0.0, 6.0]]
+    door = {"area": [[6.0, 2.55], [7.0, 2.55], [7.0, 3.45], [6.0, 3.45]]}
+    scene = {"area": {"outer": outer}, "exits": [door]}
+    assert moreau_run.exit_line(scene) == ((6.5, 2.55), (6.5, 3.45))
+    # The walls as the run file's /walls give the same; with none, the longer side.
+    walls = moreau_run.walls_of(scene)
+    assert walls.shape == (12, 4)
+    assert moreau_run.exit_line(scene, 0, walls) == ((6.5, 2.55), (6.5, 3.45))
+    assert moreau_run.exit_line({"exits": [door]}) == ((6.0, 3.0), (7.0, 3.0))
+    # A door as wide as deep in a wall, as the room's: across it.
+    room = {"area": {"outer": [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]},
+            "exits": [{"area": [[9.6, 4.4], [10.0, 4.4], [10.0, 5.6], [9.6, 5.6]]}]}
+    assert moreau_run.exit_line(room) == ((9.8, 4.4), (9.8, 5.6))
