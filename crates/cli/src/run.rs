@@ -21,9 +21,10 @@ pub struct RunArgs {
     /// The scene file (TOML). Give this, --from or --resume.
     #[arg(required_unless_present_any = ["from", "resume"], conflicts_with = "from")]
     scene: Option<PathBuf>,
-    /// Go on with a run that was killed while writing OUT.h5: from the state saved with its
-    /// last frame in the partial file it left (`.OUT.h5.partial`), with the scene and settings
-    /// stored there; the frames it writes are those the run would have written.
+    /// Go on with a run that was killed while writing OUT.h5, from the state saved with its
+    /// last frame in the partial file it left (`.OUT.h5.partial`), or that SIGINT or SIGTERM
+    /// stopped (OUT.h5 with status interrupted): with the scene and settings stored there; the
+    /// frames it writes are those the run would have written.
     #[arg(long, value_name = "OUT.h5", conflicts_with_all = ["scene", "from", "output", "tol"])]
     resume: Option<PathBuf>,
     /// Take the scene stored in this run file: the run reproduces that file.

@@ -322,6 +322,14 @@ pub(crate) fn without_locking() -> hdf5::FileBuilder {
     b
 }
 
+/// Whether `path` is a run file finished with status `interrupted` (a run stopped by a signal).
+fn interrupted(path: &Path) -> bool {
+    path.is_file()
+        && crate::RunFile::open(path)
+            .and_then(|f| f.text("status"))
+            .is_ok_and(|s| s == "interrupted")
+}
+
 // The one foreign call of this crate: the `hdf5` crate does not bind it.
 #[allow(unsafe_code)]
 unsafe extern "C" {
@@ -812,6 +820,15 @@ impl RunWriter {
     pub fn resume(path: &Path, overwrite: Overwrite) -> Result<Resumed, IoError> {
         let lock = OutputLock::acquire(path)?;
         let partial = partial_path(path);
+        // A run stopped by SIGINT or SIGTERM (a batch system's time limit) finished its file
+        // as `interrupted`, with its saved state: it goes on as a killed one does (it could
+        // not be resumed, while a SIGKILL could). Under the lock, back to its partial name.
+        if !partial.is_file() && interrupted(path) {
+            std::fs::rename(path, &partial).map_err(|e| IoError::Create {
+                path: path.to_path_buf(),
+                reason: format!("cannot move it back to '{}': {e}", partial.display()),
+            })?;
+        }
         if !partial.is_file() {
             return Err(IoError::Layout {
                 path: path.to_path_buf(),
@@ -832,6 +849,8 @@ impl RunWriter {
             .attr("format")
             .and_then(|a| a.read_scalar::<VarLenUnicode>())
             .at(&partial, || "reading attribute 'format'".into())?;
+        set_text(&file, "status", "running")
+            .at(&partial, || "writing attribute 'status'".into())?;
         if format.as_str() != FORMAT {
             return Err(IoError::Layout {
                 path: partial,

@@ -317,6 +317,50 @@ fn a_run_killed_while_finishing_failed_to_resume() {
     assert_eq!(f.exits().unwrap().len(), 2);
 }
 
+/// A run stopped by SIGINT or SIGTERM finishes its file as `interrupted`, with its saved
+/// state: `--resume` said "nothing to resume" (only a SIGKILL's partial file went on), so a
+/// batch system's time limit lost the run. It goes on from its last saved state; a complete
+/// file is still not resumed.
+#[test]
+fn a_run_stopped_by_a_signal_could_not_be_resumed() {
+    let (n, path) = (3, scratch("interrupted.h5"));
+    let h = header(n, false);
+    let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
+    for k in 0..3 {
+        write_frame(&mut w, k, n).unwrap();
+        w.save_state(format!("state after frame {k}").as_bytes())
+            .unwrap();
+    }
+    w.step(&report(4));
+    w.finish("interrupted", "{}").unwrap();
+    assert_eq!(
+        RunFile::open(&path).unwrap().text("status").unwrap(),
+        "interrupted"
+    );
+
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    assert_eq!(r.state, b"state after frame 2");
+    assert!(!path.exists() && partial_path(&path).exists());
+    assert_eq!(
+        RunFile::open(&partial_path(&path))
+            .unwrap()
+            .text("status")
+            .unwrap(),
+        "running"
+    );
+    let mut w = r.writer;
+    assert_eq!(w.frames(), 3);
+    write_frame(&mut w, 3, n).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.text("status").unwrap(), "complete");
+    assert_eq!(f.frame_times().unwrap().len(), 4);
+    assert_eq!(f.steps().unwrap().len(), 6);
+    // A complete run is not resumed.
+    let e = RunWriter::resume(&path, Overwrite::Never).unwrap_err();
+    assert!(e.to_string().contains("nothing to resume"), "{e}");
+}
+
 /// `.NAME.partial` appears only once laid out and flushed: a run killed while creating it left
 /// 96 bytes there that nothing could open. What a kill leaves under the name it is laid out
 /// under is removed by the next run.
