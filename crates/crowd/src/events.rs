@@ -391,7 +391,7 @@ impl Events {
                 roomy = true;
                 if field.distance(p).is_finite() {
                     reachable = true;
-                    if !exit.reached(p, r) {
+                    if !exit.covers(p, r) {
                         return Ok(());
                     }
                 }
@@ -545,7 +545,7 @@ impl Events {
                 || !self.clear(walls, p, r)
                 || blocked(p, r)
                 || !field.distance(p).is_finite()
-                || exit.reached(p, r)
+                || exit.covers(p, r)
             {
                 continue;
             }

@@ -66,6 +66,18 @@ impl ExitRuntime {
         }
     }
 
+    /// Whether a person of radius `r` at `p` stands where the exit counts people out once it
+    /// is open: [`reached`](Self::reached) whatever the exit's state. Where people start or
+    /// enter is checked with it: a group or a source inside an exit that opens later was
+    /// taken, and everyone there was counted out at the opening without walking.
+    pub fn covers(&self, p: [f64; 2], r: f64) -> bool {
+        match (&self.area, &self.segment) {
+            (Some(a), _) => a.contains(p),
+            (None, Some(s)) => s.distance(p) <= r + Self::LINE_REACH,
+            _ => false,
+        }
+    }
+
     /// Reads the panel's position from the moving segments where they are now: the panel is
     /// the closing line `a → b` shifted by `s (a − b)`, fully out at `s = 1`, across at `s = 0`;
     /// its tip `b + s (a − b)` leaves `[tip, b]` open.

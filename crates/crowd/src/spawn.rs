@@ -269,7 +269,7 @@ pub(crate) fn place_people(
         let goal = &exits.exits[exit];
         for k in first..placed.pos.len() {
             let p = placed.pos[k];
-            if goal.reached(p, placed.radius[k]) {
+            if goal.covers(p, placed.radius[k]) {
                 let shape = if goal.area.is_some() {
                     "area"
                 } else {

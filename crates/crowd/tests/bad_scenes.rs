@@ -123,6 +123,20 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
                 "3 elements given: a segment is two points",
             ],
         ),
+        (
+            "source-in-an-exit-that-opens-later.toml",
+            &[
+                "sources[0].area",
+                "the exit 'door' already counts people out",
+            ],
+        ),
+        (
+            "group-in-an-exit-that-opens-later.toml",
+            &[
+                "exits[0].area",
+                "person 0 of groups[0] starts at [8.08, 1.7]",
+            ],
+        ),
         ("unknown-key.toml", &["unknown field", "colour"]),
         (
             "solver-interior-step-fraction.toml",
