@@ -1330,6 +1330,27 @@ impl Scene {
                             ),
                         ));
                     }
+                    // Steps are cut so that no body moves more than half the smallest radius
+                    // in one; a body too fast for the shortest step failed the run when it got
+                    // there (`Simulation::moving_stop`), after every step before it.
+                    let r_min = self.min_radius();
+                    let largest = 0.5 * r_min / beta;
+                    if !(largest >= crate::sim::MIN_MOVING_STEP) {
+                        return Err(CrowdError::invalid(
+                            format!("{kf}.t"),
+                            Num(key.t),
+                            format!(
+                                "the body would move at {} m/s between t = {} and {}, which \
+                                 needs steps of {largest:.3e} s (half the smallest radius, {} \
+                                 m, per step), below the {:e} s a run allows",
+                                Num(beta),
+                                Num(before.t),
+                                Num(key.t),
+                                Num(r_min),
+                                crate::sim::MIN_MOVING_STEP
+                            ),
+                        ));
+                    }
                 }
             }
         }

@@ -137,6 +137,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
                 "person 0 of groups[0] starts at [8.08, 1.7]",
             ],
         ),
+        (
+            "moving-too-fast.toml",
+            &[
+                "moving[0].keyframes[1].t",
+                "0.50000001",
+                "below the 1e-9 s a run allows",
+            ],
+        ),
         ("unknown-key.toml", &["unknown field", "colour"]),
         (
             "solver-interior-step-fraction.toml",
