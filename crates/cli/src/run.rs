@@ -264,7 +264,10 @@ fn started(
 
 /// A killed run taken up again: the scene stored in its partial file, the simulation restored
 /// to the state saved with its last frame, the writer cut back to that frame.
-fn resumed(out: &Path, overwrite: Overwrite) -> Result<(Simulation, Option<RunWriter>, String)> {
+fn resumed(
+    out: &Path,
+    overwrite: Overwrite,
+) -> Result<(Simulation, Option<RunWriter>, String, String)> {
     // The run ends by moving its file to `out`: an existing file there is replaced only with
     // --force, and that is known now, not after the run (when there is a run to go on with).
     if moreau_io::partial_path(out).is_file() {
@@ -278,7 +281,9 @@ fn resumed(out: &Path, overwrite: Overwrite) -> Result<(Simulation, Option<RunWr
         SimState::from_bytes(&r.state).with_context(|| format!("the state saved in {origin}"))?;
     sim.restore(&state)
         .with_context(|| format!("restoring the state saved in {origin}"))?;
-    Ok((sim, Some(r.writer), origin))
+    // The summary's scene: the run's file (its partial name is gone when the run ends).
+    let origin = format!("{} (resumed)", out.display());
+    Ok((sim, Some(r.writer), origin, r.note))
 }
 
 /// Runs `moreau run`. Errors before the run starts are returned (exit 2, nothing written);
@@ -294,9 +299,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     // Caught before the output is created: a signal in the first milliseconds ended the
     // process with its default action, leaving a partial file nothing could open.
     let signals = Signals::install()?;
-    let (mut sim, writer, origin) = match &args.resume {
+    let (mut sim, writer, origin, totals) = match &args.resume {
         Some(out) => resumed(out, overwrite)?,
-        None => started(args, overwrite)?,
+        None => {
+            let (sim, writer, origin) = started(args, overwrite)?;
+            (sim, writer, origin, String::new())
+        }
     };
     let people = sim.total_people();
     let output = args.output.as_ref().or(args.resume.as_ref());
@@ -341,7 +349,10 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         Ok(())
     };
+    // A resumed run goes on from the totals saved with its state: its summary is the whole
+    // run's (it counted only the steps after the resume).
     let mut record = Record::new(writer.as_mut().map(|w| w as &mut dyn RunSink), people)
+        .resuming(&totals)
         .with_progress(&mut progress);
     let outcome = moreau_record::run_to_horizon(&mut sim, &mut record);
     bar.finish_and_clear();

@@ -36,7 +36,11 @@ pub trait RunSink: Send {
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError>;
     /// The run's state after the last frame (its bytes, handed over: a writer on another
     /// thread keeps them without a copy).
-    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError>;
+    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
+        self.save_state_noted(bytes, String::new())
+    }
+    /// [`RunWriter::save_state_noted`].
+    fn save_state_noted(&mut self, bytes: Vec<u8>, note: String) -> Result<(), IoError>;
 }
 
 impl RunSink for RunWriter {
@@ -65,8 +69,8 @@ impl RunSink for RunWriter {
     fn frame(&mut self, t: f64, ids: &[u32], positions: &[f64]) -> Result<(), IoError> {
         RunWriter::frame(self, t, ids, positions)
     }
-    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
-        RunWriter::save_state(self, &bytes)
+    fn save_state_noted(&mut self, bytes: Vec<u8>, note: String) -> Result<(), IoError> {
+        RunWriter::save_state_noted(self, &bytes, &note)
     }
 }
 
@@ -86,7 +90,7 @@ struct Batch {
 
 enum Message {
     Frame(Box<Batch>),
-    State(Vec<u8>),
+    State(Vec<u8>, String),
     Finish {
         steps: Vec<StepRow>,
         entries: Vec<(u32, f64)>,
@@ -221,8 +225,8 @@ fn work(
                     fail(e, &mut broken);
                 }
             }
-            Message::State(bytes) if !broken => {
-                if let Err(e) = writer.save_state(&bytes) {
+            Message::State(bytes, note) if !broken => {
+                if let Err(e) = writer.save_state_noted(&bytes, &note) {
                     fail(e, &mut broken);
                 }
             }
@@ -326,7 +330,7 @@ impl RunSink for BackgroundWriter {
         batch.positions = positions.to_vec();
         self.send(Message::Frame(Box::new(batch)))
     }
-    fn save_state(&mut self, bytes: Vec<u8>) -> Result<(), IoError> {
+    fn save_state_noted(&mut self, bytes: Vec<u8>, note: String) -> Result<(), IoError> {
         // Between frames only, as `RunWriter::save_state` says: the steps batched here would
         // otherwise reach the file after a state that does not count them (this writer let
         // it pass while the frame at a horizon off the output times went unwritten).
@@ -343,6 +347,6 @@ impl RunSink for BackgroundWriter {
                 ),
             });
         }
-        self.send(Message::State(bytes))
+        self.send(Message::State(bytes, note))
     }
 }

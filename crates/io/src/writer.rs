@@ -122,6 +122,9 @@ pub struct Resumed {
     pub header: RunHeader,
     /// The saved state's bytes.
     pub state: Vec<u8>,
+    /// The text saved with them ([`RunWriter::save_state_noted`]; empty for a state saved
+    /// without, and in files written before 2026-11-28).
+    pub note: String,
 }
 
 /// Where the datasets stood when a state was saved.
@@ -192,13 +195,14 @@ impl StateSlots {
         Ok(Self { group, slots, slot })
     }
 
-    fn save(&mut self, bytes: &[u8], marks: StateMarks) -> hdf5::Result<()> {
+    fn save(&mut self, bytes: &[u8], marks: StateMarks, note: &str) -> hdf5::Result<()> {
         let next = if self.slot == 1 { 2 } else { 1 };
         let ds = &self.slots[usize::from(next - 1)];
         ds.resize(bytes.len())?;
         if !bytes.is_empty() {
             ds.write_slice(bytes, 0..bytes.len())?;
         }
+        set_text(ds, "note", note)?;
         let values = [
             marks.people,
             marks.frames,
@@ -215,11 +219,16 @@ impl StateSlots {
         Ok(())
     }
 
-    fn load(&self) -> hdf5::Result<(Vec<u8>, Option<StateMarks>)> {
+    fn load(&self) -> hdf5::Result<(Vec<u8>, Option<StateMarks>, String)> {
         if self.slot == 0 {
-            return Ok((Vec::new(), None));
+            return Ok((Vec::new(), None, String::new()));
         }
-        let bytes = self.slots[usize::from(self.slot - 1).min(1)].read_raw::<u8>()?;
+        let ds = &self.slots[usize::from(self.slot - 1).min(1)];
+        let bytes = ds.read_raw::<u8>()?;
+        let note = match ds.attr("note") {
+            Ok(a) => a.read_scalar::<VarLenUnicode>()?.as_str().to_string(),
+            Err(_) => String::new(),
+        };
         let mut v = [0usize; 6];
         for (k, name) in STATE_MARKS.iter().enumerate() {
             v[k] = self.group.attr(name)?.read_scalar::<u64>()? as usize;
@@ -234,6 +243,7 @@ impl StateSlots {
                 trajectory_rows: v[4],
                 contact_rows: v[5],
             }),
+            note,
         ))
     }
 }
@@ -784,6 +794,12 @@ impl RunWriter {
     /// and the counts of rows it goes with, for [`resume`](Self::resume). Between frames only
     /// (nothing pending).
     pub fn save_state(&mut self, bytes: &[u8]) -> Result<(), IoError> {
+        self.save_state_noted(bytes, "")
+    }
+
+    /// [`save_state`](Self::save_state), with a text kept beside the bytes and given back by
+    /// [`RunWriter::resume`] (the run's totals so far, which a resumed run goes on from).
+    pub fn save_state_noted(&mut self, bytes: &[u8], note: &str) -> Result<(), IoError> {
         if !self.pending_steps.is_empty()
             || !self.pending_exits.is_empty()
             || !self.pending_people.is_empty()
@@ -805,7 +821,7 @@ impl RunWriter {
         };
         let path = self.path.clone();
         self.state
-            .save(bytes, marks)
+            .save(bytes, marks, note)
             .and_then(|()| self.file.flush())
             .at(&path, || {
                 format!("saving the state after frame {}", marks.frames)
@@ -871,7 +887,7 @@ impl RunWriter {
                 .at(&partial, at("removing the unfinished 'people/exit_time'"))?;
         }
         let state = StateSlots::open(&file).at(&partial, at("opening 'state'"))?;
-        let (bytes, marks) = state.load().at(&partial, at("reading the saved state"))?;
+        let (bytes, marks, note) = state.load().at(&partial, at("reading the saved state"))?;
         let Some(marks) = marks else {
             return Err(IoError::Layout {
                 path: partial,
@@ -1005,6 +1021,7 @@ impl RunWriter {
             writer,
             header,
             state: bytes,
+            note,
         })
     }
 

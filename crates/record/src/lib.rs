@@ -244,16 +244,133 @@ impl<'a> Record<'a> {
     /// Saves a state's bytes ([`SimState::to_bytes`](moreau_crowd::SimState::to_bytes)) into
     /// the run file after its last frame (nothing without a file).
     pub fn save_state_bytes(&mut self, bytes: Vec<u8>) -> Result<(), moreau_io::IoError> {
+        let totals = Totals::of(self).to_json();
         match self.writer.as_deref_mut() {
-            Some(w) => w.save_state(bytes),
+            Some(w) => w.save_state_noted(bytes, totals),
             None => Ok(()),
         }
+    }
+
+    /// Goes on from the totals saved with the state a run resumes from
+    /// ([`moreau_io::Resumed::note`]): its summary then counts the whole run (it counted only
+    /// the steps after the resume, and the frames as if the first were the resumed one). A
+    /// note that is not such totals (a file written before 2026-11-28) leaves the totals at
+    /// zero, as before.
+    pub fn resuming(mut self, note: &str) -> Self {
+        if let Ok(t) = serde_json::from_str::<Totals>(note) {
+            t.into(&mut self);
+        }
+        self
     }
 
     /// Tells `progress` of every step.
     pub fn with_progress(mut self, progress: &'a mut Progress<'a>) -> Self {
         self.progress = Some(progress);
         self
+    }
+}
+
+/// What a [`Record`] has added up, as saved beside each state (JSON).
+#[derive(Debug, Serialize, serde::Deserialize)]
+struct Totals {
+    steps: usize,
+    rejected: usize,
+    redone: usize,
+    iterations: usize,
+    factorizations: usize,
+    max_eps: f64,
+    max_violation: f64,
+    /// `predict, assemble, solve, solve_analyse, solve_factorize, verify, field, total` (s).
+    timings: [f64; 8],
+    solvers: Vec<(String, usize)>,
+    frames: usize,
+    exits: usize,
+    people: usize,
+}
+
+impl Totals {
+    fn of(r: &Record<'_>) -> Self {
+        let (s, t) = (&r.stats, &r.stats.timings);
+        Totals {
+            steps: s.steps,
+            rejected: s.rejected,
+            redone: s.redone,
+            iterations: s.iterations,
+            factorizations: s.factorizations,
+            max_eps: s.max_eps,
+            max_violation: s.max_violation,
+            timings: [
+                t.predict,
+                t.assemble,
+                t.solve,
+                t.solve_analyse,
+                t.solve_factorize,
+                t.verify,
+                t.field,
+                t.total,
+            ],
+            solvers: s.solvers.iter().map(|&(n, k)| (n.to_string(), k)).collect(),
+            frames: r.frames,
+            exits: r.exits,
+            people: r.people,
+        }
+    }
+
+    fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("plain data")
+    }
+
+    fn into(self, r: &mut Record<'_>) {
+        let [
+            predict,
+            assemble,
+            solve,
+            solve_analyse,
+            solve_factorize,
+            verify,
+            field,
+            total,
+        ] = self.timings;
+        r.stats = RunStats {
+            steps: self.steps,
+            rejected: self.rejected,
+            redone: self.redone,
+            iterations: self.iterations,
+            factorizations: self.factorizations,
+            max_eps: self.max_eps,
+            max_violation: self.max_violation,
+            timings: moreau_core::StageTimings {
+                predict,
+                assemble,
+                solve,
+                solve_analyse,
+                solve_factorize,
+                verify,
+                field,
+                total,
+            },
+            solvers: self
+                .solvers
+                .iter()
+                .map(|(n, k)| (solver_name(n), *k))
+                .collect(),
+        };
+        (r.frames, r.exits, r.people) = (self.frames, self.exits, self.people);
+    }
+}
+
+/// The `&'static str` a step report names solver `name` with: the names a run saw are few
+/// (the solver kinds and their pairings), each kept once for the process.
+fn solver_name(name: &str) -> &'static str {
+    static NAMES: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
+    let mut names = NAMES.lock().unwrap_or_else(|e| e.into_inner());
+    match names.iter().find(|&&n| n == name) {
+        Some(&n) => n,
+        None => {
+            let n: &'static str = Box::leak(name.to_string().into_boxed_str());
+            names.push(n);
+            n
+        }
     }
 }
 

@@ -107,3 +107,72 @@ fn a_run_stopped_at_a_step_on_an_output_time_lost_that_frame_and_the_steps_exits
         );
     }
 }
+
+/// A run stopped after step 37 and resumed from its last saved state (the frame of 1.8 s):
+/// the resumed run's totals, which its summary prints and stores, are the whole run's, as an
+/// uninterrupted run adds them up (they counted only the steps after the resume, and the
+/// frames from the resumed one).
+#[test]
+fn a_resumed_runs_summary_counted_only_the_steps_after_the_resume() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("moreau-record-stopped.d");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("resumed.h5");
+    let _ = std::fs::remove_file(&path);
+    let _ = std::fs::remove_file(moreau_io::partial_path(&path));
+
+    let mut whole = Simulation::new(scene()).unwrap();
+    let mut straight = Record::new(None, whole.total_people());
+    run_to_horizon(&mut whole, &mut straight).unwrap();
+
+    {
+        let mut sim = Simulation::new(scene()).unwrap();
+        let mut w =
+            RunWriter::create(&path, &header(&sim, "test".into()), Overwrite::Never).unwrap();
+        let mut steps = 0;
+        let mut progress = |_: &StepReport, _: &RunStats, _: usize| -> Result<(), ObserverError> {
+            steps += 1;
+            match steps == 37 {
+                true => Err("interrupted".into()),
+                false => Ok(()),
+            }
+        };
+        let progress: &mut Progress<'_> = &mut progress;
+        let people = sim.total_people();
+        let mut rec = Record::new(Some(&mut w as &mut dyn RunSink), people).with_progress(progress);
+        assert!(run_to_horizon(&mut sim, &mut rec).is_err());
+        drop(rec);
+        w.finish("interrupted", "{}").unwrap();
+    }
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    let mut w = r.writer;
+    let mut sim = Simulation::new(scene()).unwrap();
+    sim.restore(&moreau_crowd::SimState::from_bytes(&r.state).unwrap())
+        .unwrap();
+    assert_eq!(sim.steps(), 36, "resumed from the frame before the stop");
+    let people = sim.total_people();
+    let mut rec = Record::new(Some(&mut w as &mut dyn RunSink), people).resuming(&r.note);
+    run_to_horizon(&mut sim, &mut rec).unwrap();
+    let (a, b) = (&rec.stats, &straight.stats);
+    assert_eq!(
+        (
+            a.steps,
+            a.iterations,
+            a.factorizations,
+            a.redone,
+            a.rejected
+        ),
+        (
+            b.steps,
+            b.iterations,
+            b.factorizations,
+            b.redone,
+            b.rejected
+        )
+    );
+    assert_eq!((a.max_eps, a.max_violation), (b.max_eps, b.max_violation));
+    assert_eq!(a.solvers, b.solvers);
+    assert_eq!((rec.frames, rec.exits), (straight.frames, straight.exits));
+    // A note that is no totals (files before) leaves them at zero.
+    let fresh = Record::new(None, 3).resuming("");
+    assert_eq!((fresh.stats.steps, fresh.frames), (0, 0));
+}
