@@ -30,6 +30,7 @@ class Run:
     steps: np.ndarray  # structured, one row per step
     exits: np.ndarray  # structured (id, exit, t), one row per exit passage (exit: the scene's [[exits]] index)
     trajectory: np.ndarray  # structured (id, frame, x, y)
+    entry_time: np.ndarray | None = None  # (N,) when each entered (0: at the start); None in files before 2026-11-28
 
     @property
     def status(self) -> str:
@@ -67,6 +68,7 @@ def load(path, *, locking: bool | None = None) -> Run:
             steps=f["steps"][:],
             exits=f["exits"][:],
             trajectory=f["trajectory"][:],
+            entry_time=f["people/entry_time"][:] if "people/entry_time" in f else None,
         )
 
 

@@ -79,12 +79,15 @@ def door_counts(run, traj) -> list[tuple[str, np.ndarray, np.ndarray, str]]:
 def evacuation(ax, run, counts):
     """N(t): people not yet through an exit (from the run's exit records) and, where an exit
     is counted by PedPy, the people not yet through a door by the exits' counts."""
-    # Everyone who had entered by t (people from sources enter at the frame they first
-    # appear in; with everyone counted from t = 0, N(t) of a scene with sources started at
-    # everyone who ever came), less those out.
-    present = np.isfinite(run.positions[:, :, 0])
-    seen = present.any(axis=0)
-    t_enter = np.sort(run.time[present.argmax(axis=0)[seen]])
+    # Everyone who had entered by t, less those out: the file's entry times (in files before
+    # 2026-11-28, the frame each person first appears in, which misses those who came and
+    # went between two frames, and N(t) went below 0).
+    if run.entry_time is not None:
+        t_enter = np.sort(np.nan_to_num(run.entry_time, nan=0.0))
+    else:
+        present = np.isfinite(run.positions[:, :, 0])
+        seen = present.any(axis=0)
+        t_enter = np.sort(run.time[present.argmax(axis=0)[seen]])
     t_exit = np.sort(run.exits["t"])
     ts = np.union1d(np.union1d(t_enter, t_exit), [0.0, run.time[-1]])
     left = (np.searchsorted(t_enter, ts, side="right")

@@ -508,3 +508,78 @@ def test_a_deep_doors_measurement_line_ran_along_its_passage():
     room = {"area": {"outer": [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]},
             "exits": [{"area": [[9.6, 4.4], [10.0, 4.4], [10.0, 5.6], [9.6, 5.6]]}]}
     assert moreau_run.exit_line(room) == ((9.8, 4.4), (9.8, 5.6))
+
+
+FAST_THROUGH = """
+name = "fast-through"
+seed = 7
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 2.0], [0.0, 2.0]]
+[[exits]]
+name = "end"
+area = [[5.5, 0.0], [6.0, 0.0], [6.0, 2.0], [5.5, 2.0]]
+action = "remove"
+[[sources]]
+name = "near"
+area = [[4.6, 0.0], [5.3, 0.0], [5.3, 2.0], [4.6, 2.0]]
+rate = 4.0
+stop = 4.0
+radius = 0.2
+speed = 1.5
+destination = "end"
+[time]
+horizon = 5.0
+step = 0.05
+output_interval = 1.0
+"""
+
+
+def test_people_who_came_and_went_between_frames_made_n_of_t_negative(tmp_path):
+    """A source beside the exit, frames every second: half the entrants enter and leave
+    between two frames. The run file had no entry times, plot_run dated each entry by the
+    first frame it appears in and left out those in none, while their exits counted: N(t)
+    fell to −8. The file now stores `people/entry_time`, and N(t) is the people present at
+    each frame, never below 0."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import sys
+
+    from conftest import ROOT
+
+    sys.path.insert(0, str(ROOT / "python"))
+    import plot_run
+
+    (tmp_path / "s.toml").write_text(FAST_THROUGH)
+    out = tmp_path / "s.h5"
+    moreau("run", tmp_path / "s.toml", "-q", "-o", out)
+    run = moreau_run.load(out)
+    # Every entry time is a step time within the source's interval, in id order.
+    t_in = run.entry_time
+    assert t_in is not None and len(t_in) == len(run.radius) == 16
+    assert np.all(np.diff(t_in) >= 0) and 0.0 <= t_in[0] and t_in[-1] <= 4.0 + 1e-9
+    # Someone came and went between two frames: in no frame at all.
+    never = ~np.isfinite(run.positions[:, :, 0]).any(axis=0)
+    assert never.any(), "the test needs people who are in no frame"
+
+    class Axes:
+        curves = []
+
+        def step(self, x, y, **kw):
+            self.curves.append((np.asarray(x), np.asarray(y)))
+
+        def plot(self, *a, **kw):
+            pass
+
+        def set(self, **kw):
+            pass
+
+        def legend(self, **kw):
+            pass
+
+    ax = Axes()
+    plot_run.evacuation(ax, run, [])
+    ts, left = ax.curves[0]
+    assert left.min() >= 0, left
+    for t, n in zip(run.time, run.count):
+        assert left[np.searchsorted(ts, t, side="right") - 1] == n, (t, n)

@@ -21,6 +21,9 @@ pub(crate) const FRAME_COUNT: &str = "frames/count";
 pub(crate) const FRAME_POSITIONS: &str = "frames/positions";
 pub(crate) const PEOPLE_ID: &str = "people/id";
 pub(crate) const PEOPLE_RADIUS: &str = "people/radius";
+/// When each person entered the run (s): 0 for those there at the start (files written
+/// before 2026-11-28 lack it).
+pub(crate) const PEOPLE_ENTRY_TIME: &str = "people/entry_time";
 pub(crate) const PEOPLE_EXIT_TIME: &str = "people/exit_time";
 pub(crate) const EXITS: &str = "exits";
 pub(crate) const STEPS: &str = "steps";

@@ -248,6 +248,16 @@ impl RunFile {
             .collect())
     }
 
+    /// When each person entered the run, by id (0 for those there at the start; NaN for
+    /// those of a file written before 2026-11-28 that a run resumed); `None` for a file
+    /// written before, which did not store them.
+    pub fn entry_times(&self) -> Result<Option<Vec<f64>>, IoError> {
+        if self.file.dataset(PEOPLE_ENTRY_TIME).is_err() {
+            return Ok(None);
+        }
+        self.read(PEOPLE_ENTRY_TIME).map(Some)
+    }
+
     /// The wall segments `[x0, y0, x1, y1]` (empty for a file written before they were
     /// stored).
     pub fn walls(&self) -> Result<Vec<[f64; 4]>, IoError> {

@@ -263,6 +263,7 @@ pub struct RunWriter {
     file: File,
     people_id: Dataset,
     people_radius: Dataset,
+    people_entry: Dataset,
     trajectory: Dataset,
     frame_time: Dataset,
     frame_count: Dataset,
@@ -281,6 +282,8 @@ pub struct RunWriter {
     people: usize,
     /// The radii of the people who entered since the last frame (ids `people..`).
     pending_people: Vec<f64>,
+    /// Their entry times.
+    pending_entry: Vec<f64>,
     frames: usize,
     /// `trajectory.fps`: a frame's row in `/trajectory` is numbered `t × fps`.
     fps: f64,
@@ -642,6 +645,9 @@ impl RunWriter {
         let people_radius = table::<f64>(&file, PEOPLE_RADIUS, ROWS_PER_CHUNK)
             .and_then(|ds| append(&ds, &mut 0, &header.radii).map(|()| ds))
             .at(path, at("writing 'people/radius'"))?;
+        let people_entry = table::<f64>(&file, PEOPLE_ENTRY_TIME, ROWS_PER_CHUNK)
+            .and_then(|ds| append(&ds, &mut 0, &vec![0.0; n]).map(|()| ds))
+            .at(path, at("writing 'people/entry_time'"))?;
         let state = StateSlots::create(&file).at(path, at("creating 'state'"))?;
         file.flush().at(path, at("flushing"))?;
         Ok(Self {
@@ -653,6 +659,7 @@ impl RunWriter {
             file,
             people_id,
             people_radius,
+            people_entry,
             trajectory,
             frame_time,
             frame_count,
@@ -665,6 +672,7 @@ impl RunWriter {
             state,
             people: n,
             pending_people: Vec::new(),
+            pending_entry: Vec::new(),
             frames: 0,
             fps: header.fps,
             trajectory_rows: 0,
@@ -707,9 +715,9 @@ impl RunWriter {
         self.people + self.pending_people.len()
     }
 
-    /// Records that person `id` of radius `radius` entered the run (written with the next
-    /// frame, or when the run ends): ids come in order, each the next one.
-    pub fn enter(&mut self, id: u32, radius: f64) -> Result<(), IoError> {
+    /// Records that person `id` of radius `radius` entered the run at time `t` (written with
+    /// the next frame, or when the run ends): ids come in order, each the next one.
+    pub fn enter(&mut self, id: u32, radius: f64, t: f64) -> Result<(), IoError> {
         let next = self.people();
         if id as usize != next {
             return Err(self.layout_error(format!(
@@ -717,6 +725,7 @@ impl RunWriter {
             )));
         }
         self.pending_people.push(radius);
+        self.pending_entry.push(t);
         self.exit_times.push(f64::NAN);
         Ok(())
     }
@@ -901,6 +910,18 @@ impl RunWriter {
                 .at(&partial, || format!("opening '{name}'"))
         };
         let (people_id, people_radius) = (open(PEOPLE_ID)?, open(PEOPLE_RADIUS)?);
+        // Entry times, in files written since 2026-11-28; an older file's people get NaN
+        // (unknown), those who enter from here on their time.
+        let people_entry = match file.dataset(PEOPLE_ENTRY_TIME) {
+            Ok(ds) => ds,
+            Err(_) => file
+                .new_dataset::<f64>()
+                .chunk(ROWS_PER_CHUNK)
+                .shape(0..)
+                .create(PEOPLE_ENTRY_TIME)
+                .and_then(|ds| append(&ds, &mut 0, &vec![f64::NAN; people_id.size()]).map(|()| ds))
+                .at(&partial, || "creating 'people/entry_time'".into())?,
+        };
         let (trajectory, frame_time, frame_count, positions, exits, steps) = (
             open(TRAJECTORY)?,
             open(FRAME_TIME)?,
@@ -986,6 +1007,7 @@ impl RunWriter {
             file,
             people_id,
             people_radius,
+            people_entry,
             trajectory,
             frame_time,
             frame_count,
@@ -998,6 +1020,7 @@ impl RunWriter {
             state,
             people: n,
             pending_people: Vec::new(),
+            pending_entry: Vec::new(),
             frames: marks.frames,
             fps: header.fps,
             trajectory_rows: marks.trajectory_rows,
@@ -1100,6 +1123,7 @@ impl RunWriter {
         self.pending_steps.clear();
         self.pending_exits.clear();
         self.pending_people.clear();
+        self.pending_entry.clear();
         self.people = people;
         self.frames += 1;
         Ok(())
@@ -1129,6 +1153,14 @@ impl RunWriter {
                 &self.people_radius,
                 &mut { self.people },
                 &self.pending_people,
+            ),
+        )?;
+        named(
+            PEOPLE_ENTRY_TIME,
+            append(
+                &self.people_entry,
+                &mut { self.people },
+                &self.pending_entry,
             ),
         )?;
         let mut trajectory_rows = self.trajectory_rows;
@@ -1214,6 +1246,7 @@ impl RunWriter {
         };
         keep(self.people_id.resize(self.people));
         keep(self.people_radius.resize(self.people));
+        keep(self.people_entry.resize(self.people));
         keep(self.trajectory.resize(self.trajectory_rows));
         keep(self.positions.resize((frames, self.people, 2)));
         keep(self.frame_time.resize(frames));
@@ -1252,6 +1285,13 @@ impl RunWriter {
                     &self.pending_people,
                 )
             })
+            .and_then(|_| {
+                append(
+                    &self.people_entry,
+                    &mut { self.people },
+                    &self.pending_entry,
+                )
+            })
             .and_then(|_| self.positions.resize((self.frames, people, 2)))
             .and_then(|_| match &self.contacts {
                 Some((_, pressure)) => pressure.resize((self.frames, people)),
@@ -1263,6 +1303,7 @@ impl RunWriter {
                 self.pending_steps.clear();
                 self.pending_exits.clear();
                 self.pending_people.clear();
+                self.pending_entry.clear();
                 self.people = people;
                 Ok(())
             }
@@ -1323,6 +1364,7 @@ impl RunWriter {
             file,
             people_id,
             people_radius,
+            people_entry,
             trajectory,
             frame_time,
             frame_count,
@@ -1336,6 +1378,7 @@ impl RunWriter {
         drop((
             people_id,
             people_radius,
+            people_entry,
             trajectory,
             frame_time,
             frame_count,

@@ -226,9 +226,9 @@ fn people_who_enter_during_the_run_extend_the_file() {
     assert_eq!(w.people(), 2);
     w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
     w.step(&report(0, 0.05));
-    w.enter(2, 0.3).unwrap();
+    w.enter(2, 0.3, 0.05).unwrap();
     // Ids come in order: the next is 3, not 5.
-    let err = w.enter(5, 0.3).unwrap_err().to_string();
+    let err = w.enter(5, 0.3, 0.05).unwrap_err().to_string();
     assert!(
         err.contains("person 5") && err.contains("next id is 3"),
         "{err}"
@@ -236,14 +236,14 @@ fn people_who_enter_during_the_run_extend_the_file() {
     w.frame(0.1, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
         .unwrap();
     // Person 3 enters and leaves between two frames: in the file all the same.
-    w.enter(3, 0.35).unwrap();
+    w.enter(3, 0.35, 0.1).unwrap();
     w.exit(3, 0, 0.15).unwrap();
-    w.enter(4, 0.4).unwrap();
+    w.enter(4, 0.4, 0.15).unwrap();
     assert_eq!(w.people(), 5);
     w.frame(0.2, &[0, 2, 4], &[0.11, 0.21, 0.51, 0.61, 0.7, 0.8])
         .unwrap();
     // Person 5 enters after the last frame: the end of the run writes them.
-    w.enter(5, 0.45).unwrap();
+    w.enter(5, 0.45, 0.25).unwrap();
     w.finish("complete", "{}").unwrap();
 
     let f = RunFile::open(&path).unwrap();
@@ -266,6 +266,13 @@ fn people_who_enter_during_the_run_extend_the_file() {
     assert_eq!(exit_time[3], 0.15);
     assert_eq!(exit_time.iter().filter(|t| t.is_nan()).count(), 5);
     assert_eq!(positions, [3, 6, 2]);
+    // When each entered, 0 for those there at the start (the file had no entry times: a
+    // plot of N(t) took a person's first frame, and missed those who came and went between
+    // frames).
+    assert_eq!(
+        f.entry_times().unwrap(),
+        Some(vec![0.0, 0.0, 0.05, 0.1, 0.15, 0.25])
+    );
 }
 
 /// Files of format `moreau-run/3` (before `/exits` said which exit) still read: their rows

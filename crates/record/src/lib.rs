@@ -399,7 +399,7 @@ impl Observer for Record<'_> {
     fn enter(&mut self, record: &EntryRecord) -> Result<(), ObserverError> {
         self.people += 1;
         if let Some(w) = self.writer.as_deref_mut() {
-            w.enter(record.id, record.radius)?;
+            w.enter(record.id, record.radius, record.t)?;
         }
         Ok(())
     }
