@@ -290,7 +290,14 @@ impl<C: Correction> Scheme<C> {
         steps: &StepSequence,
         mut observe: impl FnMut(&StepReport, &[f64]),
     ) -> Result<f64, IntegrateError> {
-        // Every setting is checked before the first step.
+        // Every setting is checked before the first step (a NaN t0 was blamed on t_end).
+        if !t0.is_finite() {
+            return Err(IntegrateError::InvalidSetting {
+                field: "t0",
+                value: Num(t0).to_string(),
+                reason: "must be finite",
+            });
+        }
         match steps {
             StepSequence::Fixed { h, t_end } => {
                 check_step(*h)?;

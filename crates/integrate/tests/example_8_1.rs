@@ -354,6 +354,18 @@ fn steps_below_the_times_resolution_never_advanced_it() {
         )
         .unwrap_err();
     assert!(e.to_string().contains("invalid setting h = 1e-7"), "{e}");
+    // A NaN start was blamed on t_end ("t_end = 1: must be finite and ≥ t0").
+    let e = scheme
+        .run(
+            &field,
+            &mut set,
+            f64::NAN,
+            &mut x,
+            &StepSequence::Fixed { h: 0.1, t_end: 1.0 },
+            |_, _| {},
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("invalid setting t0 = NaN"), "{e}");
     let mut steps = 0;
     scheme
         .run(

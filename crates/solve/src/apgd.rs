@@ -213,6 +213,7 @@ impl ProjectionSolver for Apgd {
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
+        target.validate()?;
         let (m, n) = (p.rows(), p.dim());
         sol.resize_for(p);
         self.size(m, n);

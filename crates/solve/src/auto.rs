@@ -570,6 +570,7 @@ impl ProjectionSolver for AutoSolver {
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
+        target.validate()?;
         let m = p.rows();
         let nnz = p.jacobian.nnz();
         if m >= u32::MAX as usize || p.dim() >= u32::MAX as usize || nnz >= u32::MAX as usize {

@@ -58,6 +58,7 @@ impl ProjectionSolver for ClarabelReference {
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
+        target.validate()?;
         let (m, n) = (p.rows(), p.dim());
         sol.resize_for(p);
         if m == 0 {

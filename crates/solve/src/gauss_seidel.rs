@@ -422,6 +422,7 @@ impl ProjectionSolver for GaussSeidel {
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
+        target.validate()?;
         let (m, n) = (p.rows(), p.dim());
         sol.resize_for(p);
         let settings = self.settings;

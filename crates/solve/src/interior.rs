@@ -1097,6 +1097,7 @@ impl ProjectionSolver for InteriorPoint {
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
         p.validate()?;
+        target.validate()?;
         let (m, n) = (p.rows(), p.dim());
         let j = p.jacobian;
         sol.resize_for(p);

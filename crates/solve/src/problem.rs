@@ -65,6 +65,26 @@ pub struct Target {
     pub violation: f64,
 }
 
+impl Target {
+    /// Refuses a NaN or negative gap or violation (an infinite one asks nothing of it): a NaN
+    /// target was never met, and a solve ran its whole budget before saying so.
+    pub fn validate(&self) -> Result<(), SolveError> {
+        for (field, value) in [
+            ("target gap", self.gap),
+            ("target violation", self.violation),
+        ] {
+            if !(value >= 0.0) {
+                return Err(SolveError::InvalidSetting {
+                    field,
+                    value: moreau_core::Num(value).to_string(),
+                    reason: "must be ≥ 0 (or infinite)",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Caller-owned buffers for the answer; reused across solves.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ProjectionSolution {

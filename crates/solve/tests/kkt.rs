@@ -1859,6 +1859,34 @@ fn a_nan_in_the_jacobian_was_certified_as_a_perfect_answer() {
     );
     let c = certify(&p, &[-0.5, 0.5], &[0.5], &mut sm, &mut sn);
     assert!(c.violation == 0.0 && c.gap.abs() < 1e-15, "{c:?}");
+    // A NaN target ran the whole budget (20,000 APGD iterations) before saying it was not
+    // met; now refused by every kind, as a negative one. An infinite gap asks nothing.
+    for (gap, violation) in [(f64::NAN, 1e-9), (1e-9, f64::NAN), (-1.0, 1e-9)] {
+        for kind in moreau_solve::SolverKind::ALL {
+            let mut solver = kind.build(Parallelism::SEQUENTIAL, 2).unwrap();
+            let e = solver
+                .solve(
+                    &p,
+                    Target { gap, violation },
+                    &mut ProjectionSolution::default(),
+                )
+                .unwrap_err();
+            assert!(
+                e.to_string().contains("invalid setting target"),
+                "{kind:?}: {e}"
+            );
+        }
+    }
+    let mut solver = moreau_solve::SolverKind::Auto
+        .build(Parallelism::SEQUENTIAL, 2)
+        .unwrap();
+    let target = Target {
+        gap: f64::INFINITY,
+        violation: 1e-9,
+    };
+    solver
+        .solve(&p, target, &mut ProjectionSolution::default())
+        .unwrap();
 }
 
 /// APGD's backtracking on a one-row problem with coefficients of 1e80 and more doubled its
