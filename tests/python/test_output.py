@@ -18,6 +18,25 @@ import moreau_run
 from conftest import moreau
 
 
+class StepAxes:
+    """A matplotlib axes stand-in that keeps what `ax.step` draws (`plot_run`'s curves)."""
+
+    def __init__(self):
+        self.curves = []
+
+    def step(self, x, y, **kw):
+        self.curves.append((np.asarray(x), np.asarray(y)))
+
+    def plot(self, *a, **kw):
+        pass
+
+    def set(self, **kw):
+        pass
+
+    def legend(self, **kw):
+        pass
+
+
 def test_h5py_opens_the_layout_with_its_attributes(room_run):
     with h5py.File(room_run, "r") as f:
         for name in ("trajectory", "frames/time", "frames/count", "frames/positions",
@@ -435,23 +454,7 @@ def test_plot_run_counted_everyone_from_sources_at_the_start_and_failed_on_nobod
     moreau("run", scene, "-q", "-o", out)
     run = moreau_run.load(out)
 
-    class Axes:
-        def __init__(self):
-            self.curves = []
-
-        def step(self, x, y, **kw):
-            self.curves.append((np.asarray(x), np.asarray(y)))
-
-        def plot(self, *a, **kw):
-            pass
-
-        def set(self, **kw):
-            pass
-
-        def legend(self, **kw):
-            pass
-
-    ax = Axes()
+    ax = StepAxes()
     plot_run.evacuation(ax, run, [])
     ts, left = ax.curves[0]
     with h5py.File(out) as f:
@@ -562,22 +565,7 @@ def test_people_who_came_and_went_between_frames_made_n_of_t_negative(tmp_path):
     never = ~np.isfinite(run.positions[:, :, 0]).any(axis=0)
     assert never.any(), "the test needs people who are in no frame"
 
-    class Axes:
-        curves = []
-
-        def step(self, x, y, **kw):
-            self.curves.append((np.asarray(x), np.asarray(y)))
-
-        def plot(self, *a, **kw):
-            pass
-
-        def set(self, **kw):
-            pass
-
-        def legend(self, **kw):
-            pass
-
-    ax = Axes()
+    ax = StepAxes()
     plot_run.evacuation(ax, run, [])
     ts, left = ax.curves[0]
     assert left.min() >= 0, left
