@@ -92,7 +92,12 @@ def test_run_writes_the_file_of_moreau_run(room_run, tmp_path):
         for name in names:
             a, b = cli[name], py[name]
             assert type(a) is type(b), name
-            assert dict(a.attrs) == dict(b.attrs), name
+            attrs = [dict(a.attrs), dict(b.attrs)]
+            if "note" in attrs[0]:  # a saved state's totals: the same but the wall times
+                for d in attrs:
+                    d["note"] = {k: v for k, v in json.loads(d["note"]).items()
+                                 if k != "timings"}
+            assert attrs[0] == attrs[1], name
             if isinstance(a, h5py.Dataset):
                 assert a.dtype == b.dtype and a.shape == b.shape, name
                 assert a.chunks == b.chunks and a.compression == b.compression, name
