@@ -13,7 +13,7 @@ use moreau_core::Num;
 use moreau_crowd::{Scene, SimState, Simulation};
 use moreau_integrate::ErrorEstimate;
 use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
-use moreau_record::{Record, Summary};
+use moreau_record::{Interrupted, Record, Summary};
 
 /// Arguments of `moreau run`.
 #[derive(Debug, clap::Args)]
@@ -186,18 +186,6 @@ impl Signals {
         }
     }
 }
-
-/// The error that stops a run on a signal.
-#[derive(Debug, Clone, Copy)]
-struct Interrupted(&'static str);
-
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "interrupted by {}", self.0)
-    }
-}
-
-impl std::error::Error for Interrupted {}
 
 /// The status a run file ends with for a run that ended with `outcome`.
 fn status_of(outcome: &Result<(), moreau_crowd::CrowdError>) -> (String, Option<Interrupted>) {

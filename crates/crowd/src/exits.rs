@@ -53,16 +53,16 @@ impl ExitRuntime {
         if !self.open {
             return false;
         }
-        match (&self.area, &self.segment, self.passage) {
-            (_, _, Passage::Shut) => false,
-            (Some(a), _, Passage::Whole) => a.contains(p),
-            (None, Some(s), Passage::Whole) => s.distance(p) <= r + Self::LINE_REACH,
+        match self.passage {
+            Passage::Shut => false,
+            Passage::Whole => self.covers(p, r),
             // Through a gap narrower than the person nobody passes (a panel leaving 2.5 cm
-            // of a door let people of 0.4 m out).
-            (None, Some(_), Passage::Part(s)) => {
-                s.length() >= 2.0 * r && s.distance(p) <= r + Self::LINE_REACH
+            // of a door let people of 0.4 m out). Only exit lines are ever partly open.
+            Passage::Part(s) => {
+                self.area.is_none()
+                    && s.length() >= 2.0 * r
+                    && s.distance(p) <= r + Self::LINE_REACH
             }
-            _ => false,
         }
     }
 

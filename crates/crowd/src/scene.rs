@@ -1029,7 +1029,6 @@ impl Scene {
             if let Some((name, Some(interval))) = [("closes", exit.closes), ("opens", exit.opens)]
                 .into_iter()
                 .find(|(_, i)| i.is_some())
-                && (exit.area.is_some() || exit.segment.is_some())
             {
                 let walls = self.walls();
                 let poly = exit.area.as_ref().map(|a| Polygon {

@@ -225,6 +225,15 @@ fn inspect_on_a_directory_said_no_such_file() {
     assert!(err.contains("no such file"), "{err}");
 }
 
+/// Frames `0..frames` of `n` people, each followed by the state "state after frame k".
+fn frames_with_states(w: &mut RunWriter, frames: usize, n: usize) {
+    for k in 0..frames {
+        write_frame(w, k, n).unwrap();
+        w.save_state(format!("state after frame {k}").as_bytes())
+            .unwrap();
+    }
+}
+
 /// A run killed after frames it wrote past its last saved state: resuming cuts every dataset
 /// back to that state (frames, trajectory, contacts, pressure, steps, exits), gives back the
 /// state's bytes and the header, and the run goes on from there to a whole file at its name.
@@ -234,11 +243,7 @@ fn a_killed_run_resumes_from_the_state_saved_with_its_last_frame() {
     let h = header(n, true);
     {
         let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
-        for k in 0..3 {
-            write_frame(&mut w, k, n).unwrap();
-            w.save_state(format!("state after frame {k}").as_bytes())
-                .unwrap();
-        }
+        frames_with_states(&mut w, 3, n);
         // A state between frames is refused (it would not match the rows).
         w.step(&report(99));
         assert!(w.save_state(b"between").is_err());
@@ -292,10 +297,7 @@ fn a_run_killed_while_finishing_failed_to_resume() {
     let h = header(n, false);
     {
         let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
-        for k in 0..2 {
-            write_frame(&mut w, k, n).unwrap();
-            w.save_state(b"state").unwrap();
-        }
+        frames_with_states(&mut w, 2, n);
         std::mem::forget(w);
     }
     let _ = std::fs::remove_file(moreau_io::lock_path(&path));
@@ -326,11 +328,7 @@ fn a_run_stopped_by_a_signal_could_not_be_resumed() {
     let (n, path) = (3, scratch("interrupted.h5"));
     let h = header(n, false);
     let mut w = RunWriter::create(&path, &h, Overwrite::Never).unwrap();
-    for k in 0..3 {
-        write_frame(&mut w, k, n).unwrap();
-        w.save_state(format!("state after frame {k}").as_bytes())
-            .unwrap();
-    }
+    frames_with_states(&mut w, 3, n);
     w.step(&report(4));
     w.finish("interrupted", "{}").unwrap();
     assert_eq!(

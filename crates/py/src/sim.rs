@@ -11,7 +11,7 @@ use moreau_crowd::{
     ContactKind, CrowdError, Frame, Observer, ObserverError, SimState, Simulation, ToleranceWarning,
 };
 use moreau_io::{IoError, Overwrite, RunWriter};
-use moreau_record::{Record, Summary};
+use moreau_record::{Interrupted, Record, Summary};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::{PyFileExistsError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -590,18 +590,6 @@ impl PySimulation {
     }
 }
 
-/// What stops `run_to_file` on Ctrl-C (a `KeyboardInterrupt` from the signal check).
-#[derive(Debug)]
-struct CtrlC;
-
-impl std::fmt::Display for CtrlC {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("interrupted by Ctrl-C (KeyboardInterrupt)")
-    }
-}
-
-impl std::error::Error for CtrlC {}
-
 /// Runs `scene` (a `Scene` or a path) to its horizon into the HDF5 run file `output`,
 /// with `moreau run`'s observer: the same datasets and attributes (`command` says
 /// `command`). `progress(t, steps, people_left)` is called about every 0.2 s; Ctrl-C stops
@@ -683,7 +671,7 @@ pub fn run_to_file(
                 });
                 interrupted = Some(e);
                 match ctrl_c {
-                    true => Box::new(CtrlC),
+                    true => Box::new(Interrupted("Ctrl-C (KeyboardInterrupt)")),
                     false => format!("stopped from Python: {message}").into(),
                 }
             })
@@ -695,7 +683,7 @@ pub fn run_to_file(
         // Python: KeyboardInterrupt").
         let status = match &outcome {
             Ok(()) => "complete".to_string(),
-            Err(CrowdError::Observer(e)) if e.is::<CtrlC>() => "interrupted".to_string(),
+            Err(CrowdError::Observer(e)) if e.is::<Interrupted>() => "interrupted".to_string(),
             Err(e) => format!("failed: {e:#}"),
         };
         let wall = start.elapsed().as_secs_f64();

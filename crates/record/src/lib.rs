@@ -191,6 +191,19 @@ pub fn state_due(frames: usize, people: usize) -> bool {
     frames.is_multiple_of(k)
 }
 
+/// The error that stops a run on a signal (`SIGINT`, `SIGTERM`, Ctrl-C in Python): its run
+/// file is finished with status `interrupted`, by `moreau run` and the Python module alike.
+#[derive(Debug, Clone, Copy)]
+pub struct Interrupted(pub &'static str);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted by {}", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
 /// Told of every step with the run's totals so far and the people not yet out; an error
 /// stops the run (an interrupt, say).
 pub type Progress<'a> =

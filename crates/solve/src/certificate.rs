@@ -50,12 +50,10 @@ pub(crate) fn certify_given(
         let s = problem.b[i] + scratch[i];
         // A NaN slack (a NaN or ∞ in `J` or `v`) is no satisfied row: `f64::max` dropped
         // it, and an answer of NaN was certified perfect (gap 0, violation 0).
-        let relax = if s >= 0.0 {
-            0.0
-        } else if s < 0.0 {
-            -s
-        } else {
+        let relax = if s.is_nan() {
             f64::INFINITY
+        } else {
+            (-s).max(0.0)
         };
         violation = violation.max(relax);
         let l = lambda[i].max(0.0);
