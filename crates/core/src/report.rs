@@ -13,9 +13,10 @@ pub enum SolveStatus {
     /// The solver reported a numerical failure.
     NumericalError,
     /// The target is below what double precision certifies for this problem: the progress
-    /// stalled at the certificate's rounding floor, about `10⁻¹⁶ Σ λ_i` (each slack
-    /// `b_i + J_i v` is rounded to ~10⁻¹⁶ of the velocities). No solver's answer certifies
-    /// lower; a larger target does.
+    /// stalled with the certified gap within a factor 100 of the certificate's rounding floor
+    /// (`moreau_solve::rounding_floor`: the unit roundoff times the magnitudes the gap sums,
+    /// about `10⁻¹⁶ Σ λ_i |J_i| |v|` for the slacks). No solver's answer certifies much lower;
+    /// a larger target does. A stall further above the floor is a `NumericalError`.
     RoundingFloor,
 }
 

@@ -102,6 +102,47 @@ pub(crate) fn certify_given(
     }
 }
 
+/// How far [`certify`]'s gap for `(v, λ)` can be from its exact value by rounding alone: the
+/// unit roundoff times the magnitudes its sums add up (`½|v − w|²`, `Σ_c ((|J|ᵀλ)_c)²` for
+/// `½|Jᵀλ|²`, and `Σ_i λ_i (|b'_i| + (|J| (|v| + |w|))_i)` for `λᵀ(b' + J w)`, where `|J| |v|`
+/// also bounds the slacks' own rounding). No pair certifies much below it: a target under it
+/// is a [`SolveStatus::RoundingFloor`](moreau_core::SolveStatus::RoundingFloor), a stall far
+/// above it is not. Two passes over `J`: for a solver's rare stop, not for each iteration.
+/// `scratch_n` must have one entry per unknown.
+pub fn rounding_floor(
+    problem: &ProjectionProblem<'_>,
+    v: &[f64],
+    lambda: &[f64],
+    scratch_n: &mut [f64],
+) -> f64 {
+    let j = problem.jacobian;
+    scratch_n.iter_mut().for_each(|x| *x = 0.0);
+    let mut rows = 0.0;
+    for (i, &l) in lambda.iter().enumerate() {
+        let l = l.max(0.0);
+        if l == 0.0 {
+            continue;
+        }
+        let (c, a) = j.row(i);
+        let mut jv = 0.0;
+        let mut reach = 0.0;
+        for (&c, &a) in c.iter().zip(a) {
+            scratch_n[c] += a.abs() * l;
+            jv += a * v[c];
+            reach += a.abs() * (v[c].abs() + problem.w[c].abs());
+        }
+        let relax = (-(problem.b[i] + jv)).max(0.0);
+        rows += l * ((problem.b[i] + relax).abs() + reach);
+    }
+    let jtl: f64 = scratch_n.iter().map(|x| x * x).sum();
+    let dv: f64 = v
+        .iter()
+        .zip(problem.w)
+        .map(|(v, w)| (v - w) * (v - w))
+        .sum();
+    f64::EPSILON * (0.5 * dv + jtl + rows)
+}
+
 /// The certificate of a pair with `v = w + Jᵀλ` (as the first-order solvers keep it), from
 /// the slacks `s = b + Jv`: the gap `Σ λ_i s_i⁺` and the violation `max (−s_i)⁺`, summed on
 /// `w`'s threads in fixed chunks.

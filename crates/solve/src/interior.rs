@@ -21,7 +21,7 @@
 use moreau_core::{ConstraintKey, ConstraintRows, Num, Parallelism, SolveStatus};
 
 use crate::augmented::AugmentedSystem;
-use crate::certificate::{Certificate, certify};
+use crate::certificate::{Certificate, certify, rounding_floor};
 use crate::error::SolveError;
 use crate::normal::{FactorizationCounts, NormalEquations, StageTimes};
 use crate::problem::{
@@ -270,8 +270,7 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
-/// The interior point stops ([`SolveStatus::RoundingFloor`]) after this many iterations in a
-/// row near the end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring
+/// The interior point stops after this many iterations in a row near the end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring
 /// the measure of progress 10 % below its best: `sᵀλ` while it is above the target, then the
 /// certified gap. The target is then below what double precision can certify of this
 /// problem: each slack is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps
@@ -279,10 +278,16 @@ impl InteriorPointSettingsBuilder {
 /// go below about `10⁻¹⁶ Σ λ_i` (benches/README.md, sessions 20 and 22). On a chain of 3,000
 /// pushed together (multipliers up to 56,000) the certified gap stays at 8.8·10⁻⁸ while
 /// `sᵀλ` falls; on a crush of 3,600 `sᵀλ` stays at 2.0·10⁻¹¹ (`Σ λ` = 59,000); the solves
-/// used to spend their whole budget of 100 iterations there.
+/// used to spend their whole budget of 100 iterations there. The stop is a
+/// [`SolveStatus::RoundingFloor`] when the certified gap is within [`FLOOR_MARGIN`] of
+/// [`rounding_floor`], and a [`SolveStatus::NumericalError`] above.
 const STALLED_ITERATIONS: usize = 10;
 /// See [`STALLED_ITERATIONS`].
 const STALL_ZONE: f64 = 1e3;
+/// A stall is at the rounding floor when the certified gap is within this factor of
+/// [`rounding_floor`]'s estimate; further above, the iterate lost its dual residual to the
+/// Newton matrices' rounding and the stop is a [`SolveStatus::NumericalError`].
+const FLOOR_MARGIN: f64 = 1e2;
 
 /// Mehrotra's predictor–corrector interior point on the velocity-form projection, with
 /// sparse Cholesky normal equations. Its answers are certified by [`certify`].
@@ -903,7 +908,20 @@ impl InteriorPoint {
                 } else {
                     stalled += 1;
                     if stalled == STALLED_ITERATIONS {
-                        break SolveStatus::RoundingFloor;
+                        // A stall at the certificate's rounding floor, or one far above it
+                        // (the dual residual lost to the rounding of a Newton matrix whose
+                        // `D` spans 10³⁰: the fallback's question, not a larger target's).
+                        let gap = if check {
+                            cert_gap
+                        } else {
+                            certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n).gap
+                        };
+                        let floor = rounding_floor(p, v, lam, &mut self.scratch_n);
+                        break if gap <= FLOOR_MARGIN * floor {
+                            SolveStatus::RoundingFloor
+                        } else {
+                            SolveStatus::NumericalError
+                        };
                     }
                 }
             }
