@@ -53,8 +53,11 @@ def people(fmu: str | os.PathLike, scene: str | os.PathLike | None = None,
     from fmpy.fmi3 import FMU3Slave
 
     md = md or read_model_description(str(fmu))
-    vr = next(v.valueReference for v in md.modelVariables if v.name == N_PEOPLE)
-    scene_vr = next(v.valueReference for v in md.modelVariables if v.name == "scene")
+    by_name = {v.name: v.valueReference for v in md.modelVariables}
+    if not md.fmiVersion.startswith("3") or N_PEOPLE not in by_name or "scene" not in by_name:
+        raise ValueError(f"{fmu}: an FMI {md.fmiVersion} FMU without the parameters "
+                         f"{N_PEOPLE} and scene: only moreau's FMI 3 FMU has them")
+    vr, scene_vr = by_name[N_PEOPLE], by_name["scene"]
     unzipped = extract(str(fmu))
     try:
         s = FMU3Slave(guid=md.guid, unzipDirectory=unzipped,
@@ -101,8 +104,9 @@ def signal(md: ModelDescription, time, values: dict):
     """The structured array `simulate_fmu(..., input=...)` takes: a column `time` and one per
     input named in `values` (e.g. `{"moving.door": [0, 0, 1, 1]}`), each as long as `time`.
     Real inputs are floats, Boolean ones bools; a name that is not an input of `md` is
-    refused, naming the inputs there are, and so are times that go back and values or times
-    that are not finite."""
+    refused, naming the inputs there are, and so are times that go back, times or values
+    that are not finite numbers (a string, None), booleans for an input that is not Boolean,
+    anything but True/False or 1/0 for one that is, and a column that is not a list."""
     import numpy as np
 
     inputs = {v.name: v for v in md.modelVariables if v.causality == "input"}
@@ -119,12 +123,21 @@ def signal(md: ModelDescription, time, values: dict):
         raise ValueError(f"time = {time.tolist()}: must be finite and never decrease")
     out = np.zeros(len(time), dtype=columns)
     out["time"] = time
-    for name, column in values.items():
-        column = np.asarray(column)
+    for name, given in values.items():
+        column = np.asarray(given)
+        if column.ndim != 1:
+            raise ValueError(f"{name} = {column.tolist()}: must be a list of values, one per "
+                             f"time (not an array of shape {column.shape})")
         if column.shape != time.shape:
-            raise ValueError(f"{name}: {column.shape[0] if column.ndim else 1} values for "
-                             f"{len(time)} times")
-        if column.dtype.kind == "f" and not np.isfinite(column).all():
-            raise ValueError(f"{name} = {column.tolist()}: must be finite")
+            raise ValueError(f"{name}: {len(column)} values for {len(time)} times")
+        # Numbers only ("false" is no False, None no number); booleans (True/False, 0/1)
+        # only for a Boolean input.
+        if out.dtype[name] == np.bool_:
+            if column.dtype.kind not in "biuf" or not np.isin(column, [0, 1]).all():
+                raise ValueError(f"{name} = {column.tolist()}: must be True/False (or 1/0): "
+                                 f"a Boolean input")
+        elif column.dtype.kind not in "iuf" or not np.isfinite(column).all():
+            raise ValueError(f"{name} = {column.tolist()}: must be finite numbers: a "
+                             f"{inputs[name].type} input")
         out[name] = column
     return out

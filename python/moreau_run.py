@@ -121,14 +121,19 @@ def exit_line(scene: dict, index: int = 0, walls: np.ndarray | None = None
 
 def upstream_area(scene: dict, depth: float = 2.0, index: int = 0) -> list[tuple[float, float]]:
     """A `depth` × `depth` square in front of exit `index`, on the side people start from
-    (the side of the first group's spawn region or positions)."""
+    (the side of the first group's spawn region or positions; in a scene without groups, of
+    the first source's area)."""
     (ax, ay), (bx, by) = exit_line(scene, index)
     mid = np.array([(ax + bx) / 2, (ay + by) / 2])
     tangent = np.array([bx - ax, by - ay])
     tangent /= np.linalg.norm(tangent)
     normal = np.array([-tangent[1], tangent[0]])
-    group = scene["groups"][0]
-    start = np.asarray(group.get("spawn") or group.get("positions"), dtype=float).mean(axis=0)
+    starts = [g.get("spawn") or g.get("positions") for g in scene.get("groups", [])]
+    starts += [s.get("area") for s in scene.get("sources", [])]
+    if not any(starts):
+        raise ValueError("upstream_area: the scene has no group or source to say which side "
+                         "of the exit people come from")
+    start = np.asarray(next(filter(None, starts)), dtype=float).mean(axis=0)
     if np.dot(start - mid, normal) < 0:
         normal = -normal
     h = depth / 2
@@ -139,18 +144,22 @@ def upstream_area(scene: dict, depth: float = 2.0, index: int = 0) -> list[tuple
 
 def min_gaps(run: Run) -> np.ndarray:
     """The smallest gap |x_i − x_j| − r_i − r_j between two people present, per frame
-    (+inf with fewer than two people). Found with a k-d tree, independently of moreau."""
+    (+inf with fewer than two people). Found with a k-d tree, independently of moreau: each
+    person's nearest centre gives a pair whose gap `g` bounds the smallest from above, and
+    every pair with a gap ≤ `g` has its centres within `g + 2 r_max`, the reach searched.
+    (The reach was 2 r_max alone, which finds only pairs in contact: +inf in every frame
+    where nobody touched.)"""
     out = np.full(len(run.time), np.inf)
-    reach = 2.0 * float(run.radius.max()) if len(run.radius) else 0.0
     for k, frame in enumerate(run.positions):
         present = np.flatnonzero(~np.isnan(frame[:, 0]))
         if len(present) < 2:
             continue
-        pts = frame[present]
-        pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
-        if len(pairs) == 0:
-            continue
-        i, j = present[pairs[:, 0]], present[pairs[:, 1]]
-        d = np.linalg.norm(frame[i] - frame[j], axis=1) - run.radius[i] - run.radius[j]
-        out[k] = d.min()
+        pts, radius = frame[present], run.radius[present]
+        tree = cKDTree(pts)
+        distance, nearest = tree.query(pts, k=2)
+        bound = (distance[:, 1] - radius - radius[nearest[:, 1]]).min()
+        reach = bound + 2.0 * radius.max()
+        pairs = tree.query_pairs(reach * (1 + 1e-12) + 1e-12, output_type="ndarray")
+        i, j = pairs[:, 0], pairs[:, 1]
+        out[k] = (np.linalg.norm(pts[i] - pts[j], axis=1) - radius[i] - radius[j]).min()
     return out

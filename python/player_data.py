@@ -91,8 +91,14 @@ def geometry(scene: dict) -> tuple[dict, list[float]]:
 
 
 def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
-    """The player's data for a run file (see the module documentation)."""
+    """The player's data for a run file (see the module documentation); a ValueError
+    naming the file when it is an HDF5 file but not a run file."""
     with h5py.File(run_path, "r") as f:
+        for name in ("frames/time", "frames/positions", "people/radius"):
+            if name not in f:
+                raise ValueError(f"{run_path}: not a moreau run file (no /{name})")
+        if "scene" not in f.attrs:
+            raise ValueError(f"{run_path}: not a moreau run file (no attribute scene)")
         scene = tomllib.loads(_text(f.attrs["scene"]))
         name = _text(f.attrs["scene_name"]) if "scene_name" in f.attrs else scene.get("name", "")
         time_all = f["frames/time"][:]
@@ -174,7 +180,10 @@ def main(argv=None) -> int:
         h5py.File(args.run, "r").close()
     except OSError as e:
         parser.error(f"{args.run}: cannot be read as HDF5: {e}")
-    out = write_html(args.run, args.out or args.run.with_suffix(".html"), args.max_values)
+    try:
+        out = write_html(args.run, args.out or args.run.with_suffix(".html"), args.max_values)
+    except ValueError as e:
+        parser.error(str(e))
     print(f"{out}: {out.stat().st_size / 1e6:.1f} MB")
     return 0
 

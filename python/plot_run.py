@@ -7,8 +7,6 @@ speed over time and the per-step solver statistics.
 writes evacuation.png, flow.png, density.png, speed.png, solver.png and overview.png (all
 five on one figure) into the output directory.
 
-    .venv/bin/python python/plot_run.py out/room-150.h5 --animate out/room-150.mp4
-
     .venv/bin/python python/plot_run.py out/barrier-sweep.h5 --snapshots 0,5,10,15 -o out/sweep.png
 
 draws the people (to scale, coloured by speed) and the walls, the moving ones in red, at those
@@ -120,8 +118,11 @@ def flow(ax, run, counts):
     ax.legend(loc="upper left", fontsize=8)
 
 
-def density(ax, traj, walkable, cell=0.5):
-    """Mean classic density on a grid (PedPy density profile) over the whole run."""
+def density(ax, traj, walkable, frames, cell=0.5):
+    """Mean classic density on a grid (PedPy density profile) over the run's `frames` frames,
+    those with nobody in counting as zero. (PedPy has a profile for each frame someone is in,
+    and its plot averages those only: the mean of a run everyone left halfway through was
+    twice the run's.)"""
     if traj.data.empty:
         # Nobody in any frame: PedPy's profile of nothing failed inside matplotlib.
         ax.text(0.5, 0.5, "nobody in the run", ha="center", va="center", transform=ax.transAxes)
@@ -130,7 +131,8 @@ def density(ax, traj, walkable, cell=0.5):
     profiles = pedpy.compute_density_profile(
         data=traj.data, walkable_area=walkable, grid_size=cell,
         density_method=pedpy.DensityMethod.CLASSIC)
-    pedpy.plot_profiles(walkable_area=walkable, profiles=profiles, axes=ax,
+    mean = np.sum(profiles, axis=0) / frames
+    pedpy.plot_profiles(walkable_area=walkable, profiles=[mean], axes=ax,
                         label="density (1/m²)", vmin=0, cmap="YlOrRd")
     ax.set_title(f"Density map (PedPy, {cell} m cells, mean over the run)")
 
@@ -404,7 +406,7 @@ def main(argv=None) -> int:
     panels = {
         "evacuation": lambda ax: evacuation(ax, run, counts),
         "flow": lambda ax: flow(ax, run, counts),
-        "density": lambda ax: density(ax, traj, walkable),
+        "density": lambda ax: density(ax, traj, walkable, len(run.time)),
         "speed": lambda ax: speed(ax, run),
         "solver": lambda ax: solver(ax, run),
     }

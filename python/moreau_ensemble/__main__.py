@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import pathlib
+import shutil
 import sys
 
 from .runner import TABLE, default_moreau, run_sweep
@@ -29,6 +30,17 @@ def main(argv=None) -> int:
     p.add_argument("--retry-failed", action="store_true", help="run failed variants again")
     p.add_argument("--plot", action="store_true", help="also draw DIR/evacuation.png")
     args = p.parse_args(argv)
+    # Refused before any run: a run of each would fail (or, for --workers 0, wait forever).
+    if args.workers < 1:
+        p.error(f"--workers {args.workers}: must be at least 1")
+    if args.engine == "fmu" and not args.fmu:
+        p.error("--engine fmu needs --fmu FILE (the FMI 2 .fmu)")
+    if not args.scheduler:  # the workers are on this machine: their files are these
+        if args.engine == "fmu" and not pathlib.Path(args.fmu).is_file():
+            p.error(f"--fmu {args.fmu}: no such file")
+        moreau = args.moreau or default_moreau()
+        if args.engine == "driver" and shutil.which(moreau) is None:
+            p.error(f"--moreau {moreau}: no such program (the moreau driver binary)")
 
     try:
         sweep = load_sweep(args.sweep)

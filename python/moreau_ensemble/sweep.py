@@ -10,6 +10,8 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 
+from moreau_run import exit_line
+
 
 @dataclass(frozen=True)
 class Variant:
@@ -33,7 +35,7 @@ class Sweep:
 
     def variants(self) -> list[Variant]:
         """Every combination of the varied values with every seed, in a fixed order."""
-        base = tomllib.loads(self.base.read_text())
+        base = read_base(self.base)
         keys = list(self.vary)
         out = []
         for combo in itertools.product(*(self.vary[k] for k in keys)):
@@ -51,6 +53,17 @@ class Sweep:
         return out
 
 
+def read_base(path: pathlib.Path) -> dict:
+    """The base scene at `path`, its relative file paths (`[area] wkt_file`, the only one a
+    scene has) made absolute from the base's directory, as moreau reads them: the variants'
+    scenes are written elsewhere (`runs/<variant>/scene.toml`), where they would not be found."""
+    scene = tomllib.loads(path.read_text())
+    area = scene.get("area")
+    if isinstance(area, dict) and isinstance(area.get("wkt_file"), str):
+        area["wkt_file"] = str((path.parent / area["wkt_file"]).resolve())
+    return scene
+
+
 def _label(value, key: bool = False) -> str:
     """`value` as part of a directory name: letters, digits and `.+-` only (and `_` in a key),
     so no `/`, and no name is `.` or `..`; at most 60 characters."""
@@ -64,7 +77,7 @@ def _check(path: pathlib.Path, sweep: Sweep) -> None:
     key or value is an error naming it before any run starts; and checks that the variants'
     directory names are distinct."""
     try:
-        base = tomllib.loads(sweep.base.read_text())
+        base = read_base(sweep.base)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise ValueError(f"{path}: base = {str(sweep.base)!r}: not a scene file (TOML): {e}") from e
     entries = [("set", k, v) for k, v in sweep.fixed.items()]
@@ -80,7 +93,7 @@ def _check(path: pathlib.Path, sweep: Sweep) -> None:
                              f"scene: {kind}: {e}") from e
     # Each variant's whole scene as the runs will read it (the values together: one may need
     # another), once for each combination of values (the seed changes nothing else).
-    validate = _scene_validator(base)
+    validate = _scene_validator()
     checked = set()
     for variant in sweep.variants():
         combination = tuple(sorted(variant.values.items(), key=lambda kv: kv[0]))
@@ -100,18 +113,15 @@ def _check(path: pathlib.Path, sweep: Sweep) -> None:
         names[variant.name] = variant.values
 
 
-def _scene_validator(base: dict):
+def _scene_validator():
     """A check that a variant's scene text has the scene format's keys and types, by moreau's
     own reader where the `moreau` module is installed (a key misspelt, `groups.0.cont`, was
     written into every variant and failed each run). Only the format: a value the scene's
     rules refuse (a radius of −0.2) is that variant's failure, recorded as such while the
-    others run. None for a base that reads its area from a `wkt_file` (a path relative to
-    the base, which a scene read from text cannot follow)."""
+    others run."""
     try:
         import moreau
     except ImportError:
-        return lambda text: None
-    if "wkt_file" in base.get("area", {}):
         return lambda text: None
 
     def validate(text: str) -> None:
@@ -126,31 +136,45 @@ def _scene_validator(base: dict):
 
 
 def load_sweep(path) -> Sweep:
-    """Reads a sweep file; errors name the key at fault."""
+    """Reads a sweep file; errors name the key at fault and its value."""
     path = pathlib.Path(path)
-    spec = tomllib.loads(path.read_text())
+    try:
+        spec = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{path}: not TOML: {e}") from e
     unknown = set(spec) - {"base", "seeds", "set", "vary"}
     if unknown:
         raise ValueError(f"{path}: unknown keys {sorted(unknown)} (base, seeds, set, vary)")
     if "base" not in spec:
         raise ValueError(f"{path}: 'base' (the scene file) is missing")
+    if not isinstance(spec["base"], str):
+        raise ValueError(f"{path}: base = {spec['base']!r}: must be the scene file's path (a "
+                         f"string)")
     base = (path.parent / spec["base"]).resolve()
     if not base.is_file():
         raise ValueError(f"{path}: base = {spec['base']!r}: no such scene file ({base})")
     seeds = spec.get("seeds", 1)
-    seeds = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError(f"{path}: seeds: at least one")
+    if _is_int(seeds) and seeds >= 1:
+        seeds = list(range(seeds))
+    elif not (isinstance(seeds, list) and seeds and all(_is_int(s) and s >= 0 for s in seeds)):
+        raise ValueError(f"{path}: seeds = {seeds!r}: must be a count (an integer ≥ 1) or a "
+                         f"non-empty list of seeds (integers ≥ 0)")
+    fixed = spec.get("set", {})
     vary = spec.get("vary", {})
+    for key, table in (("set", fixed), ("vary", vary)):
+        if not isinstance(table, dict):
+            raise ValueError(f"{path}: {key} = {table!r}: must be a table")
     for key, values in vary.items():
         if not isinstance(values, list) or not values:
             raise ValueError(f"{path}: vary.{key} must be a non-empty list, got {values!r}")
-    fixed = spec.get("set", {})
-    if not isinstance(fixed, dict) or not isinstance(vary, dict):
-        raise ValueError(f"{path}: 'set' and 'vary' must be tables")
     sweep = Sweep(path=path, base=base, seeds=seeds, fixed=fixed, vary=vary)
     _check(path, sweep)
     return sweep
+
+
+def _is_int(value) -> bool:
+    """An integer of TOML's, not a boolean (Python's bool is an int)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def apply(scene: dict, key: str, value) -> None:
@@ -186,20 +210,21 @@ def apply(scene: dict, key: str, value) -> None:
 
 
 def set_door_width(scene: dict, width: float) -> None:
-    """Resizes the first exit, an axis-aligned rectangle in a gap of the walls: along its
-    longer side, every coordinate equal to the door's ends (in the exit's area, and the
-    vertices of the walkable outline beside it: its jambs) moves to `centre ± width/2`.
-    (Every outline vertex at those coordinates moved until session 38: the other door of
-    room-two-exits, at the same height, narrowed too.)"""
+    """Resizes the first exit, an axis-aligned rectangle in a gap of the walls: along the
+    wall (the side its measurement line `moreau_run.exit_line` runs along, from jamb to jamb),
+    every coordinate equal to the door's ends (in the exit's area, and the vertices of the
+    walkable outline beside it: its jambs) moves to `centre ± width/2`. (Every outline vertex
+    at those coordinates moved until session 38: the other door of room-two-exits, at the
+    same height, narrowed too. And the width was the box's longer side: a door deeper than
+    wide, 1 m in a 2 m thick wall, had its depth changed.)"""
     if not width > 0 or width != width or width == float("inf"):
         raise ValueError(f"door_width = {width}: must be finite and > 0")
     area = scene["exits"][0].get("area")
     if not area:
         raise ValueError("door_width needs the first exit to be an area")
-    xs = [p[0] for p in area]
-    ys = [p[1] for p in area]
-    axis = 1 if max(ys) - min(ys) >= max(xs) - min(xs) else 0
-    lo, hi = (min(ys), max(ys)) if axis == 1 else (min(xs), max(xs))
+    (x0, _), (x1, _) = exit_line(scene, 0)
+    axis = 1 if x0 == x1 else 0
+    lo, hi = min(p[axis] for p in area), max(p[axis] for p in area)
     centre = 0.5 * (lo + hi)
     new = {lo: centre - width / 2, hi: centre + width / 2}
     other = 1 - axis

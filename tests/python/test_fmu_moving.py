@@ -121,3 +121,31 @@ def test_signal_refuses_times_that_go_back_and_values_that_are_not_finite(fmus):
         moreau_fmi.signal(md, [0.0, 1.0], {"moving.door": [0.0, float("nan")]})
     steps = moreau_fmi.signal(md, [0.0, 2.0, 2.0, 3.0], {"moving.door": [0.0, 0.0, 1.0, 1.0]})
     assert steps["time"].tolist() == [0.0, 2.0, 2.0, 3.0]  # a repeated time is a jump
+
+
+def test_signal_read_the_string_false_as_true_and_let_none_and_inf_through(fmus):
+    """Regression: `signal` stored "false" as True in a Boolean input, None (NaN) and "inf"
+    passed its finiteness check, and a 2-D column was "2 values for 2 times"."""
+    md = read_model_description(str(fmus["room2"]))
+    for values, said in [
+        ({"door_open": ["false", "false"]}, "door_open = ['false', 'false']: must be True/False"),
+        ({"door_open": [2, 1]}, "door_open = [2, 1]: must be True/False"),
+        ({"speed_factor": [None, 1.0]}, "speed_factor = [None, 1.0]: must be finite numbers"),
+        ({"speed_factor": ["inf", "1"]}, "speed_factor = ['inf', '1']: must be finite numbers"),
+        ({"speed_factor": [True, False]}, "speed_factor = [True, False]: must be finite numb"),
+        ({"speed_factor": [[1, 2], [3, 4]]}, "speed_factor = [[1, 2], [3, 4]]: must be a list"),
+    ]:
+        with pytest.raises(ValueError) as e:
+            moreau_fmi.signal(md, [0.0, 1.0], values)
+        assert said in str(e.value), str(e.value)
+    ok = moreau_fmi.signal(md, [0.0, 1.0], {"door_open": [1, False], "speed_factor": [1, 0.5]})
+    assert ok["door_open"].tolist() == [True, False]
+    assert ok["speed_factor"].tolist() == [1.0, 0.5]
+
+
+def test_people_on_an_fmi2_fmu_raised_a_bare_stop_iteration(fmus):
+    """Regression: `people` looked for `n_people`, which only the FMI 3 FMU has, with
+    `next()`: a bare StopIteration on the FMI 2 FMU."""
+    with pytest.raises(ValueError, match=r"moreau-crowd-fmi2.fmu: an FMI 2.0 FMU without"):
+        moreau_fmi.people(fmus["room2"])
+    assert moreau_fmi.people(fmus["room3"]) == 150  # the shipped room's 150 people

@@ -571,3 +571,106 @@ def test_people_who_came_and_went_between_frames_made_n_of_t_negative(tmp_path):
     assert left.min() >= 0, left
     for t, n in zip(run.time, run.count):
         assert left[np.searchsorted(ts, t, side="right") - 1] == n, (t, n)
+
+
+def test_min_gaps_was_inf_in_every_frame_where_nobody_touched():
+    """Regression: the search reached 2 r_max only, so it found pairs in contact alone, and
+    a frame where nobody touched had a smallest gap of +inf."""
+    nan = np.nan
+    positions = np.array([
+        # Apart: 0–1 is 1 m between centres (gap 0.5), 2 is far away.
+        [[0.0, 0.0], [1.0, 0.0], [5.0, 5.0], [nan, nan]],
+        # The nearest centres (0–1, 1 m, gap 0.8) are not the smallest gap: 2–3, 2.5 m
+        # between centres of radius 1, gap 0.5.
+        [[0.0, 0.0], [1.0, 0.0], [10.0, 0.0], [12.5, 0.0]],
+        # One person: no pair.
+        [[0.0, 0.0], [nan, nan], [nan, nan], [nan, nan]],
+    ])
+    run = moreau_run.Run(path=None, attrs={}, scene={}, time=np.arange(3.0), count=None,
+                         positions=positions, radius=np.array([0.2, 0.3, 1.0, 1.0]),
+                         steps=None, exits=None, trajectory=None)
+    gaps = moreau_run.min_gaps(run)
+    assert gaps[0] == pytest.approx(1.0 - 0.2 - 0.3)
+    assert gaps[1] == pytest.approx(2.5 - 1.0 - 1.0)
+    assert gaps[2] == np.inf
+
+    # Against every pair, on random crowds of mixed radii, some frames with nobody touching.
+    rng = np.random.default_rng(7)
+    positions = rng.uniform(0.0, 20.0, size=(30, 12, 2))
+    positions[rng.random((30, 12)) < 0.2] = nan
+    run.time, run.positions = np.arange(30.0), positions
+    run.radius = rng.uniform(0.1, 0.6, size=12)
+    expected = []
+    for frame in positions:
+        present = np.flatnonzero(~np.isnan(frame[:, 0]))
+        expected.append(min((np.hypot(*(frame[i] - frame[j])) - run.radius[i] - run.radius[j]
+                             for a, i in enumerate(present) for j in present[a + 1:]),
+                            default=np.inf))
+    assert (np.array(expected) > 0).sum() > 10
+    np.testing.assert_allclose(moreau_run.min_gaps(run), expected, rtol=0, atol=1e-12)
+
+
+def test_the_density_map_mean_over_the_run_averaged_only_the_frames_someone_was_in(tmp_path):
+    """Regression: PedPy has a density profile for each frame someone is in only, and the
+    map titled "mean over the run" averaged those: 5 people who all left within the first
+    of 11 frames made a map of 5 people, not of 5/11 of a person."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    import plot_run
+
+    scene = tmp_path / "out.toml"
+    scene.write_text("""
+name = "all-out"
+seed = 1
+[area]
+outer = [[0.0, 0.0], [6.0, 0.0], [6.0, 6.0], [0.0, 6.0]]
+[[exits]]
+name = "door"
+area = [[5.0, 0.0], [6.0, 0.0], [6.0, 6.0], [5.0, 6.0]]
+action = "remove"
+[[groups]]
+name = "g"
+count = 5
+spawn = [[4.5, 0.5], [4.7, 0.5], [4.7, 5.5], [4.5, 5.5]]
+radius = 0.1
+speed = 10.0
+destination = "door"
+[time]
+horizon = 1.0
+step = 0.05
+output_interval = 0.1
+""")
+    out = tmp_path / "out.h5"
+    moreau("run", scene, "-q", "-o", out)
+    with h5py.File(out) as f:
+        count = f["frames/count"][:]
+    assert count.tolist() == [5] + [0] * 10
+    traj = pedpy.load_trajectory_from_ped_data_archive_hdf5(trajectory_file=out)
+    walkable = pedpy.load_walkable_area_from_ped_data_archive_hdf5(trajectory_file=out)
+    fig, ax = plt.subplots()
+    plot_run.density(ax, traj, walkable, len(count), cell=0.5)
+    # Densities (1/m²) × cell areas: the people in the area, on average over the frames.
+    people = float(ax.images[0].get_array().sum()) * 0.5 ** 2
+    plt.close(fig)
+    assert people == pytest.approx(5 / 11)
+
+
+def test_upstream_area_raised_key_error_groups_on_a_scene_of_sources_only():
+    """Regression: the square in front of the exit took its side from the first group, and
+    a scene whose people all come from sources had none: KeyError 'groups'."""
+    def scene(source_x):
+        return {"exits": [{"name": "door", "segment": [[5.0, 0.0], [5.0, 2.0]]}],
+                "sources": [{"area": [[source_x, 0.0], [source_x + 1, 0.0],
+                                      [source_x + 1, 2.0], [source_x, 2.0]]}]}
+
+    def square(points):
+        return sorted((round(x, 9), round(y, 9)) for x, y in points)
+
+    # The 2 m square on the door's 2 m line, on the sources' side.
+    assert square(moreau_run.upstream_area(scene(1.0))) == [(3, 0), (3, 2), (5, 0), (5, 2)]
+    assert square(moreau_run.upstream_area(scene(8.0))) == [(5, 0), (5, 2), (7, 0), (7, 2)]
+    with pytest.raises(ValueError, match="no group or source"):
+        moreau_run.upstream_area({"exits": scene(1.0)["exits"]})

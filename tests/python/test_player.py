@@ -354,3 +354,16 @@ def test_player_data_refuses_what_moreau_view_refuses(room_run, tmp_path, capsys
             player_data.main(args)
         assert ended.value.code == 2 and said in capsys.readouterr().err, args
     assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.h5"]
+
+
+def test_player_data_on_an_hdf5_file_that_is_no_run_gave_a_traceback(tmp_path, capsys):
+    """Regression: an HDF5 file that is not a run file (no /frames) ended in h5py's KeyError
+    traceback; it is refused (exit 2), naming the file and what it lacks."""
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f["x"] = [1.0, 2.0]
+    with pytest.raises(SystemExit) as ended:
+        player_data.main([str(other), "-o", str(tmp_path / "other.html")])
+    err = capsys.readouterr().err
+    assert ended.value.code == 2 and f"{other}: not a moreau run file (no /frames/time)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.h5"]

@@ -376,6 +376,53 @@ def test_a_bad_sweep_variant_gave_a_traceback_after_the_cluster_started(tmp_path
     assert not (tmp_path / "out").exists(), "nothing made before the sweep was checked"
 
 
+@pytest.mark.parametrize("args,said", [
+    (["--engine", "fmu"], "--engine fmu needs --fmu FILE"),
+    (["--engine", "fmu", "--fmu", "missing.fmu"], "--fmu missing.fmu: no such file"),
+    (["--moreau", "/nowhere/moreau"], "--moreau /nowhere/moreau: no such program"),
+])
+def test_engine_fmu_without_an_fmu_recorded_every_run_as_failed(tmp_path, args, said):
+    """Regression: `--engine fmu` without `--fmu` (or with a driver that is not there) started
+    the cluster and recorded every run as failed ("engine fmu needs --fmu")."""
+    proc = ensemble(sweep(tmp_path, ""), "--out", tmp_path / "out", *args)
+    assert proc.returncode == 2 and said in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists(), "no run recorded"
+
+
+@pytest.mark.parametrize("workers", ["0", "-1"])
+def test_workers_0_waited_forever(tmp_path, workers):
+    """Regression: `--workers 0` started a cluster of no workers and waited for them."""
+    proc = ensemble(sweep(tmp_path, ""), "--out", tmp_path / "out", "--workers", workers)
+    assert proc.returncode == 2, proc.stderr
+    assert f"--workers {workers}: must be at least 1" in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("body,said", [
+    ('seeds = 2.5', "seeds = 2.5: must be a count (an integer ≥ 1) or a non-empty list"),
+    ('seeds = "12"', "seeds = '12': must be a count"),  # was seeds 1 and 2
+    ('seeds = [1.7, 2.2]', "seeds = [1.7, 2.2]: must be a count"),  # was seeds 1 and 2
+    ('seeds = true', "seeds = True: must be a count"),
+    ('vary = 3', "vary = 3: must be a table"),
+    ('set = "x"', "set = 'x': must be a table"),
+    ('seeds = [', "not TOML"),
+])
+def test_sweep_seeds_of_the_wrong_type_gave_a_traceback_or_other_seeds(tmp_path, body, said):
+    """Regression: `seeds = 2.5`, `vary = 3` and `base = 3` gave tracebacks, `seeds = "12"`
+    became the seeds 1 and 2 and `[1.7, 2.2]` the same, and a TOML syntax error did not name
+    the sweep file."""
+    from moreau_ensemble import load_sweep
+
+    spec = tmp_path / "sweep.toml"
+    spec.write_text(f'base = "{ROOM}"\n{body}\n')
+    with pytest.raises(ValueError) as e:
+        load_sweep(spec)
+    assert str(e.value).startswith(f"{spec}: ") and said in str(e.value), str(e.value)
+    spec.write_text("base = 3\n")
+    with pytest.raises(ValueError, match="base = 3: must be the scene file's path"):
+        load_sweep(spec)
+
+
 def test_a_garbage_base_file_gave_a_traceback(tmp_path):
     base = tmp_path / "garbage.toml"
     base.write_bytes(b"\x00\xff not [toml")
