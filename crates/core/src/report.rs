@@ -14,9 +14,9 @@ pub enum SolveStatus {
     NumericalError,
     /// The target is below what double precision certifies for this problem: the progress
     /// stalled with the certified gap within a factor 100 of the certificate's rounding floor
-    /// (`moreau_solve::rounding_floor`: the unit roundoff times the magnitudes the gap sums,
-    /// about `10⁻¹⁶ Σ λ_i |J_i| |v|` for the slacks). No solver's answer certifies much lower;
-    /// a larger target does. A stall further above the floor is a `NumericalError`.
+    /// (`moreau_solve::Certificate::floor`: the unit roundoff times the magnitudes the gap
+    /// sums, about `10⁻¹⁶ Σ λ_i |J_i| |v|` for the slacks). No answer certifies below the
+    /// floor; a larger target does. A stall further above the floor is a `NumericalError`.
     RoundingFloor,
 }
 

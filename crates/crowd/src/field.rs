@@ -191,6 +191,39 @@ impl DistanceField {
             .map_or(f64::INFINITY, |(ix, iy)| self.dist[iy * self.nx + ix])
     }
 
+    /// The distance at `p` blended bilinearly from the four nearest cell centres, walkable
+    /// cells only (their weights renormalized): Lipschitz in `p` where a walkable cell is
+    /// near, unlike [`Self::distance`], which is constant on each cell and jumps between
+    /// them. ∞ where no walkable cell is near.
+    pub fn interpolated_distance(&self, p: [f64; 2]) -> f64 {
+        let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
+        let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
+        let (x0, y0) = (floor(fx), floor(fy));
+        let (tx, ty) = (fx - x0, fy - y0);
+        let (mut acc, mut weight) = (0.0, 0.0);
+        for (dx, dy, w) in [
+            (0, 0, (1.0 - tx) * (1.0 - ty)),
+            (1, 0, tx * (1.0 - ty)),
+            (0, 1, (1.0 - tx) * ty),
+            (1, 1, tx * ty),
+        ] {
+            let (ix, iy) = (x0 as i64 + dx, y0 as i64 + dy);
+            if ix < 0 || iy < 0 || ix >= self.nx as i64 || iy >= self.ny as i64 {
+                continue;
+            }
+            let d = self.dist[iy as usize * self.nx + ix as usize];
+            if d.is_finite() && w > 0.0 {
+                acc += w * d;
+                weight += w;
+            }
+        }
+        if weight > 0.0 {
+            acc / weight
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// Asks the processor to bring the cells [`Self::direction`]`(p)` reads into its cache;
     /// changes no result.
     #[inline]
@@ -329,7 +362,9 @@ impl DesiredVelocity<'_> {
         let mut d = self.fields[g].direction(p);
         let mut slow = 1.0;
         if lipschitz && matches!(self.people.place[i], Place::ToTarget(_)) {
-            slow = (self.fields[g].distance(p) / Self::ARRIVAL_RANGE).clamp(0.0, 1.0);
+            // (Interpolated: the cell's own distance made the slowing a staircase of
+            // 0.1 m/s steps, not Lipschitz.)
+            slow = (self.fields[g].interpolated_distance(p) / Self::ARRIVAL_RANGE).clamp(0.0, 1.0);
         }
         let r = self.people.radius[i];
         self.walls.near(p, r + Self::WALL_RANGE, near);

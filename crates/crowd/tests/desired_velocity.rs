@@ -141,3 +141,52 @@ fn a_run_file_scene_without_a_desired_velocity_ran_with_the_classic_one() {
         assert_eq!(stored.model.field_update, file.model.field_update);
     }
 }
+
+/// Regression: the Lipschitz desired velocity slowed people down over their last metre to the
+/// target area by the distance of the field's cell they stood in, so the speed fell in a
+/// staircase of 0.1 m/s steps at each 0.1 m cell edge (not Lipschitz, against
+/// seeds/000 (8)). One person of the paper's room walks through the door and on to the target
+/// area (x ≥ 14) in steps of 5 ms (at most 5 mm each): in the open corridor (x > 12.5, no
+/// wall within reach) the desired speed falls from 1 to near 0 by at most 0.005 a step, as
+/// a slowing over 1 m at 1 m/s does.
+#[test]
+fn the_arrival_slowdown_was_a_staircase_of_cell_distances() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/scenes/room-150.toml"
+    ))
+    .unwrap()
+    .replace("count = 150", "count = 1")
+    .replace(
+        "spawn = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]",
+        "spawn = [[8.5, 4.5], [9.5, 4.5], [9.5, 5.5], [8.5, 5.5]]",
+    );
+    assert!(
+        text.contains("spawn = [[8.5, 4.5]"),
+        "the room's spawn area moved"
+    );
+    let scene = Scene::from_toml(&text, "one person").unwrap();
+    assert_eq!(scene.model.desired_velocity, DesiredVelocityKind::Lipschitz);
+    let mut sim = Simulation::new(scene).unwrap();
+    // (x, desired speed) after each step in the corridor.
+    let mut walk = Vec::new();
+    let mut u = [0.0; 2];
+    for _ in 0..1200 {
+        sim.step(0.005).unwrap();
+        sim.desired_velocities(&mut u);
+        let x = sim.frame().positions[0];
+        if x > 12.5 {
+            walk.push((x, u[0].hypot(u[1])));
+        }
+    }
+    let slowest = walk.iter().map(|w| w.1).fold(f64::INFINITY, f64::min);
+    assert!(slowest < 0.2, "never slowed down: {slowest}");
+    let jump = walk
+        .windows(2)
+        .map(|w| (w[1].1 - w[0].1).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        jump < 0.006,
+        "the desired speed jumped by {jump} in one step"
+    );
+}

@@ -15,10 +15,13 @@
 //! at equal error this costs what error-per-unit-step control costs there, without its
 //! collapse to `mu_min` at every contact.
 //!
-//! `ε_k = max(θ² tol² (μ_k / μ_max)³, floor · μ_k²)`: the projection error `√ε_k ≤ θ tol` stays
-//! a fraction of the step's error budget, and `ε_k / μ_k²` falls with `μ_k` and with `tol`,
-//! down to the `floor` double precision certifies ([`AdaptiveSettings::eps_policy`]):
-//! Definition 4.3 of `seeds/002` with `tol` as the parameter that goes to zero.
+//! `ε_k = max(θ² tol² (μ_k / μ_max)³, floor · μ_k²)`: above the floor the projection error
+//! `√ε_k ≤ θ tol` stays a fraction of the step's error budget, and `ε_k / μ_k²` falls with
+//! `μ_k` and with `tol`, down to the `floor` double precision certifies
+//! ([`AdaptiveSettings::eps_policy`]): Definition 4.3 of `seeds/002` with `tol` as the
+//! parameter that goes to zero. Where the floor binds (every step once
+//! `θ² tol² μ / μ_max³ < floor`), `ε_k / μ_k²` is the floor whatever `tol`, and `√ε_k` exceeds
+//! `θ tol` for `μ_k > θ tol / √floor`.
 
 use moreau_core::{Field, Num, StepReport};
 use serde::{Deserialize, Serialize};

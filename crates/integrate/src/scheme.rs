@@ -11,7 +11,9 @@ use crate::stepping::fixed_step;
 /// How the set-valued part `∂ψ` enters the prediction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Selection {
-    /// `w = ` the element of minimal norm of `F(t, q) − ∂ψ(q)` (`seeds/002` Definition 4.3).
+    /// `w = ` the element of minimal norm of `F(t, q) − ∂ψ(q)`: `seeds/002` Definition 4.3
+    /// takes any element of `F(x_k)`; the minimal norm is ours (it sticks only where `q_i` is
+    /// exactly 0, which is the chattering the README reports for Example 8.2).
     #[default]
     Explicit,
     /// `y = prox_{μψ}(q + μ F(t, q))`: implicit in `ψ`, explicit in `F`.
@@ -67,8 +69,8 @@ impl EpsPolicy {
 
     /// `ε = max(budget² (μ / μ_max)³, 2·10⁻⁷ μ²)` for an adaptive controller whose
     /// convergence parameter is its tolerance: `budget = θ tol` is the projection's share of a
-    /// step's error (`√ε ≤ budget` for `μ ≤ μ_max`), and `ε/μ² = budget² μ / μ_max³` falls as
-    /// the steps actually taken shrink, as seeds/000 asks (`p = 3 > 2`; the power 1 used before
+    /// step's error (`√ε ≤ budget` for `μ ≤ μ_max` above the floor), and `ε/μ² = budget² μ /
+    /// μ_max³` falls as the steps actually taken shrink, as Definition 4.3 of seeds/002 asks (`p = 3 > 2`; the power 1 used before
     /// made `ε/μ²` *grow* as `μ` shrank: 10 at `μ = 10⁻⁶`, tol = 0.01), down to
     /// [`Self::ADAPTIVE_FLOOR`]: a duality gap of 10⁻⁷ (m/s)², about where Clarabel's
     /// certificates stop in double precision on crowds (measured on room-60 at `μ = 10⁻⁶`,

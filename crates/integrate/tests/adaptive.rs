@@ -240,7 +240,7 @@ fn the_eps_floor_is_the_settings_own() {
     assert!(policy.eps(1e-3) > 5.0 * AdaptiveSettings::new(0.01).eps_policy().eps(1e-3));
 }
 
-/// seeds/000 asks `ε_k/μ_k² → 0` of the steps a run takes: with adaptive steps the tolerance
+/// seeds/002 (Definition 4.3) asks `ε_k/μ_k² → 0` of the steps a run takes: with adaptive steps the tolerance
 /// fixes the budget, and `ε/μ²` must still fall as `μ` falls (the power-1 policy used before
 /// made it grow: 10 at `μ = 10⁻⁶`, tol = 0.01), down to the floor double precision certifies.
 #[test]

@@ -21,7 +21,7 @@
 use moreau_core::{ConstraintKey, ConstraintRows, Num, Parallelism, SolveStatus};
 
 use crate::augmented::AugmentedSystem;
-use crate::certificate::{Certificate, certify, rounding_floor};
+use crate::certificate::{Certificate, certify};
 use crate::error::SolveError;
 use crate::normal::{FactorizationCounts, NormalEquations, StageTimes};
 use crate::problem::{
@@ -280,12 +280,12 @@ impl InteriorPointSettingsBuilder {
 /// `sᵀλ` falls; on a crush of 3,600 `sᵀλ` stays at 2.0·10⁻¹¹ (`Σ λ` = 59,000); the solves
 /// used to spend their whole budget of 100 iterations there. The stop is a
 /// [`SolveStatus::RoundingFloor`] when the certified gap is within [`FLOOR_MARGIN`] of
-/// [`rounding_floor`], and a [`SolveStatus::NumericalError`] above.
+/// its rounding floor ([`Certificate::floor`]), and a [`SolveStatus::NumericalError`] above.
 const STALLED_ITERATIONS: usize = 10;
 /// See [`STALLED_ITERATIONS`].
 const STALL_ZONE: f64 = 1e3;
 /// A stall is at the rounding floor when the certified gap is within this factor of
-/// [`rounding_floor`]'s estimate; further above, the iterate lost its dual residual to the
+/// [`Certificate::floor`]; further above, the iterate lost its dual residual to the
 /// Newton matrices' rounding and the stop is a [`SolveStatus::NumericalError`].
 const FLOOR_MARGIN: f64 = 1e2;
 
@@ -911,13 +911,12 @@ impl InteriorPoint {
                         // A stall at the certificate's rounding floor, or one far above it
                         // (the dual residual lost to the rounding of a Newton matrix whose
                         // `D` spans 10³⁰: the fallback's question, not a larger target's).
-                        let gap = if check {
-                            cert_gap
-                        } else {
-                            certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n).gap
-                        };
-                        let floor = rounding_floor(p, v, lam, &mut self.scratch_n);
-                        break if gap <= FLOOR_MARGIN * floor {
+                        // (`sᵀλ` stalled above the target while the certificate, consulted
+                        // only below it, may meet it already.)
+                        let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
+                        break if c.gap <= target.gap && c.violation <= target.violation {
+                            SolveStatus::Converged
+                        } else if c.gap <= FLOOR_MARGIN * c.floor {
                             SolveStatus::RoundingFloor
                         } else {
                             SolveStatus::NumericalError

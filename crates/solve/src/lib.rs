@@ -32,7 +32,7 @@ mod workers;
 
 pub use apgd::{Apgd, ApgdSettings, ApgdSettingsBuilder};
 pub use auto::{AutoSettings, AutoSolver, Reach, ScreenReport};
-pub use certificate::{Certificate, certify, rounding_floor};
+pub use certificate::{Certificate, certify};
 pub use chain::WithFallback;
 pub use clarabel_ref::{ClarabelReference, ClarabelSettings, infeasibility_certificate};
 pub use error::{MAX_BUDGET, SolveError};
