@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use moreau_core::Num;
-use moreau_crowd::{Scene, SimState, Simulation};
+use moreau_crowd::{Scene, SimState, Simulation, limits};
 use moreau_integrate::ErrorEstimate;
 use moreau_io::{BackgroundWriter, Overwrite, RunFile, RunSink, RunWriter};
 use moreau_record::{Interrupted, Record, Summary};
@@ -92,7 +92,9 @@ fn load_scene(args: &RunArgs) -> Result<(Scene, String)> {
             let file = RunFile::open(run)?;
             let text = file.text("scene")?;
             let origin = format!("{} (attribute 'scene')", run.display());
-            Ok((Scene::from_run_file(&text, &origin)?, origin))
+            let mut scene = Scene::from_run_file(&text, &origin)?;
+            scene.solver.threads = limits::threads_here(scene.solver.threads);
+            Ok((scene, origin))
         }
         _ => bail!("give a scene file or --from RUN.h5"),
     }
@@ -263,7 +265,9 @@ fn resumed(
     }
     let r = RunWriter::resume(out, overwrite)?;
     let origin = format!("{} (resumed)", r.writer.partial().display());
-    let scene = Scene::from_run_file(&r.header.scene, &origin)?;
+    let mut scene = Scene::from_run_file(&r.header.scene, &origin)?;
+    // (Saved on a machine with more cores: goes on with what this one has.)
+    scene.solver.threads = limits::threads_here(scene.solver.threads);
     let mut sim = Simulation::new(scene).with_context(|| format!("scene {origin}"))?;
     let state =
         SimState::from_bytes(&r.state).with_context(|| format!("the state saved in {origin}"))?;

@@ -38,6 +38,12 @@ pub mod limits {
     pub fn max_threads() -> usize {
         2 * std::thread::available_parallelism().map_or(1, |n| n.get())
     }
+
+    /// A stored run's thread count on this machine: at most [`max_threads`] (a run saved on
+    /// a larger machine goes on here; its results do not depend on the thread count).
+    pub fn threads_here(threads: usize) -> usize {
+        threads.min(max_threads())
+    }
 }
 
 /// Cells of the distance grid over the box `[lo, hi]` with cells of `cell`, as a float (it
@@ -350,7 +356,7 @@ fn default_kappa() -> f64 {
 fn default_violation() -> f64 {
     1e-6
 }
-fn default_threads() -> usize {
+pub(crate) fn default_threads() -> usize {
     1
 }
 fn default_cell() -> f64 {

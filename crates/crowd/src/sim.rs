@@ -1077,7 +1077,9 @@ impl Simulation {
             );
         }
         let hash = SimState::hash_scene(&self.scene);
-        if state.scene_hash != hash {
+        if state.scene_hash != hash
+            && state.scene_hash != SimState::hash_scene_with_threads(&self.scene)
+        {
             return refuse(
                 "scene_hash",
                 format!("{:016x}", state.scene_hash),

@@ -63,9 +63,19 @@ impl SimState {
     /// `fields_built`; 2 was written by builds with only some of them).
     pub const FORMAT: u32 = 5;
 
-    /// A 64-bit FNV-1a hash of the scene's TOML: a state restores only into a simulation of
-    /// the scene it was saved from.
+    /// A 64-bit FNV-1a hash of the scene's TOML, its thread count left out (as if the
+    /// default): a state restores only into a simulation of the scene it was saved from, on
+    /// any number of threads (results do not depend on it; a killed run resumes on a smaller
+    /// machine).
     pub fn hash_scene(scene: &Scene) -> u64 {
+        let mut any_threads = scene.clone();
+        any_threads.solver.threads = crate::scene::default_threads();
+        Self::hash_scene_with_threads(&any_threads)
+    }
+
+    /// The hash of the whole TOML, thread count included, which states saved before
+    /// 2026-11-28 hold (they still restore, at their own thread count).
+    pub(crate) fn hash_scene_with_threads(scene: &Scene) -> u64 {
         scene
             .to_toml()
             .bytes()
