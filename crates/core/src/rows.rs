@@ -168,10 +168,23 @@ impl ConstraintRows {
         }
     }
 
-    /// `|∇g_i|²` for row `i`.
+    /// `|∇g_i|²` for row `i`. A column repeated within the row is one coefficient, the sum of
+    /// its entries (as the products read it): the sum of the entries' squares made
+    /// Gauss–Seidel's step twice too long on `2x ≥ 2` written as `x + x`, and it never
+    /// converged.
     #[inline]
     pub fn row_norm_sq(&self, i: usize) -> f64 {
-        self.row(i).1.iter().map(|a| a * a).sum()
+        let (c, a) = self.row(i);
+        if c.windows(2).all(|w| w[0] < w[1]) {
+            return a.iter().map(|a| a * a).sum();
+        }
+        (0..c.len())
+            .filter(|&k| !c[..k].contains(&c[k]))
+            .map(|k| {
+                let sum: f64 = (k..c.len()).filter(|&l| c[l] == c[k]).map(|l| a[l]).sum();
+                sum * sum
+            })
+            .sum()
     }
 }
 
@@ -194,6 +207,10 @@ mod tests {
         assert_eq!(jty, [1.0, 6.0, -2.0]);
         assert_eq!(r.keys(), &[7, 8, 9]);
         assert_eq!(r.row_norm_sq(0), 5.0);
+        // Regression: a repeated column is one coefficient (x + x is 2x: norm² 4, not 2),
+        // whatever its place in the row.
+        r.push(8, 0.0, [(1, 1.0), (0, 3.0), (1, 1.0)]);
+        assert_eq!(r.row_norm_sq(3), 13.0);
         r.clear(3);
         assert!(r.is_empty());
     }

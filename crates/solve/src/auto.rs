@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use moreau_core::{ConstraintKey, Helper, Num, Parallelism, SolveStatus};
 
-use crate::certificate::certify_given;
+use crate::certificate::certify;
 use crate::components::{CheckScratch, Components, DisjointSolution, SubProblem};
 use crate::error::SolveError;
 use crate::gauss_seidel::{GaussSeidel, GaussSeidelSettings};
@@ -184,12 +184,15 @@ pub struct AutoSettings {
 impl AutoSettings {
     /// Checks every field; the error names the first one out of its domain.
     pub fn validate(&self) -> Result<(), SolveError> {
+        // (`retry_after` was not checked and was cut to 32 bits: 2³² became 0, Gauss–Seidel
+        // tried again at every solve.)
         crate::error::check_budgets(&[
             ("first_order_passes", self.first_order_passes),
             (
                 "round_newton_factorizations",
                 self.round_newton_factorizations,
             ),
+            ("retry_after", self.retry_after),
         ])?;
         if !(self.set_aside_factor >= 1.0) {
             return Err(SolveError::InvalidSetting {
@@ -1248,11 +1251,10 @@ impl AutoSolver {
         // Unknowns in no row have v = w; the whole answer is certified here.
         self.scratch_m.resize(m, 0.0);
         self.scratch_n.resize(p.dim(), 0.0);
-        let cert = certify_given(
+        let cert = certify(
             p,
             &sol.v,
             &sol.lambda,
-            Some(&self.jw),
             &mut self.scratch_m,
             &mut self.scratch_n,
         );

@@ -1787,6 +1787,13 @@ fn settings_are_validated() {
     })
     .unwrap_err();
     assert!(e.to_string().contains("first_order_passes"), "{e}");
+    // (Regression: unchecked, and 2³² was cut to 0 retries.)
+    let e = AutoSolver::new(AutoSettings {
+        retry_after: 1 << 32,
+        ..AutoSettings::default()
+    })
+    .unwrap_err();
+    assert!(e.to_string().contains("retry_after"), "{e}");
     let e = gs().certify_every(0).build().unwrap_err();
     assert!(e.to_string().contains("certify_every"), "{e}");
     let bad = GaussSeidelSettings {
@@ -2346,8 +2353,8 @@ fn moved(k: usize, size: f64) -> (Vec<f64>, ConstraintRows, Vec<f64>) {
 /// Regression: a crush of 900 disks asked a gap of 10⁻¹² drives `D = λ/s` past what the
 /// Cholesky factorization of `I + JᵀDJ` holds, and the interior point ended with
 /// `NumericalError`. It finishes with the Newton system's augmented form, certified, within
-/// the certified distance of its own answer at 10⁻¹⁰ (or, since the certificate counts its
-/// own rounding, 3.6·10⁻¹³ here, at the rounding floor with a gap within 100 times it).
+/// the certified distance of its own answer at 10⁻¹⁰ (or at 10⁻¹², since the certificate is
+/// computed without cancellation, stops at its rounding floor, within 100 times it).
 #[test]
 fn a_crush_asked_a_tight_gap_is_certified_after_the_normal_equations_break_down() {
     let (w, rows, b) = crush(30, 0.999);
@@ -2371,7 +2378,7 @@ fn a_crush_asked_a_tight_gap_is_certified_after_the_normal_equations_break_down(
             (rep.status.is_converged() && rep.gap <= gap
                 || rep.status == SolveStatus::RoundingFloor && rep.gap <= 1e2 * floor)
                 && rep.violation <= 1e-10,
-            "{rep:?}"
+            "{rep:?}, floor {floor:e}"
         );
         let augmented = ip.counts().augmented_factorizations;
         assert_eq!(
@@ -2624,4 +2631,76 @@ fn a_stall_far_above_the_rounding_floor_was_reported_as_the_floor() {
     }
     // Both kinds of stop occur in this family (else the test proves nothing).
     assert!(floors > 0 && far > 0, "{floors} {far}");
+}
+
+/// Regression: the certificate summed `½|v − w|² + ½|Jᵀλ|² + λᵀ(b' + J w)`, four terms of
+/// about `|w|²` that cancel, and clamped the rounding at 0: a push of 10⁸ stopped by a wall
+/// was certified with gap 0 while the pair's exact gap was 1.66 (`λ_1 s_1 = 5·10⁷ ×
+/// 1.5·10⁻⁸`). The projection of `w = (−10⁸, −5·10⁷)` on `v_0 ≥ 0, v_0 + v_1 ≥ 0` is
+/// `v* = 0`: every kind's answer, through its fallbacks, is certified, and its distance to
+/// `v*` within what the certificate claims (`|v − v*| ≤ √(2 gap)`, plus the violation's
+/// share).
+#[test]
+fn a_gap_lost_to_cancellation_was_certified_as_zero() {
+    let mut rows = ConstraintRows::new(2);
+    rows.push(0, 0.0, [(0, 1.0)]);
+    rows.push(1, 0.0, [(0, 1.0), (1, 1.0)]);
+    let (w, b) = ([-1e8, -5e7], [0.0, 0.0]);
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let target = Target {
+        gap: 1e-10,
+        violation: 1e-9,
+    };
+    for kind in moreau_solve::SolverKind::ALL {
+        let mut solver = kind.build(Parallelism::SEQUENTIAL, 2).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = solver.solve(&p, target, &mut sol).unwrap();
+        // (The gap is that of the offsets relaxed by the violation, whose projection is
+        // within 2 × the violation of `v*` here.)
+        let distance = sol.v[0].hypot(sol.v[1]);
+        let bound = (2.0 * rep.gap).sqrt() + 2.0 * rep.violation;
+        assert!(
+            rep.status.is_converged() && rep.gap <= target.gap && distance <= bound,
+            "{kind:?}: {rep:?}, v = {:?}, |v − v*| = {distance:e} > {bound:e}",
+            sol.v
+        );
+    }
+}
+
+/// Regression: a column repeated within a row (`2x ≥ 2` written as `x + x`, which the products
+/// read as `2x`) made Gauss–Seidel's step twice too long (the row's norm was the sum of the
+/// entries' squares): it oscillated for all its passes; Clarabel took the entries apart and
+/// ended with NumericalError. Every kind alone answers `x = 1, λ = 0.5` (from `w = 0`), as
+/// with the row written `2x`.
+#[test]
+fn a_column_repeated_in_a_row_broke_gauss_seidel_and_clarabel() {
+    let mut rows = ConstraintRows::new(1);
+    rows.push(0, 0.0, [(0, 1.0), (0, 1.0)]);
+    let (w, b) = ([0.0], [-2.0]);
+    let p = ProjectionProblem {
+        w: &w,
+        jacobian: &rows,
+        b: &b,
+    };
+    let target = Target {
+        gap: 1e-9, // (Clarabel stops near 10⁻¹⁰)
+        violation: 1e-10,
+    };
+    for kind in moreau_solve::SolverKind::ALL {
+        let mut solver = kind.build_alone(Parallelism::SEQUENTIAL).unwrap();
+        let mut sol = ProjectionSolution::default();
+        let rep = solver.solve(&p, target, &mut sol).unwrap();
+        assert!(
+            rep.status.is_converged()
+                && (sol.v[0] - 1.0).abs() < 1e-6
+                && (sol.lambda[0] - 0.5).abs() < 1e-6,
+            "{kind:?}: {rep:?}, v = {:?}, λ = {:?}",
+            sol.v,
+            sol.lambda
+        );
+    }
 }
