@@ -30,6 +30,28 @@ impl Default for ClarabelSettings {
     }
 }
 
+impl ClarabelSettings {
+    /// Refuses a tolerance that is not a positive finite number and a budget of 0 or above
+    /// [`MAX_BUDGET`](crate::MAX_BUDGET) (each was handed to Clarabel as it was).
+    pub fn validate(&self) -> Result<(), SolveError> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(SolveError::InvalidSetting {
+                field: "tolerance",
+                value: moreau_core::Num(self.tolerance).to_string(),
+                reason: "must be a positive finite number",
+            });
+        }
+        if self.max_iterations == 0 {
+            return Err(SolveError::InvalidSetting {
+                field: "max_iterations",
+                value: "0".into(),
+                reason: "must be at least 1",
+            });
+        }
+        crate::error::check_budgets(&[("max_iterations", self.max_iterations as usize)])
+    }
+}
+
 /// Clarabel on `min ½vᵀv − wᵀv  s.t. (−J)v + s = b, s ≥ 0`; its dual `z` is `λ`.
 ///
 /// Its answer is certified by [`certify`] like any other: Clarabel's own status decides
@@ -57,6 +79,7 @@ impl ProjectionSolver for ClarabelReference {
         target: Target,
         sol: &mut ProjectionSolution,
     ) -> Result<SolveReport, SolveError> {
+        self.settings.validate()?;
         p.validate()?;
         target.validate()?;
         let (m, n) = (p.rows(), p.dim());

@@ -1794,6 +1794,46 @@ fn settings_are_validated() {
     })
     .unwrap_err();
     assert!(e.to_string().contains("retry_after"), "{e}");
+    // (Regression: Clarabel's settings were not checked.)
+    let mut rows = ConstraintRows::new(1);
+    rows.push(0, 0.0, [(0, 1.0)]);
+    let p = ProjectionProblem {
+        w: &[0.0],
+        jacobian: &rows,
+        b: &[0.0],
+    };
+    let t = Target {
+        gap: 1e-9,
+        violation: 1e-9,
+    };
+    for (settings, field) in [
+        (
+            ClarabelSettings {
+                tolerance: f64::NAN,
+                ..Default::default()
+            },
+            "tolerance",
+        ),
+        (
+            ClarabelSettings {
+                tolerance: -1.0,
+                ..Default::default()
+            },
+            "tolerance",
+        ),
+        (
+            ClarabelSettings {
+                max_iterations: 0,
+                ..Default::default()
+            },
+            "max_iterations",
+        ),
+    ] {
+        let e = ClarabelReference::new(settings)
+            .solve(&p, t, &mut ProjectionSolution::default())
+            .unwrap_err();
+        assert!(e.to_string().contains(field), "{e}");
+    }
     let e = gs().certify_every(0).build().unwrap_err();
     assert!(e.to_string().contains("certify_every"), "{e}");
     let bad = GaussSeidelSettings {
