@@ -267,7 +267,7 @@ impl Default for AutoSettings {
 ///
 /// Each component must meet its share of the target gap (its rows over all rows) and the
 /// whole violation target; the answer is then certified as a whole by
-/// [`certify`](crate::certify). The report names the solver that answered:
+/// [`certify`]. The report names the solver that answered:
 /// `gauss-seidel`, `interior`, or `gs+interior` when both answered components, with
 /// `newton` added where the Newton method answered a round's largest component
 /// (`newton`, `gs+newton`, `interior+newton`, `gs+ip+newton`); its

@@ -201,7 +201,7 @@ pub fn infeasibility_certificate(
     p: &ProjectionProblem<'_>,
 ) -> Result<Option<Vec<f64>>, SolveError> {
     p.validate()?;
-    let (m, n) = (p.rows(), p.dim());
+    let m = p.rows();
     if m == 0 {
         return Ok(None);
     }
