@@ -196,22 +196,10 @@ impl DistanceField {
     /// near, unlike [`Self::distance`], which is constant on each cell and jumps between
     /// them. ∞ where no walkable cell is near.
     pub fn interpolated_distance(&self, p: [f64; 2]) -> f64 {
-        let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
-        let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
-        let (x0, y0) = (floor(fx), floor(fy));
-        let (tx, ty) = (fx - x0, fy - y0);
         let (mut acc, mut weight) = (0.0, 0.0);
-        for (dx, dy, w) in [
-            (0, 0, (1.0 - tx) * (1.0 - ty)),
-            (1, 0, tx * (1.0 - ty)),
-            (0, 1, (1.0 - tx) * ty),
-            (1, 1, tx * ty),
-        ] {
-            let (ix, iy) = (x0 as i64 + dx, y0 as i64 + dy);
-            if ix < 0 || iy < 0 || ix >= self.nx as i64 || iy >= self.ny as i64 {
-                continue;
-            }
-            let d = self.dist[iy as usize * self.nx + ix as usize];
+        for (cell, w) in self.corners(p) {
+            let Some(k) = cell else { continue };
+            let d = self.dist[k];
             if d.is_finite() && w > 0.0 {
                 acc += w * d;
                 weight += w;
@@ -222,6 +210,27 @@ impl DistanceField {
         } else {
             f64::INFINITY
         }
+    }
+
+    /// The four cells whose centres surround `p`, each with its bilinear weight, in a fixed
+    /// order; `None` for one off the grid.
+    #[inline]
+    fn corners(&self, p: [f64; 2]) -> [(Option<usize>, f64); 4] {
+        let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
+        let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
+        let (x0, y0) = (floor(fx), floor(fy));
+        let (tx, ty) = (fx - x0, fy - y0);
+        let at = |dx: i64, dy: i64| {
+            let (ix, iy) = (x0 as i64 + dx, y0 as i64 + dy);
+            (ix >= 0 && iy >= 0 && ix < self.nx as i64 && iy < self.ny as i64)
+                .then(|| iy as usize * self.nx + ix as usize)
+        };
+        [
+            (at(0, 0), (1.0 - tx) * (1.0 - ty)),
+            (at(1, 0), tx * (1.0 - ty)),
+            (at(0, 1), (1.0 - tx) * ty),
+            (at(1, 1), tx * ty),
+        ]
     }
 
     /// Asks the processor to bring the cells [`Self::direction`]`(p)` reads into its cache;
@@ -255,22 +264,10 @@ impl DistanceField {
     /// The descent direction at `p`: bilinear blend of the four nearest cell directions
     /// (walkable cells only), normalized; zero where no walkable cell is near.
     pub fn direction(&self, p: [f64; 2]) -> [f64; 2] {
-        let fx = (p[0] - self.origin[0]) / self.cell - 0.5;
-        let fy = (p[1] - self.origin[1]) / self.cell - 0.5;
-        let (x0, y0) = (floor(fx), floor(fy));
-        let (tx, ty) = (fx - x0, fy - y0);
         let mut acc = [0.0; 2];
-        for (dx, dy, w) in [
-            (0, 0, (1.0 - tx) * (1.0 - ty)),
-            (1, 0, tx * (1.0 - ty)),
-            (0, 1, (1.0 - tx) * ty),
-            (1, 1, tx * ty),
-        ] {
-            let (ix, iy) = (x0 as i64 + dx, y0 as i64 + dy);
-            if ix < 0 || iy < 0 || ix >= self.nx as i64 || iy >= self.ny as i64 {
-                continue;
-            }
-            let d = self.dir[iy as usize * self.nx + ix as usize];
+        for (cell, w) in self.corners(p) {
+            let Some(k) = cell else { continue };
+            let d = self.dir[k];
             acc[0] += w * d[0];
             acc[1] += w * d[1];
         }
