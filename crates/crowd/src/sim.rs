@@ -897,7 +897,9 @@ impl Simulation {
     /// of the longest steps away (the bound a scene's horizon has; `t_end = 1e300` asked
     /// ~10³⁰¹ steps of a call, which ran until killed).
     pub fn check_t_end(&self, t_end: f64) -> Result<(), CrowdError> {
-        if !(t_end.is_finite() && t_end >= self.t) {
+        // (Before it by rounding only is the current time: `advance_to(2.4)` twice, the first
+        // having stepped to the frame at 2.4000000000000004.)
+        if !(t_end.is_finite() && (t_end >= self.t || self.stepping.reached(t_end, self.t))) {
             return Err(CrowdError::invalid(
                 "t_end",
                 Num(t_end),
@@ -943,6 +945,15 @@ impl Simulation {
         }
         loop {
             let output = self.next_output();
+            // A `t_end` short of the next frame by rounding alone (`advance_to(2.4)` with the
+            // frame at 24 × 0.1 = 2.4000000000000004) is that frame's time: the step ended at
+            // `t_end`, 1 ulp before the frame a run to the horizon steps to, and the steps
+            // after it differed from that run's in their last bits.
+            let t_end = if t_end < output && self.stepping.reached(t_end, output) {
+                output
+            } else {
+                t_end
+            };
             // A `t_end` past the frame by more than rounding but less than the shortest span
             // is where that frame is taken: the step after the frame would be too short to
             // certify.

@@ -320,6 +320,34 @@ fn advance_to_0_6_gave_the_frame_of_0_6_s_one_call_late() {
     assert_eq!(once.steps(), sim.steps());
 }
 
+/// Regression: `advance_to(2.4)` with the frame at 24 × 0.1 = 2.4000000000000004 ended its
+/// step at 2.4, one ulp before the frame a run to the horizon steps to, and with adaptive
+/// steps every step after it differed from that run's (positions by up to 2·10⁻⁹ m). Asked at
+/// the output times written in decimal, the run is the run to the horizon, bit for bit; and
+/// asked the same time twice, the second call does nothing.
+#[test]
+fn advance_to_2_4_stopped_one_ulp_before_the_frame_and_the_steps_after_it_differed() {
+    let text = room(&[("horizon = 15.0", "horizon = 4.0\ntol = 0.01")]);
+    let scene = || Scene::from_toml(&text, "<test>").unwrap();
+    let mut once = Simulation::new(scene()).unwrap();
+    once.run(&mut FrameTimes::default()).unwrap();
+    let mut decimal = Simulation::new(scene()).unwrap();
+    let mut frames = FrameTimes::default();
+    for k in 1..=40 {
+        let t: f64 = format!("{}.{}", k / 10, k % 10).parse().unwrap();
+        decimal.advance_to(t, &mut frames).unwrap();
+        decimal.advance_to(t, &mut frames).unwrap();
+        assert_eq!(frames.0.len(), k + 1, "after advance_to({t})");
+    }
+    assert_eq!(decimal.steps(), once.steps());
+    let bits = |q: &[f64]| q.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(
+        bits(decimal.frame().positions),
+        bits(once.frame().positions)
+    );
+    assert_eq!(decimal.exit_records(), once.exit_records());
+}
+
 #[test]
 fn a_horizon_of_0_700000001_s_failed_its_last_step_of_1e_minus_9_s() {
     // A stop just past a multiple of the step left a last step of 10⁻⁹ s, whose ε = κ μ³
