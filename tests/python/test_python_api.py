@@ -123,6 +123,36 @@ def test_run_writes_the_file_of_moreau_run(room_run, tmp_path):
             assert s_cli[key] == s_py[key] == summary[key], key
 
 
+def test_a_pickle_with_more_threads_than_the_unpickling_worker_runs_was_refused():
+    """Regression: a simulation pickled with `solver.threads` above what the unpickling
+    process runs (a Dask worker with fewer cores) was refused there ("more than this machine
+    runs usefully"). It unpickles with the threads lowered, and goes on with the same bits."""
+    cores = len(os.sched_getaffinity(0))
+    if cores < 2:
+        pytest.skip("needs 2 cores: the unpickling process is given one")
+    d = short_room(1.0).to_dict()
+    d.setdefault("solver", {})["threads"] = 2 * cores
+    scene = moreau.Scene.from_dict(d)
+    sim = moreau.Simulation(scene)
+    sim.advance_to(0.5)
+    straight = moreau.Simulation(scene)
+    straight.advance_to(1.0)
+    child = (
+        "import os, pickle, sys\n"
+        "os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})\n"
+        "sim = pickle.loads(sys.stdin.buffer.read())\n"
+        "sim.advance_to(1.0)\n"
+        "sys.stdout.buffer.write(pickle.dumps((sim.scene.to_dict()['solver']['threads'], "
+        "sim.positions)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", child], input=pickle.dumps(sim),
+                         capture_output=True, timeout=120)
+    assert out.returncode == 0, out.stderr.decode()
+    threads, positions = pickle.loads(out.stdout)
+    assert threads == 2
+    assert same_bits(positions, straight.positions)
+
+
 def test_state_restore_and_pickle_continue_a_run_identically():
     scene = short_room(6.0)
     straight = moreau.Simulation(scene)

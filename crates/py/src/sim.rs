@@ -262,23 +262,19 @@ impl PySimulation {
     #[new]
     #[pyo3(signature = (scene, record = false))]
     fn new(py: Python<'_>, scene: &Bound<'_, PyAny>, record: bool) -> PyResult<Self> {
-        let scene = scene_of(scene)?;
-        let s = scene.scene.clone();
-        let sim = py
-            .detach(move || Simulation::new(s))
-            .map_err(|e| to_py(py, e))?;
-        let unmet = ToleranceWarning::new(&sim.scene().time);
-        Ok(PySimulation {
-            scene,
-            inner: Mutex::new(Inner {
-                sim,
-                last: None,
-                recording: record,
-                frames: Vec::new(),
-                unmet,
-                warning: None,
-            }),
-        })
+        Self::built(py, scene_of(scene)?, record)
+    }
+
+    /// What unpickling calls: the simulation of `scene` with its thread count lowered to what
+    /// this machine runs (a pickle made where more cores were, sent to a smaller worker, was
+    /// refused: `solver.threads = 4: more than this machine runs usefully`; results do not
+    /// depend on it).
+    #[staticmethod]
+    fn _unpickle(py: Python<'_>, scene: &Bound<'_, PyAny>, record: bool) -> PyResult<Self> {
+        let mut scene = scene_of(scene)?;
+        let threads = &mut scene.scene.solver.threads;
+        *threads = moreau_crowd::limits::threads_here(*threads);
+        Self::built(py, scene, record)
     }
 
     /// One step of the scene's stepping (its step `time.step`, shortened to land on the next
@@ -573,15 +569,17 @@ impl PySimulation {
         }
     }
 
-    /// Pickled as `(Simulation(scene, record), state())`: unpickled, it goes on bit for bit
-    /// (recorded frames, `last_report` and `velocities` are not carried).
+    /// Pickled as `(Simulation._unpickle(scene, record), state())`: unpickled, it goes on bit
+    /// for bit, on at most the threads the unpickling machine runs (recorded frames,
+    /// `last_report` and `velocities` are not carried).
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
         let py = slf.py();
         let this = slf.borrow();
         let recording = this.lock()?.recording;
         let state = this.state(py)?;
         let scene = Bound::new(py, this.scene.clone())?;
-        (slf.get_type(), (scene, recording), state).into_pyobject(py)
+        let unpickle = slf.get_type().getattr("_unpickle")?;
+        (unpickle, (scene, recording), state).into_pyobject(py)
     }
 
     /// What `__reduce__` hands to `pickle`: the `state()` bytes, restored here.
@@ -720,4 +718,26 @@ pub fn run_to_file(
     outcome.map_err(|e| to_py(py, e))?;
     finished.map_err(|e| PyOSError::new_err(e.to_string()))?;
     Ok(json)
+}
+
+impl PySimulation {
+    /// The simulation of `scene`, recording its frames with `record`.
+    fn built(py: Python<'_>, scene: PyScene, record: bool) -> PyResult<Self> {
+        let s = scene.scene.clone();
+        let sim = py
+            .detach(move || Simulation::new(s))
+            .map_err(|e| to_py(py, e))?;
+        let unmet = ToleranceWarning::new(&sim.scene().time);
+        Ok(PySimulation {
+            scene,
+            inner: Mutex::new(Inner {
+                sim,
+                last: None,
+                recording: record,
+                frames: Vec::new(),
+                unmet,
+                warning: None,
+            }),
+        })
+    }
 }
