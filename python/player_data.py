@@ -126,8 +126,9 @@ def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
     if sf > 1:
         parts.append(f"every {_ordinal(sf)} frame")
     if sp > 1:
-        parts.append(f"every {_ordinal(sp)} person")
-    note = (", ".join(parts) + " shown") if parts else ""
+        parts.append(f"every {_ordinal(sp)} person ({radius.shape[0]} of {people})")
+    # (The words of `moreau view`'s note.)
+    note = (", ".join(parts) + " shown: the run is larger than --max-values") if parts else ""
 
     geo, bbox = geometry(scene)
     return {

@@ -228,7 +228,8 @@ def test_people_who_leave_are_not_drawn(browser, make_html, tmp_path):
     player_data.write_html(run, small, max_values=20_000)
     data = read_player_data(small)
     assert player_data.strides(len(counts), 150, 2, 20_000) == (1, 3)
-    assert data["note"] == "every 3rd person shown" and data["people_shown"] == 50
+    assert data["note"] == ("every 3rd person (50 of 150) shown: the run is larger than "
+                            "--max-values") and data["people_shown"] == 50
     open_player(browser, small)
     assert browser.find_element("id", "note").text == data["note"]
     with h5py.File(run, "r") as f:
@@ -280,6 +281,16 @@ def test_moreau_view_and_the_python_stand_in_write_the_same_data(room_run, make_
     assert undirected(ours["geometry"]["walls"]) == undirected(theirs["geometry"]["walls"])
     assert ours["geometry"]["exits"] == theirs["geometry"]["exits"]
     assert ours["geometry"]["area"] == theirs["geometry"]["area"]
+    # Decimated, both say so in the same words (regression: Rust wrote "every 2th frame",
+    # Python left out how many people of how many, and why).
+    for max_values in (20_000, 2_000):
+        out = tmp_path / f"room-{max_values}.html"
+        moreau("view", room_run, "-o", out, "--force", "--max-values", str(max_values))
+        ours = read_player_data(out)
+        theirs = player_data.player_json(room_run, max_values)
+        for key in ("people_shown", "frames_total", "note", "radius", "positions"):
+            assert ours[key] == theirs[key], key
+        assert ours["note"].endswith("shown: the run is larger than --max-values"), ours["note"]
 
 
 def test_decimation_keeps_100_frames_then_thins_people():

@@ -222,13 +222,14 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
     }
     let mut note = String::new();
     if frame_stride > 1 {
-        let _ = write!(note, "every {frame_stride}th frame");
+        let _ = write!(note, "every {} frame", ordinal(frame_stride));
     }
     if people_stride > 1 {
         let _ = write!(
             note,
-            "{}every {people_stride}th person ({} of {people})",
+            "{}every {} person ({} of {people})",
             if note.is_empty() { "" } else { ", " },
+            ordinal(people_stride),
             shown.len()
         );
     }
@@ -319,9 +320,35 @@ pub fn view(args: &ViewArgs) -> Result<()> {
     Ok(())
 }
 
+/// `n` as an English ordinal: 2nd, 3rd, 11th, 21st (the note said "every 2th frame").
+fn ordinal(n: usize) -> String {
+    let suffix = match (n % 100, n % 10) {
+        (11..=13, _) => "th",
+        (_, 1) => "st",
+        (_, 2) => "nd",
+        (_, 3) => "rd",
+        _ => "th",
+    };
+    format!("{n}{suffix}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_note_said_every_2th_frame() {
+        let words: Vec<String> = [1, 2, 3, 4, 11, 12, 13, 21, 22, 101, 111, 112]
+            .map(ordinal)
+            .into();
+        assert_eq!(
+            words,
+            [
+                "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "101st",
+                "111th", "112th"
+            ]
+        );
+    }
 
     #[test]
     fn base64_matches_the_standard_alphabet_and_padding() {
