@@ -270,10 +270,10 @@ impl InteriorPointSettingsBuilder {
     }
 }
 
-/// The interior point stops after this many iterations in a row near the end (`sᵀλ` within [`STALL_ZONE`] times the target gap) that did not bring
-/// the measure of progress 10 % below its best: `sᵀλ` while it is above the target, then the
-/// certified gap. The target is then below what double precision can certify of this
-/// problem: each slack is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps
+/// The interior point stops after this many iterations in a row near the end (`sᵀλ` within
+/// [`STALL_ZONE`] times the target gap) that did not bring the measure of progress 10 % below
+/// its best: `sᵀλ` while it is above the target, then the certified gap. The target is then
+/// mostly below what double precision can certify of this problem: each slack is rounded to ~10⁻¹⁶ of the velocities, so neither `sᵀλ` (the steps
 /// then blocked by slacks at their rounding) nor the certified gap (which holds `Σ λ_i s_i`)
 /// go below about `10⁻¹⁶ Σ λ_i` (benches/README.md, sessions 20 and 22). On a chain of 3,000
 /// pushed together (multipliers up to 56,000) the certified gap stays at 8.8·10⁻⁸ while
@@ -910,11 +910,11 @@ impl InteriorPoint {
                 } else {
                     stalled += 1;
                     if stalled == STALLED_ITERATIONS {
-                        // A stall at the certificate's rounding floor, or one far above it
-                        // (the dual residual lost to the rounding of a Newton matrix whose
-                        // `D` spans 10³⁰: the fallback's question, not a larger target's).
-                        // (`sᵀλ` stalled above the target while the certificate, consulted
-                        // only below it, may meet it already.)
+                        // Met already (`sᵀλ` can stall above the target while the
+                        // certificate, consulted only below it, meets it), a stall at the
+                        // certificate's rounding floor, or one far above it (the dual
+                        // residual lost to the rounding of a Newton matrix whose `D` spans
+                        // 10³⁰: the fallback's question, not a larger target's).
                         let c = certify(p, v, lam, &mut self.scratch_m, &mut self.scratch_n);
                         break if c.gap <= target.gap && c.violation <= target.violation {
                             SolveStatus::Converged
