@@ -11,6 +11,11 @@ Decimation, when frames × people × values would exceed `max_values` (float32 v
 least 100 frames stay when there were that many), the smallest s that fits; then, if still too
 many, every p-th person, the smallest p that fits. Frames kept: 0, s, 2s, ...; people kept:
 ids 0, p, 2p, ...
+
+Moving bodies (the scene's `[[moving]]`, and the panels `exit:NAME` of exits that `closes` or
+`opens`, stored alike in the run file): their segments at each frame shown, from
+`/frames/moving_walls`, in `moving`; absent when the run has none (no rows in `/moving/body`).
+The walls are the run file's `/walls` (the edges of the area's rings for a file without).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import numpy as np
 FORMAT = "moreau-player-1"
 TEMPLATE = pathlib.Path(__file__).resolve().parents[1] / "crates" / "cli" / "src" / "view" / "player.html"
 PLACEHOLDER = '<script id="moreau-data" type="application/json">__MOREAU_DATA__</script>'
-MAX_VALUES = 16_000_000  # ~85 MB of base64 float32
+MAX_VALUES = 40_000_000  # `moreau view`'s default; ~213 MB of base64 float32
 MIN_FRAMES = 100  # frame decimation stops here; people are decimated beyond
 
 
@@ -90,6 +95,31 @@ def geometry(scene: dict) -> tuple[dict, list[float]]:
     return {"area": rings, "walls": walls, "exits": exits}, bbox
 
 
+def step_values(steps, time) -> tuple[list, list]:
+    """Per frame: ε and violation of the last step ending at or before it (steps end exactly
+    on output times; `moreau view`'s tolerance, 10⁻⁹ relative above 1 s); all None without
+    steps."""
+    if steps is None or not len(steps):
+        return [None] * len(time), [None] * len(time)
+    order = np.argsort(steps["t"], kind="stable")
+    tol = 1e-9 * np.maximum(np.abs(time), 1.0)
+    idx = np.searchsorted(steps["t"][order], time + tol, side="right") - 1
+    return _per_frame(steps["eps"][order], idx), _per_frame(steps["violation"][order], idx)
+
+
+def moving_walls(f, run_path, frames: int, sf: int):
+    """The moving bodies' segments `[x0, y0, x1, y1]` at frames 0, sf, 2sf, ... of `frames`
+    (float64 `[frames shown, segments, 4]`), or None when the run has no moving bodies."""
+    if "moving/body" not in f or f["moving/body"].shape[0] == 0:
+        return None
+    if "frames/moving_walls" not in f:
+        raise ValueError(f"{run_path}: moving bodies but no /frames/moving_walls")
+    ds = f["frames/moving_walls"]
+    if ds.shape[0] < frames:
+        raise ValueError(f"{run_path}: /frames/moving_walls has {ds.shape[0]} frames of {frames}")
+    return ds[:frames:sf]
+
+
 def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
     """The player's data for a run file (see the module documentation); a ValueError
     naming the file when it is an HDF5 file but not a run file."""
@@ -111,16 +141,10 @@ def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
         radius = f["people/radius"][::sp]
         pressure = f["frames/pressure"][:frames:sf, ::sp] if has_pressure else None
         steps = f["steps"][:] if "steps" in f else None
+        moving = moving_walls(f, run_path, frames, sf)
+        walls = f["walls"][:] if "walls" in f else np.empty((0, 4))
 
-    if steps is not None and len(steps):
-        order = np.argsort(steps["t"], kind="stable")
-        st = steps["t"][order]
-        # The last step ending at or before each frame (steps end exactly on output times).
-        idx = np.searchsorted(st, time + 1e-9, side="right") - 1
-        eps = _per_frame(steps["eps"][order], idx)
-        violation = _per_frame(steps["violation"][order], idx)
-    else:
-        eps = violation = None
+    eps, violation = step_values(steps, time)
 
     parts = []
     if sf > 1:
@@ -131,7 +155,9 @@ def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
     note = (", ".join(parts) + " shown: the run is larger than --max-values") if parts else ""
 
     geo, bbox = geometry(scene)
-    return {
+    if len(walls):
+        geo["walls"] = [[float(v) for v in w] for w in walls]
+    data = {
         "format": FORMAT,
         "title": name,
         "people_total": int(people),
@@ -147,6 +173,9 @@ def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
         "positions": _b64(positions),
         "pressure": _b64(pressure) if pressure is not None else None,
     }
+    if moving is not None:
+        data["moving"] = _b64(moving)
+    return data
 
 
 def fill_template(data: dict, template: str | None = None) -> str:

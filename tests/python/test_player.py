@@ -268,6 +268,7 @@ def test_moreau_view_and_the_python_stand_in_write_the_same_data(room_run, make_
     Python from h5py and tomllib) agree on everything a player draws."""
     ours = read_player_data(make_html(room_run, tmp_path / "room.html"))
     theirs = player_data.player_json(room_run)
+    assert sorted(ours) == sorted(theirs)
     for key in ("format", "title", "people_total", "people_shown", "frames_total", "note",
                 "radius", "positions", "pressure"):
         assert ours[key] == theirs[key], key
@@ -291,6 +292,42 @@ def test_moreau_view_and_the_python_stand_in_write_the_same_data(room_run, make_
         for key in ("people_shown", "frames_total", "note", "radius", "positions"):
             assert ours[key] == theirs[key], key
         assert ours["note"].endswith("shown: the run is larger than --max-values"), ours["note"]
+
+
+@pytest.mark.parametrize("source, edit, names, strides", [
+    # 201 frames: a decimated page keeps every 2nd frame.
+    (ROOT / "tests" / "fuzz-corpus" / "moving.toml",
+     ("output_interval = 0.5", "output_interval = 0.05"), ["bar", "block", "exit:east"], (1, 2)),
+    # A hole (walls oriented by the run), 31 frames: decimated, every frame, fewer people.
+    (ROOM.with_name("room-closing-door.toml"), ("horizon = 40.0", "horizon = 3.0"),
+     ["panel"], (1, 1)),
+])
+def test_the_python_stand_in_writes_the_moving_walls_of_moreau_view(source, edit, names,
+                                                                    strides, tmp_path):
+    """Regression: python/player_data.py left out `moving`, so its page drew no moving body
+    and no exit panel. The fuzz corpus's moving scene (a turning bar, a drifting block, the
+    panel `exit:east` of an exit that closes and opens) and the room whose door a panel
+    closes, short: both writers agree on every field, decimated (--max-values 2000) or not,
+    and `moving` is the file's /frames/moving_walls at the frames shown."""
+    scene = tmp_path / source.name
+    scene.write_text(source.read_text().replace(*edit))
+    run = tmp_path / "moving.h5"
+    moreau("run", scene, "-o", run, "--quiet")
+    with h5py.File(run, "r") as f:
+        walls = f["frames/moving_walls"][:].astype("f4")
+        assert list(f["moving/name"].asstr()[:]) == names
+    for max_values, stride in zip((None, 2_000), strides):
+        out = tmp_path / f"moving-{max_values}.html"
+        moreau("view", run, "-o", out, "--force",
+               *(("--max-values", max_values) if max_values else ()))
+        ours = read_player_data(out)
+        theirs = player_data.player_json(run, *((max_values,) if max_values else ()))
+        theirs = json.loads(json.dumps(theirs))  # through JSON, as the page holds it
+        assert sorted(ours) == sorted(theirs)
+        for key in ours:
+            assert ours[key] == theirs[key], key
+        np.testing.assert_array_equal(floats(theirs["moving"]).reshape(-1, *walls.shape[1:]),
+                                      walls[::stride])
 
 
 def test_decimation_keeps_100_frames_then_thins_people():

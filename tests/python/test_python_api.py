@@ -346,6 +346,48 @@ def test_a_tol_no_step_meets_ran_at_the_smallest_step_without_a_python_warning(t
     assert len(said) == 1, [str(w.message) for w in said]
 
 
+def test_a_blocked_sources_people_left_waiting_were_counted_nowhere(tmp_path):
+    """A source whose area holds one person at a time, 10 a second: people due who found no
+    room were in no frame and no count (a run of 50 due and 23 entered said 23 people and
+    nothing else). `source_tallies` says due and entered after every step, the summary holds
+    them, and `moreau.run` and `moreau run` warn once a source, naming it."""
+    import warnings
+
+    d = moreau.Scene.from_file(ROOT / "data" / "scenes" / "gate-inflow.toml").to_dict()
+    d["sources"][0]["area"] = [[0.5, 1.9], [0.7, 1.9], [0.7, 2.1], [0.5, 2.1]]
+    d["sources"][0]["rate"] = 10.0
+    d["time"]["horizon"] = 2.0
+    sim = moreau.Simulation(moreau.Scene.from_dict(d))
+    assert sim.source_tallies() == [("gate", 0, 0)]
+    while sim.time < 2.0 - 1e-9:
+        sim.step()
+        name, due, entered = sim.source_tallies()[0]
+        assert name == "gate"
+        assert due == math.floor(10.0 * sim.time + 1e-9)
+        assert entered == sim.total_people - 20  # the 20 of the group "waiting" at the start
+    assert due == 20 and entered <= 10, (due, entered)
+    pattern = r"source 'gate': \d+ of the 20 people due by t = 2 s did not enter"
+    with pytest.warns(RuntimeWarning, match=pattern) as said:
+        summary = moreau.run(moreau.Scene.from_dict(d), tmp_path / "blocked.h5")
+    assert len(said) == 1, [str(w.message) for w in said]
+    summary = json.loads(summary) if isinstance(summary, str) else summary
+    (tally,) = summary["sources"]
+    assert tally["name"] == "gate" and tally["due"] == 20 and tally["entered"] <= 10
+    scene = tmp_path / "blocked.toml"
+    scene.write_text(moreau.Scene.from_dict(d).to_toml())
+    cli = subprocess.run([MOREAU, "run", scene, "-q", "--summary-json", "-"],
+                         capture_output=True, text=True, check=True)
+    assert json.loads(cli.stdout)["sources"] == summary["sources"]
+    assert re.search(pattern, cli.stderr), cli.stderr
+    # A source that brings everyone due says nothing.
+    d["sources"][0]["rate"] = 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        summary = moreau.run(moreau.Scene.from_dict(d), tmp_path / "free.h5")
+    summary = json.loads(summary) if isinstance(summary, str) else summary
+    assert summary["sources"] == [{"name": "gate", "due": 2, "entered": 2}]
+
+
 def test_velocities_report_and_contacts_of_the_last_step(tmp_path):
     scene = short_room(6.0, output={"contacts": True})
     sim = moreau.Simulation(scene)

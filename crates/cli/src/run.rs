@@ -361,6 +361,12 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     );
     let stats = &record.stats;
     let json = summary.to_json();
+    // People a source could not place are in no frame and no count but this one.
+    if let Some(message) = summary.waiting_warning() {
+        for line in message.lines() {
+            eprintln!("moreau: warning: {line}");
+        }
+    }
     let mut failed: Option<anyhow::Error> = match interrupted {
         Some(_) => None,
         None => outcome.err().map(anyhow::Error::from),

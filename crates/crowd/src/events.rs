@@ -84,6 +84,26 @@ pub struct EntryRecord {
     pub radius: f64,
 }
 
+/// How far a source kept to its schedule: the people due by now and those who entered. A
+/// source whose area has no room (people standing in it, a moving body over it) keeps the
+/// rest waiting, in order, so `due − entered` is its queue.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SourceTally {
+    /// The source's name.
+    pub name: String,
+    /// People due by the time reached (at most `count`, none after `stop`).
+    pub due: u64,
+    /// People who entered.
+    pub entered: u64,
+}
+
+impl SourceTally {
+    /// People due who have not entered: they wait for room in the source's area.
+    pub fn waiting(&self) -> u64 {
+        self.due - self.entered
+    }
+}
+
 /// What an inflow source's next steps depend on, in [`SimState`](crate::SimState).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct InflowState {
@@ -438,6 +458,19 @@ impl Events {
     /// Everyone sources brought in so far.
     pub fn emitted(&self) -> usize {
         self.sources.iter().map(|s| s.emitted as usize).sum()
+    }
+
+    /// Each source's people due by `t` and entered (in the scene's order).
+    pub fn tallies(&self, t: f64, scene: &Scene) -> Vec<SourceTally> {
+        self.sources
+            .iter()
+            .zip(&scene.sources)
+            .map(|(s, source)| SourceTally {
+                name: source.name.clone(),
+                due: s.due(t, self.tolerance).max(s.emitted),
+                entered: s.emitted,
+            })
+            .collect()
     }
 
     /// An upper bound of the people the sources can bring in.

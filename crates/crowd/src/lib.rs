@@ -36,7 +36,7 @@ pub use contacts::{
     PersonWalls,
 };
 pub use error::{CrowdError, Infeasibility};
-pub use events::{EntryRecord, Inflow, InflowState};
+pub use events::{EntryRecord, Inflow, InflowState, SourceTally};
 pub use field::{DesiredVelocity, DistanceField, ExitGoal, FieldError};
 pub use geometry::{Polygon, Segment};
 pub use hall::{Crush, Hall};

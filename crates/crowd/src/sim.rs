@@ -366,6 +366,12 @@ impl Simulation {
         self.total + self.events.emitted()
     }
 
+    /// Each inflow source's people due by now and entered (in the scene's order): where they
+    /// differ, people wait for room in the source's area.
+    pub fn source_tallies(&self) -> Vec<crate::SourceTally> {
+        self.events.tallies(self.time(), &self.scene)
+    }
+
     /// The most people the run can hold: those at the start and all its sources can bring
     /// (the solver, and its fallback, are chosen for this many).
     pub fn max_people(&self) -> usize {

@@ -410,3 +410,43 @@ tol = 5.0
     // One person due every second from t = 1 s: ten by the horizon.
     assert_eq!(sim.total_people(), 10);
 }
+
+#[test]
+fn a_blocked_sources_people_left_waiting_were_counted_nowhere() {
+    // The turnstile above, stopped at its 2 s: people due by then who found no room were in no
+    // frame and no count (50 due, 23 entered was reported as a run of 23 people). The tally
+    // says, after every step, how many were due (10 a second, counted here) and how many came.
+    let scene = corridor(
+        30.0,
+        2.0,
+        r#"
+[[sources]]
+name = "turnstile"
+area = [[0.5, 1.9], [0.7, 1.9], [0.7, 2.1], [0.5, 2.1]]
+rate = 10.0
+radius = 0.2
+speed = 1.3
+destination = "end"
+"#,
+    );
+    let mut sim = Simulation::new(scene).unwrap();
+    let at_start = sim.source_tallies();
+    assert_eq!(at_start.len(), 1);
+    assert_eq!((at_start[0].due, at_start[0].entered), (0, 0));
+    let mut entries = Entries::default();
+    run_checked(&mut sim, 2.0, &mut entries, |sim, entered| {
+        let tally = &sim.source_tallies()[0];
+        let owed = (10.0 * sim.time() + 1e-9).floor() as u64;
+        assert_eq!(tally.name, "turnstile");
+        assert_eq!(tally.due, owed, "t = {}", sim.time());
+        assert_eq!(tally.entered as usize, entered.len());
+        assert_eq!(tally.waiting(), owed - entered.len() as u64);
+    });
+    let tally = &sim.source_tallies()[0];
+    assert_eq!(tally.due, 20);
+    assert!(
+        tally.waiting() >= 10,
+        "a square that holds one person let {} of 20 in within 2 s",
+        tally.entered
+    );
+}

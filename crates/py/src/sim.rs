@@ -377,6 +377,19 @@ impl PySimulation {
             .collect())
     }
 
+    /// Each inflow source's `(name, due, entered)`: the people due by now and those who
+    /// entered (in the scene's order; empty without sources). Where they differ, people wait
+    /// for room in the source's area.
+    fn source_tallies(&self) -> PyResult<Vec<(String, u64, u64)>> {
+        Ok(self
+            .lock()?
+            .sim
+            .source_tallies()
+            .into_iter()
+            .map(|s| (s.name, s.due, s.entered))
+            .collect())
+    }
+
     /// The last step's report: a dict with `step`, `t`, `mu` (s), certified `eps` and its
     /// target `eps_target` (m²), `violation` (m), `iterations`, `assembled`, `active`,
     /// `redone`, `rejected`, `solver` (which answered), `status`, `timings` (s per stage);
@@ -644,6 +657,8 @@ pub fn run_to_file(
     // Adaptive steps that miss `time.tol`: said once, as `Simulation` and `moreau run` say it.
     let mut once = ToleranceWarning::new(&sim.scene().time);
     let mut unmet: Option<String> = None;
+    // Sources that left people waiting at the end: said as `moreau run` says it.
+    let mut waiting: Option<String> = None;
     let (outcome, json, finished) = py.detach(|| {
         let start = Instant::now();
         let mut polled = Instant::now();
@@ -694,6 +709,7 @@ pub fn run_to_file(
             wall,
         );
         let json = summary.to_json();
+        waiting = summary.waiting_warning();
         drop(record);
         let finished = writer.finish(&status, &json);
         (outcome, json, finished)
@@ -702,6 +718,7 @@ pub fn run_to_file(
         return Err(e);
     }
     warn(py, unmet)?;
+    warn(py, waiting)?;
     if let Some(p) = &progress {
         p.call1(
             py,

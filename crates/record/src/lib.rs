@@ -2,9 +2,9 @@
 //! ([`header`]) and the summary ([`Summary`]) that `moreau run` and the Python module both
 //! use, so that both write the same file.
 
-use moreau_core::{RunStats, StepReport};
+use moreau_core::{Num, RunStats, StepReport};
 use moreau_crowd::{
-    ContactKind, EntryRecord, ExitRecord, Frame, Observer, ObserverError, Simulation,
+    ContactKind, EntryRecord, ExitRecord, Frame, Observer, ObserverError, Simulation, SourceTally,
 };
 use moreau_io::{ContactRow, RunHeader, RunSink};
 use serde::Serialize;
@@ -94,6 +94,9 @@ pub struct Summary {
     pub broad_phase: String,
     /// How many steps each solver answered.
     pub solvers: Vec<(String, usize)>,
+    /// Each inflow source's people due by the time reached and entered (empty without
+    /// sources): a source with no room in its area leaves the difference waiting.
+    pub sources: Vec<SourceTally>,
 }
 
 impl Summary {
@@ -133,7 +136,29 @@ impl Summary {
                 .iter()
                 .map(|&(s, n)| (s.to_string(), n))
                 .collect(),
+            sources: sim.source_tallies(),
         }
+    }
+
+    /// The warning for sources that left people waiting, one line each (`None` when every
+    /// source brought everyone due): what `moreau run` prints and the Python module warns.
+    pub fn waiting_warning(&self) -> Option<String> {
+        let lines: Vec<String> = self
+            .sources
+            .iter()
+            .filter(|s| s.waiting() > 0)
+            .map(|s| {
+                format!(
+                    "source '{}': {} of the {} people due by t = {} s did not enter (no room \
+                     in its area: people or a moving body stood there)",
+                    s.name,
+                    s.waiting(),
+                    s.due,
+                    Num(self.simulated_time)
+                )
+            })
+            .collect();
+        (!lines.is_empty()).then(|| lines.join("\n"))
     }
 
     /// Pretty JSON (what the file's `summary` attribute holds).

@@ -128,6 +128,9 @@ class Simulation:
     def speed_factor(self) -> float: ...
     def exit_records(self) -> list[tuple[int, int, float]]:
         """``(id, exit index, t)`` of everyone who passed an exit, in order."""
+    def source_tallies(self) -> list[tuple[str, int, int]]:
+        """``(name, due, entered)`` of each inflow source: the people due by now and those who
+        entered; where they differ, people wait for room in the source's area."""
     def contacts(self) -> Contacts:
         """The last step's contact forces: ``kind`` (0 person–person, 1 person–wall, 2
         person–moving wall), ``a``, ``b`` (ids; for a wall its row in the run file's
