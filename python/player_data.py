@@ -155,6 +155,13 @@ def player_json(run_path, max_values: int = MAX_VALUES) -> dict:
     note = (", ".join(parts) + " shown: the run is larger than --max-values") if parts else ""
 
     geo, bbox = geometry(scene)
+    if moving is not None:
+        # The moving bodies as drawn (float32), wherever they go, as `moreau view` fits them.
+        pts = moving.astype("<f4").astype(float).reshape(-1, 2)
+        pts = pts[np.isfinite(pts).all(axis=1)]
+        if len(pts):
+            bbox = [min(bbox[0], float(pts[:, 0].min())), min(bbox[1], float(pts[:, 1].min())),
+                    max(bbox[2], float(pts[:, 0].max())), max(bbox[3], float(pts[:, 1].max()))]
     if len(walls):
         geo["walls"] = [[float(v) for v in w] for w in walls]
     data = {

@@ -328,6 +328,11 @@ def test_the_python_stand_in_writes_the_moving_walls_of_moreau_view(source, edit
             assert ours[key] == theirs[key], key
         np.testing.assert_array_equal(floats(theirs["moving"]).reshape(-1, *walls.shape[1:]),
                                       walls[::stride])
+        # The view holds the moving bodies wherever they go (room-closing-door's panel starts
+        # below the area, y = -0.75, and was drawn outside the view).
+        xs, ys = walls[::stride][..., [0, 2]], walls[::stride][..., [1, 3]]
+        x0, y0, x1, y1 = ours["bbox"]
+        assert x0 <= xs.min() and xs.max() <= x1 and y0 <= ys.min() and ys.max() <= y1, ours["bbox"]
 
 
 def test_decimation_keeps_100_frames_then_thins_people():

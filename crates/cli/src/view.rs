@@ -208,10 +208,18 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
         f64::NEG_INFINITY,
     ];
     let exits = exits(&scene);
+    // The moving bodies as drawn, wherever they go (room-closing-door's panel starts below
+    // the area and was drawn outside the view).
+    let drawn: Vec<[f64; 2]> = moving
+        .chunks_exact(2)
+        .map(|p| [f64::from(p[0]), f64::from(p[1])])
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .collect();
     for p in area
         .iter()
         .flatten()
         .chain(exits.iter().flat_map(|e| &e.points))
+        .chain(&drawn)
     {
         bbox = [
             bbox[0].min(p[0]),
