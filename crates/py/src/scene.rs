@@ -107,6 +107,31 @@ impl PyScene {
         }
         let text = toml::to_string(&value)
             .map_err(|e| SceneError::new_err(format!("scene <dict>: {e}")))?;
+        // The dict's keys, not lines of TOML nobody wrote: the parse error's span names its
+        // key (`groups[0].radius`), as a validation error names its field.
+        // (`field`, `value` and `reason` as a validation error has them; a missing key's
+        // field is its table, and no value.)
+        if let Err(e) = toml::from_str::<Scene>(&text) {
+            let reason = e.message().trim().to_string();
+            let (field, value) = match e.span().and_then(|span| key_at(&text, span.start)) {
+                Some((path, Some(value))) if !reason.starts_with("missing field") => {
+                    (Some(path), Some(value))
+                }
+                Some((path, _)) if !path.is_empty() => (Some(path), None),
+                _ => (None, None),
+            };
+            let message = match (&field, &value) {
+                (Some(f), Some(v)) => format!("scene error at {f} = {v}: {reason}"),
+                (Some(f), None) => format!("scene error at {f}: {reason}"),
+                _ => format!("scene error in <dict>: {reason}"),
+            };
+            let err = SceneError::new_err(message);
+            let v = err.value(py);
+            v.setattr("field", field)?;
+            v.setattr("value", value)?;
+            v.setattr("reason", reason)?;
+            return Err(err);
+        }
         Self::from_toml(py, &text, "<dict>")
     }
 
@@ -191,3 +216,65 @@ impl PyScene {
         (from_toml, (slf.get().scene.to_toml(),)).into_pyobject(py)
     }
 }
+
+/// In `text` as `toml::to_string` writes a table (headers `[a.b]` and `[[a]]`, one `key =
+/// value` a line), the dotted path of what byte `at` lies in, with the indices of arrays of
+/// tables (`groups[0].radius`), and the value written there: the key of its line with its
+/// value, or the table of a header line (`None` for the value).
+fn key_at(text: &str, at: usize) -> Option<(String, Option<String>)> {
+    // Arrays of tables by their resolved path, and how many elements each had so far.
+    let mut counts: Vec<(String, usize)> = Vec::new();
+    // A header's path, each array of tables before its last part at its current element.
+    let resolve = |name: &str, counts: &[(String, usize)]| {
+        let parts: Vec<&str> = name.split('.').map(|p| p.trim().trim_matches('"')).collect();
+        let mut path = String::new();
+        for (k, part) in parts.iter().enumerate() {
+            if k > 0 {
+                path.push('.');
+            }
+            path.push_str(part);
+            if k + 1 < parts.len()
+                && let Some((_, n)) = counts.iter().find(|(p, _)| *p == path)
+            {
+                path = format!("{path}[{}]", n - 1);
+            }
+        }
+        path
+    };
+    let (mut table, mut start) = (String::new(), 0);
+    for line in text.split_inclusive('\n') {
+        let end = start + line.len();
+        let l = line.trim();
+        let here = (start..end).contains(&at);
+        if let Some(name) = l.strip_prefix("[[").and_then(|l| l.strip_suffix("]]")) {
+            let base = resolve(name, &counts);
+            let n = match counts.iter_mut().find(|(p, _)| *p == base) {
+                Some((_, n)) => {
+                    *n += 1;
+                    *n
+                }
+                None => {
+                    counts.push((base.clone(), 1));
+                    1
+                }
+            };
+            table = format!("{base}[{}]", n - 1);
+        } else if let Some(name) = l.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            table = resolve(name, &counts);
+        } else if here {
+            let (key, value) = l.split_once('=')?;
+            let key = key.trim().trim_matches('"');
+            let path = match table.is_empty() {
+                true => key.to_string(),
+                false => format!("{table}.{key}"),
+            };
+            return Some((path, Some(value.trim().to_string())));
+        }
+        if here {
+            return Some((table, None));
+        }
+        start = end;
+    }
+    None
+}
+

@@ -14,7 +14,9 @@ class SceneError(ValueError):
     """A scene that cannot be read or is invalid; the message names the field and the value
     (as ``moreau run`` says it). ``field`` and ``value`` are ``None`` where no value is at
     fault (a text that does not parse as a scene: a misspelt or missing key); ``reason`` is
-    then the parser's message, or ``None`` where there is none."""
+    then the parser's message, or ``None`` where there is none. From ``Scene.from_dict``,
+    ``field`` names the dict's key (``groups[0].radius``) and ``value`` its value, or
+    ``field`` the table a key is missing from."""
 
     field: str | None
     value: str | None
