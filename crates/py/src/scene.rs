@@ -226,7 +226,10 @@ fn key_at(text: &str, at: usize) -> Option<(String, Option<String>)> {
     let mut counts: Vec<(String, usize)> = Vec::new();
     // A header's path, each array of tables before its last part at its current element.
     let resolve = |name: &str, counts: &[(String, usize)]| {
-        let parts: Vec<&str> = name.split('.').map(|p| p.trim().trim_matches('"')).collect();
+        let parts: Vec<&str> = name
+            .split('.')
+            .map(|p| p.trim().trim_matches('"'))
+            .collect();
         let mut path = String::new();
         for (k, part) in parts.iter().enumerate() {
             if k > 0 {
@@ -277,4 +280,3 @@ fn key_at(text: &str, at: usize) -> Option<(String, Option<String>)> {
     }
     None
 }
-
