@@ -725,6 +725,8 @@ impl Scene {
             ring.boundary_distance(p) <= 1e-9 * p[0].abs().max(p[1].abs()).max(1.0)
         };
         let inside = |ring: &Polygon, p: [f64; 2]| ring.contains(p) && !on(ring, p);
+        let on_segment =
+            |e: Segment, p: [f64; 2]| e.distance(p) <= 1e-9 * p[0].abs().max(p[1].abs()).max(1.0);
         let crossing = |a: &Polygon, b: &Polygon| {
             a.edges().find_map(|e| {
                 b.edges()
@@ -732,12 +734,31 @@ impl Scene {
                     .map(|f| (e, f))
             })
         };
-        // A hole's vertices and the midpoints of its edges: one of them lies strictly inside
-        // another hole that overlaps it without an edge crossing (one inside the other).
-        fn points(ring: &Polygon) -> impl Iterator<Item = [f64; 2]> + '_ {
-            let mid = |e: Segment| [0.5 * (e.a[0] + e.b[0]), 0.5 * (e.a[1] + e.b[1])];
-            ring.vertices.iter().copied().chain(ring.edges().map(mid))
-        }
+        // A ring's vertices and the midpoints of its edges' pieces between the points where
+        // `other`'s vertices touch them: where two rings meet without an edge crossing, one
+        // of these lies strictly on the wrong side of the other ring whenever the rings
+        // overlap (one inside the other, or an edge running outside between two vertices on
+        // the other ring, or through one of its vertices).
+        let points = |ring: &Polygon, other: &Polygon| -> Vec<[f64; 2]> {
+            let mut out = ring.vertices.clone();
+            let mut cuts = Vec::new();
+            for e in ring.edges() {
+                let d = [e.b[0] - e.a[0], e.b[1] - e.a[1]];
+                let len2 = d[0] * d[0] + d[1] * d[1];
+                cuts.clear();
+                cuts.extend([0.0, 1.0]);
+                for &q in other.vertices.iter().filter(|&&q| on_segment(e, q)) {
+                    let t = ((q[0] - e.a[0]) * d[0] + (q[1] - e.a[1]) * d[1]) / len2;
+                    cuts.push(t.clamp(0.0, 1.0));
+                }
+                cuts.sort_by(f64::total_cmp);
+                out.extend(cuts.windows(2).filter(|w| w[1] > w[0]).map(|w| {
+                    let t = 0.5 * (w[0] + w[1]);
+                    [e.a[0] + t * d[0], e.a[1] + t * d[1]]
+                }));
+            }
+            out
+        };
         let mut holes: Vec<(Polygon, [f64; 2], [f64; 2])> = Vec::new();
         for (h, hole) in self.area.holes.iter().enumerate() {
             let f = format!("area.holes[{h}]");
@@ -764,6 +785,22 @@ impl Scene {
                     ),
                 ));
             }
+            // Between vertices on the outer ring an edge can still run outside it (along a
+            // notch of the outer ring, the gap of a door): the run file's area was then
+            // invalid, and PedPy's Voronoi cells raised a TopologyException.
+            if let Some(p) = points(&poly, &outer)
+                .into_iter()
+                .find(|&p| !outer.contains(p) && !on(&outer, p))
+            {
+                return Err(CrowdError::invalid(
+                    f,
+                    format!("{hole:?}"),
+                    format!(
+                        "its boundary runs outside the outer polygon (through {p:?}): a hole \
+                         lies inside the outer polygon"
+                    ),
+                ));
+            }
             let (lo, hi) = poly.bounds();
             for (g, (other, olo, ohi)) in holes.iter().enumerate() {
                 if lo[0] > ohi[0] || lo[1] > ohi[1] || olo[0] > hi[0] || olo[1] > hi[1] {
@@ -777,19 +814,22 @@ impl Scene {
                         )
                     })
                     .or_else(|| {
-                        points(&poly)
+                        points(&poly, other)
+                            .into_iter()
                             .any(|p| inside(other, p))
                             .then(|| format!("it lies in area.holes[{g}]"))
                     })
                     .or_else(|| {
-                        points(other)
+                        points(other, &poly)
+                            .into_iter()
                             .any(|p| inside(&poly, p))
                             .then(|| format!("area.holes[{g}] lies in it"))
                     })
                     // The same ring twice (either way round): every point on the other's
                     // boundary, none strictly inside, and the file's area was invalid.
                     .or_else(|| {
-                        points(&poly)
+                        points(&poly, other)
+                            .into_iter()
                             .all(|p| on(other, p))
                             .then(|| format!("it is area.holes[{g}] again"))
                     });

@@ -293,6 +293,40 @@ fn an_obstacle_against_the_right_or_top_wall_was_refused_as_outside() {
 }
 
 #[test]
+fn a_hole_running_outside_the_room_between_vertices_on_its_walls_was_taken() {
+    // A room with a door's gap cut in its bottom wall (the outer ring's notch 4 → 6, 0 → 0.5)
+    // and an obstacle whose bottom edge closes the gap: every vertex on or inside the outer
+    // ring, no edge crossing it, but the edge 4 → 6 at y = 0 runs outside. It ran, and PedPy's
+    // Voronoi cells raised "TopologyException: side location conflict" on the run file.
+    let notched = |hole: &str| {
+        format!(
+            "[area]\nouter = [[0.0, 0.0], [4.0, 0.0], [4.0, 0.5], [6.0, 0.5], [6.0, 0.0], \
+             [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]\nholes = [{hole}]\n"
+        )
+    };
+    assert_mentions(
+        &error(&notched("[[4.0, 0.0], [6.0, 0.0], [6.0, 3.0], [4.0, 3.0]]")),
+        &[
+            "at area.holes[0]",
+            "runs outside the outer polygon",
+            "[5.0, 0.0]",
+        ],
+    );
+    // An edge whose midpoint is on the ring: the bottom edge 0 → 8 at y = 0 has its middle
+    // at the notch's corner (4, 0), and runs outside from there to (6, 0).
+    assert_mentions(
+        &error(&notched("[[0.0, 0.0], [8.0, 0.0], [8.0, 3.0], [0.0, 3.0]]")),
+        &[
+            "at area.holes[0]",
+            "runs outside the outer polygon",
+            "[5.0, 0.0]",
+        ],
+    );
+    // An obstacle beside the gap, against the wall, is still taken.
+    read(&notched("[[1.0, 0.0], [3.0, 0.0], [3.0, 3.0], [1.0, 3.0]]")).unwrap();
+}
+
+#[test]
 fn overlapping_and_nested_holes_ran_and_their_file_failed_in_pedpy() {
     // Holes that overlap, lie in one another, or leave the room between their vertices were
     // taken; the run file's area then failed in PedPy ("Holes need to be inside the walkable
