@@ -49,8 +49,9 @@ EXIT_PASSED = 3000
 
 
 def people_of(scene: dict) -> int:
-    """The people a scene places: its groups' counts (or listed positions)."""
-    return sum(g.get("count", len(g.get("positions", []))) for g in scene["groups"])
+    """The people a scene places at the start: its groups' counts (or listed positions); 0 for
+    a scene of sources alone (it has no `groups`: a KeyError stopped the build half done)."""
+    return sum(g.get("count", len(g.get("positions", []))) for g in scene.get("groups", []))
 
 
 def substitute(text: str, pattern: str, replacement: str, where: pathlib.Path) -> str:

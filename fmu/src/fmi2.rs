@@ -181,8 +181,8 @@ pub extern "C" fn fmi2SetupExperiment(
     _tolerance_defined: c_int,
     _tolerance: f64,
     start_time: f64,
-    _stop_time_defined: c_int,
-    _stop_time: f64,
+    stop_time_defined: c_int,
+    stop_time: f64,
 ) -> Status {
     with(c, "fmi2SetupExperiment", |comp| {
         comp.instance
@@ -193,7 +193,8 @@ pub extern "C" fn fmi2SetupExperiment(
             )));
         }
         comp.instance.set_start_time(start_time);
-        Ok(())
+        comp.instance
+            .set_stop_time((stop_time_defined != 0).then_some(stop_time))
     })
 }
 

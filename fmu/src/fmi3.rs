@@ -79,7 +79,7 @@ fn instantiate(
             // SAFETY: the host's string.
             unsafe { text(resource_path, "resourcePath") }
                 .ok()
-                .map(crate::resource_path)
+                .map(crate::resource_dir)
         };
         let instance = Instance::new(instance_name, resources, logging_on, Box::new(log));
         instance.info("instantiated");
@@ -210,8 +210,8 @@ pub extern "C" fn fmi3EnterInitializationMode(
     _tolerance_defined: bool,
     _tolerance: f64,
     start_time: f64,
-    _stop_time_defined: bool,
-    _stop_time: f64,
+    stop_time_defined: bool,
+    stop_time: f64,
 ) -> Status {
     with(c, "fmi3EnterInitializationMode", |comp| {
         if !start_time.is_finite() {
@@ -222,6 +222,8 @@ pub extern "C" fn fmi3EnterInitializationMode(
         comp.instance
             .expect("fmi3EnterInitializationMode", &[State::Instantiated])?;
         comp.instance.set_start_time(start_time);
+        comp.instance
+            .set_stop_time(stop_time_defined.then_some(stop_time))?;
         comp.instance.enter_initialization()
     })
 }

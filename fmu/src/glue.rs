@@ -517,10 +517,12 @@ pub(crate) unsafe fn serialize_state(
 }
 
 /// `fmi2DeSerializeFMUstate` / `fmi3DeserializeFMUState`: a state from its serialized form
-/// (checked: this FMU's, its format; the scene is checked when it is set).
+/// (checked: this FMU's, its format; the scene is checked when it is set), always a new state
+/// whatever `*slot` held.
 ///
 /// # Safety
-/// `bytes` holds `size` bytes; `slot` points to the host's `FMUstate` variable.
+/// `bytes` holds `size` bytes; `slot` points to the host's `FMUstate` variable (its value is
+/// not read).
 pub(crate) unsafe fn deserialize_state(
     bytes: *const u8,
     size: usize,
@@ -533,8 +535,21 @@ pub(crate) unsafe fn deserialize_state(
     }
     // SAFETY: `size` bytes at `bytes`.
     let snapshot = Snapshot::from_bytes(unsafe { values(bytes, size)? })?;
-    // SAFETY: as the caller's contract.
-    unsafe { store(slot, snapshot) }
+    if slot.is_null() {
+        return Err(FmuError::Null("FMUstate"));
+    }
+    // Always a new state: `*FMUstate` is an output here (FMI 2 §2.1.8, FMI 3 alike; only
+    // `GetFMUstate` overwrites the state it is given). Read as an input, a host's variable
+    // left uninitialized crashed the process, and one holding a saved state had that state
+    // overwritten and handed back twice.
+    let state = Box::into_raw(Box::new(StateBox {
+        tag: STATE_TAG,
+        snapshot,
+        bytes: None,
+    })) as *mut c_void;
+    // SAFETY: `slot` points to the host's `FMUstate` variable (the caller's contract).
+    unsafe { *slot = state };
+    Ok(())
 }
 
 #[cfg(test)]
@@ -826,6 +841,102 @@ mod tests {
             assert!(fresh.is_null());
             free_state(&mut slot).unwrap();
         }
+    }
+
+    #[test]
+    fn deserializing_into_a_variable_that_held_a_state_overwrote_that_state() {
+        // `*FMUstate` of DeSerialize is an output: it was read as a state to overwrite, so a
+        // host variable still holding a checkpoint got that checkpoint replaced (and the same
+        // handle back, to be freed twice), and an uninitialized one crashed the process.
+        let (mut comp, _) = stepping(None);
+        steps(&mut comp, 0.0, 2, 0.5);
+        let at_one = outputs(&mut comp);
+        let (mut early, mut late): (*mut c_void, *mut c_void) =
+            (std::ptr::null_mut(), std::ptr::null_mut());
+        steps(&mut comp, 1.0, 2, 0.5);
+        let at_two = outputs(&mut comp);
+        let mut size = 0usize;
+        // SAFETY: our slots, size and buffers.
+        unsafe {
+            let (mut back, _) = stepping(None);
+            steps(&mut back, 0.0, 2, 0.5);
+            get_state(&mut back, &mut early).unwrap();
+            get_state(&mut comp, &mut late).unwrap();
+            state_size(late, &mut size).unwrap();
+            let mut bytes = vec![0u8; size];
+            serialize_state(late, bytes.as_mut_ptr(), size).unwrap();
+            // Into the variable holding the t = 1 checkpoint: a new state, the old one kept.
+            let mut slot = early;
+            deserialize_state(bytes.as_ptr(), size, &mut slot).unwrap();
+            assert_ne!(slot, early);
+            set_state(&mut comp, early).unwrap();
+            assert_eq!(outputs(&mut comp), at_one);
+            set_state(&mut comp, slot).unwrap();
+            assert_eq!(outputs(&mut comp), at_two);
+            free_state(&mut slot).unwrap();
+            // Into a variable holding what is no state at all (never read).
+            let mut junk = [0x5au8; 64];
+            let mut slot = junk.as_mut_ptr() as *mut c_void;
+            deserialize_state(bytes.as_ptr(), size, &mut slot).unwrap();
+            assert_ne!(slot, junk.as_mut_ptr() as *mut c_void);
+            set_state(&mut comp, slot).unwrap();
+            assert_eq!(outputs(&mut comp), at_two);
+            for s in [&mut slot, &mut early, &mut late] {
+                free_state(s).unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn a_step_past_the_stop_time_the_experiment_set_up_was_taken() {
+        use crate::fmi2::{
+            fmi2DoStep, fmi2EnterInitializationMode, fmi2ExitInitializationMode,
+            fmi2SetupExperiment,
+        };
+        use crate::fmi3::{fmi3EnterInitializationMode, fmi3ExitInitializationMode};
+        // FMI 2.0 §4.2.1: "if the environment tries to compute past stopTime the FMU has to
+        // return fmi2Error". Both FMUs stepped on to t = 6 with stopTime = 1.
+        let (mut comp, lines) = component(None);
+        let c = ptr(&mut comp);
+        assert_eq!(fmi2SetupExperiment(c, 0, 0.0, 0.0, 1, 1.0), OK);
+        assert_eq!(fmi2EnterInitializationMode(c), OK);
+        assert_eq!(fmi2ExitInitializationMode(c), OK);
+        assert_eq!(fmi2DoStep(c, 0.0, 0.5, 1), OK);
+        // 0.5 + 0.5000000001 ends within rounding of the stop time (fmpy's isclose).
+        assert_eq!(fmi2DoStep(c, 0.5, 0.5 + 1e-10, 1), OK);
+        let t = comp.instance.time().unwrap();
+        assert_eq!(fmi2DoStep(c, t, 0.5, 1), ERROR);
+        assert_eq!(comp.instance.time(), Some(t));
+        let line = lines.borrow().last().unwrap().clone();
+        assert!(line.contains("after stopTime = 1 s"), "{line}");
+        // Without a stop time (stopTimeDefined false) it steps on.
+        let (mut free, _) = component(None);
+        let c = ptr(&mut free);
+        assert_eq!(fmi2SetupExperiment(c, 0, 0.0, 0.0, 0, 1.0), OK);
+        assert_eq!(fmi2EnterInitializationMode(c), OK);
+        assert_eq!(fmi2ExitInitializationMode(c), OK);
+        assert_eq!(fmi2DoStep(c, 0.0, 1.5, 1), OK);
+        // FMI 3 sets it entering initialization; a stop before the start is refused.
+        let (mut three, lines) = component(None);
+        let c = ptr(&mut three);
+        assert_eq!(
+            fmi3EnterInitializationMode(c, false, 0.0, 2.0, true, 1.0),
+            ERROR
+        );
+        let line = lines.borrow().last().unwrap().clone();
+        assert!(
+            line.contains("stopTime = 1: before startTime = 2"),
+            "{line}"
+        );
+        assert_eq!(
+            fmi3EnterInitializationMode(c, false, 0.0, 0.0, true, 0.75),
+            OK
+        );
+        assert_eq!(fmi3ExitInitializationMode(c), OK);
+        assert!(three.instance.do_step(0.0, 0.5).is_ok());
+        let e = three.instance.do_step(0.5, 0.5).unwrap_err().to_string();
+        assert!(e.contains("after stopTime = 0.75 s"), "{e}");
+        assert!(three.instance.do_step(0.5, 0.25).is_ok());
     }
 
     #[test]

@@ -78,23 +78,28 @@ pub(crate) fn xml_attribute(xml: &'static str, attribute: &str) -> &'static str 
     &xml[start..end]
 }
 
-/// A file path from an FMI resource location: `file:///a/b`, `file:/a/b` or a plain path,
-/// with `%XX` escapes decoded.
+/// A file path from FMI 2's resource location, a URI: `file:///a/b`, `file:/a/b` (or a plain
+/// path, from hosts that pass one), with `%XX` escapes decoded in a URI only.
 pub(crate) fn resource_path(location: &str) -> std::path::PathBuf {
-    let rest = location
+    let Some(rest) = location
         .strip_prefix("file://localhost")
         .or_else(|| location.strip_prefix("file://"))
         .or_else(|| location.strip_prefix("file:"))
-        .unwrap_or(location);
+    else {
+        return std::path::PathBuf::from(location);
+    };
+    let hex = |b: u8| (b as char).to_digit(16).map(|d| d as u8);
     let bytes = rest.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
+        // Byte by byte: a `%` before a multibyte character sliced the text inside it and
+        // panicked.
         if bytes[i] == b'%'
             && i + 2 < bytes.len()
-            && let Ok(v) = u8::from_str_radix(&rest[i + 1..i + 3], 16)
+            && let (Some(h), Some(l)) = (hex(bytes[i + 1]), hex(bytes[i + 2]))
         {
-            out.push(v);
+            out.push(h << 4 | l);
             i += 3;
             continue;
         }
@@ -102,6 +107,17 @@ pub(crate) fn resource_path(location: &str) -> std::path::PathBuf {
         i += 1;
     }
     std::path::PathBuf::from(String::from_utf8_lossy(&out).into_owned())
+}
+
+/// A file path from FMI 3's `resourcePath`: an absolute path as it is, `%` and all (it was
+/// decoded as a URI: an FMU unpacked under `100%25/` read its scene from `100%/`). A
+/// `file:` URI, which FMI 3 does not pass, is still read as one.
+pub(crate) fn resource_dir(path: &str) -> std::path::PathBuf {
+    if path.starts_with("file:") {
+        resource_path(path)
+    } else {
+        std::path::PathBuf::from(path)
+    }
 }
 
 #[cfg(test)]
@@ -121,6 +137,28 @@ mod tests {
         assert_eq!(
             resource_path("/plain/path"),
             std::path::PathBuf::from("/plain/path")
+        );
+    }
+
+    #[test]
+    fn an_fmi3_resource_path_was_decoded_as_a_uri() {
+        // FMI 3's resourcePath is a path: `%41` and `%25` in a directory's name are its own.
+        assert_eq!(
+            resource_dir("/tmp/a%41b/100%25/resources/"),
+            std::path::PathBuf::from("/tmp/a%41b/100%25/resources/")
+        );
+        assert_eq!(
+            resource_dir("file:///tmp/a%20b/resources"),
+            std::path::PathBuf::from("/tmp/a b/resources")
+        );
+        // A `%` before a multibyte character panicked (slicing inside it).
+        assert_eq!(
+            resource_path("file:///tmp/x%aé/r"),
+            std::path::PathBuf::from("/tmp/x%aé/r")
+        );
+        assert_eq!(
+            resource_path("file:///tmp/%C3%A9"),
+            std::path::PathBuf::from("/tmp/é")
         );
     }
 

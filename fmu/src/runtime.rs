@@ -82,6 +82,8 @@ pub struct Instance {
     pub logging_on: bool,
     model: Option<CrowdModel>,
     stale: bool,
+    /// The stop time the master set up, if it gave one: no step may end after it.
+    stop_time: Option<f64>,
     log: LogFn,
 }
 
@@ -106,6 +108,25 @@ impl Instance {
         }
     }
 
+    /// Sets the stop time (`fmi2SetupExperiment`, `fmi3EnterInitializationMode`, with
+    /// `stopTimeDefined`): a step that would end after it is refused, as the standards ask
+    /// (FMI 2.0 §4.2.1: "if the environment tries to compute past stopTime the FMU has to
+    /// return fmi2Error"; FMI 3 alike). It was ignored. Refused itself when not a number or
+    /// before the start time.
+    pub fn set_stop_time(&mut self, stop: Option<f64>) -> Result<(), FmuError> {
+        if let Some(stop) = stop
+            && !(stop >= self.settings.start_time)
+        {
+            return Err(FmuError::Setting(format!(
+                "stopTime = {}: before startTime = {} (or not a number)",
+                Num(stop),
+                Num(self.settings.start_time)
+            )));
+        }
+        self.stop_time = stop;
+        Ok(())
+    }
+
     /// A new instance in state `Instantiated`.
     pub fn new(name: String, resources: Option<PathBuf>, logging_on: bool, log: LogFn) -> Self {
         Self {
@@ -116,6 +137,7 @@ impl Instance {
             logging_on,
             model: None,
             stale: true,
+            stop_time: None,
             log,
         }
     }
@@ -534,6 +556,19 @@ impl Instance {
                 Num(t)
             )));
         }
+        // Past it by more than rounding: a billionth of the stop time or of the step (fmpy
+        // takes a point within `math.isclose`'s 10⁻⁹ of the stop time as reaching it).
+        if let Some(stop) = self.stop_time
+            && t + h - stop > 1e-9 * stop.abs().max(h)
+        {
+            return Err(FmuError::Setting(format!(
+                "a step from {} s of {} s ends after stopTime = {} s, which the experiment set \
+                 up: refused",
+                Num(t),
+                Num(h),
+                Num(stop)
+            )));
+        }
         let settings = self.settings.clone();
         let model = self.model()?;
         model.apply(&settings)?;
@@ -636,6 +671,7 @@ impl Instance {
     pub fn reset(&mut self) {
         self.model = None;
         self.stale = true;
+        self.stop_time = None;
         self.settings = Settings::default();
         self.state = State::Instantiated;
     }

@@ -134,6 +134,26 @@ def test_the_fmu_of_the_rooms_own_scene_checks_other_scenes_too(tmp_path, capfd)
         in said, said
 
 
+def test_the_fmus_of_a_scene_of_sources_alone_were_not_built(tmp_path):
+    """`package.py --scene` on a scene of sources alone (no `[[groups]]`, as the README allows)
+    stopped with KeyError 'groups' after writing the FMI 2 FMU. Both are built now, fmpy's
+    validator finds nothing (FMI 3's `n_people` is 0, no longer below its `min`), and both run
+    the people in through the source."""
+    text = (ROOT / "data" / "scenes" / "gate-inflow.toml").read_text()
+    start, end = text.index("\n[[groups]]"), text.index("\n[[sources]]")
+    scene = tmp_path / "gate-only.toml"
+    scene.write_text(text[:start] + text[end:])
+    package = [sys.executable, str(ROOT / "fmu" / "package.py"), "--no-build", "--out",
+               str(tmp_path)]
+    built = subprocess.run(package + ["--scene", str(scene)], capture_output=True, text=True)
+    assert built.returncode == 0, built.stderr
+    for version in ("2", "3"):
+        fmu = str(tmp_path / f"moreau-crowd-gate-only-fmi{version}.fmu")
+        assert validate_fmu(fmu) == [], version
+        r = simulate_fmu(fmu, stop_time=2.0, output_interval=0.5)
+        assert r["people_inside"][0] == 0 and r["people_inside"][-1] == 6, (version, r)
+
+
 @pytest.mark.parametrize("version", ["2", "3"])
 def test_a_failed_fmu_run_of_the_ensemble_left_its_instance_and_extracted_fmu_behind(
         fmus, version, tmp_path, monkeypatch):
