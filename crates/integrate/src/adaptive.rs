@@ -73,8 +73,8 @@ pub struct AdaptiveSettings {
 }
 
 impl AdaptiveSettings {
-    /// Defaults for tolerance `tol`: steps in `[1e-6, 0.5]`, first `min(0.01, mu_max)`,
-    /// safety 0.9, growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling, the floor
+    /// Defaults for tolerance `tol`: steps in `[1e-6, 0.5]`, first 0.01 (a `mu_max` set below
+    /// it needs `mu_first` lowered too: `validate` refuses `mu_first > mu_max`), safety 0.9, growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling, the floor
     /// [`EpsPolicy::ADAPTIVE_FLOOR`].
     pub fn new(tol: f64) -> Self {
         Self {
@@ -262,6 +262,9 @@ impl StepController {
                 reason: "must be after the current time",
             });
         }
+        // Its smallest step must move the time (from t0 = 10¹² with mu_min = 10⁻⁶, millions of
+        // steps never reached the end).
+        crate::stepping::check_resolution("mu_min", s.mu_min, t, t_end)?;
         let policy = s.eps_policy();
         scheme.set_eps(policy);
         let n = q.len();

@@ -260,6 +260,15 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
             violation: self.settings.max_violation / mu,
         };
         let mut margin = constraints.margin(q, w, mu);
+        // NaN or a negative margin assembles no row and checks nothing after the step (a
+        // half-line crossed to −2 was a certified run): the set's estimate is wrong.
+        if !(margin >= 0.0) {
+            return Err(IntegrateError::InvalidSetting {
+                field: "margin",
+                value: Num(margin).to_string(),
+                reason: "ConstraintSet::margin must be ≥ 0 (or +∞: assemble every row)",
+            });
+        }
         loop {
             let start = Instant::now();
             self.rows.clear(q.len());
@@ -325,7 +334,14 @@ impl<S: ProjectionSolver> Correction for LinearizedProjection<S> {
                 });
             }
             report.redone += 1;
-            margin *= 2.0;
+            // Wider: twice the margin, and at least as far as any coordinate moved in the
+            // step (a margin of 0, at rest, stayed 0 through every redo).
+            let moved = q
+                .iter()
+                .zip(q_next.iter())
+                .map(|(a, b)| (b - a).abs())
+                .fold(0.0, f64::max);
+            margin = (2.0 * margin).max(2.0 * moved);
         }
     }
 }

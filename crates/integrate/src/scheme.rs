@@ -313,7 +313,7 @@ impl<C: Correction> Scheme<C> {
                 // A step the time cannot resolve: t + h rounded back to t, and a run from
                 // t0 = 1.7e9 (a Unix time) with h = 1e-7 stepped forever at the same time.
                 let scale = t0.abs().max(t_end.abs());
-                if !(*h >= 100.0 * f64::EPSILON * scale) {
+                if !(*h >= crate::stepping::RESOLVABLE * f64::EPSILON * scale) {
                     return Err(IntegrateError::InvalidSetting {
                         field: "h",
                         value: format!("{} at times near {}", Num(*h), Num(scale)),

@@ -74,6 +74,30 @@ pub enum SteppingState {
     Adaptive(ControllerState),
 }
 
+/// The smallest step, in rounding units of the time, a run takes (`Scheme::run`,
+/// [`Stepping::step`] and the adaptive controller refuse shorter ones).
+pub(crate) const RESOLVABLE: f64 = 100.0;
+
+/// Refuses a step `h` (the setting `field`) that times between `t` and `t_stop` cannot resolve:
+/// below [`RESOLVABLE`] rounding units of them.
+pub(crate) fn check_resolution(
+    field: &'static str,
+    h: f64,
+    t: f64,
+    t_stop: f64,
+) -> Result<(), IntegrateError> {
+    let scale = t.abs().max(t_stop.abs());
+    if h >= RESOLVABLE * f64::EPSILON * scale {
+        return Ok(());
+    }
+    Err(IntegrateError::InvalidSetting {
+        field,
+        value: format!("{} at times near {}", Num(h), Num(scale)),
+        reason: "below 100 rounding units of the time, which it would not advance exactly \
+                 (measure times from the run's start)",
+    })
+}
+
 impl Stepping {
     /// Fixed steps of `step`, checked.
     pub fn fixed(step: f64) -> Result<Self, IntegrateError> {
@@ -123,6 +147,13 @@ impl Stepping {
     ) -> Result<Option<StepReport>, IntegrateError> {
         if self.reached(t, t_stop) {
             return Ok(None);
+        }
+        // A step the time cannot resolve: `t + μ` rounds back to (or near) `t`, and the state
+        // moved while the time stood still (from t0 = 1.7e9 with steps of 1e-7, 30 million
+        // steps at the same time). `Scheme::run` refused it; stepping did not. (The adaptive
+        // controller checks its smallest step itself.)
+        if let Stepping::Fixed { step } = self {
+            check_resolution("step", *step, t, t_stop)?;
         }
         match self {
             Stepping::Fixed { step } => match fixed_step(*step, t_stop - t) {

@@ -6,7 +6,7 @@
 use moreau_core::{FnField, HalfSpace, SolveStatus, StepReport};
 use moreau_integrate::{
     AdaptiveSettings, Correction, EpsPolicy, ErrorEstimate, ExactProjection, IntegrateError,
-    Scheme, StepController, StepSequence, Unconstrained,
+    Scheme, StepController, StepSequence, Stepping, Unconstrained,
 };
 
 const A: f64 = 1.0;
@@ -493,4 +493,44 @@ fn adaptive_steps_on_a_set_that_moves_the_state() {
         "step doubling saw the set's motion (error {err:.3e}, largest estimate \
          {estimate:.3e}): update the README"
     );
+}
+
+#[test]
+fn a_step_the_time_cannot_resolve_stepped_forever_at_the_same_time() {
+    // From t0 = 1.7e9 (a Unix time) steps of 1e-7 round back to t: `Scheme::run` refused
+    // them, `Stepping` took them, and the state moved while the time stood still (30 million
+    // steps, t − t0 = 0). The adaptive controller's floor alike, from t0 = 10¹².
+    let field = FnField::new(1, |_t, _q: &[f64], out: &mut [f64]| out[0] = 1.0);
+    let mut scheme = Scheme::new(Unconstrained, EpsPolicy::default());
+    let mut q = [0.0];
+    let mut fixed = Stepping::fixed(1e-7).unwrap();
+    let t0 = 1.7e9;
+    match fixed.step(&mut scheme, &field, &mut (), 0, t0, &mut q, t0 + 1e-3) {
+        Err(IntegrateError::InvalidSetting { field, value, .. }) => {
+            assert_eq!(field, "step");
+            assert!(value.contains("1e-7 at times near 1700000000"), "{value}");
+        }
+        other => panic!("expected InvalidSetting, got {other:?}"),
+    }
+    assert_eq!(q, [0.0], "no step taken");
+    let mut controller = StepController::new(AdaptiveSettings::new(1e-6)).unwrap();
+    let t0 = 1e12;
+    match controller.step(&mut scheme, &field, &mut (), 0, t0, &mut q, t0 + 1.0) {
+        Err(IntegrateError::InvalidSetting { field, .. }) => assert_eq!(field, "mu_min"),
+        other => panic!("expected InvalidSetting, got {:?}", other.map(|s| s.report)),
+    }
+    // Steps the time resolves are taken there: 1e-3 s from 1.7e9 lands on t0 + 1 s.
+    let mut fine = Stepping::fixed(1e-3).unwrap();
+    let (mut t, mut k) = (1.7e9, 0);
+    while let Some(r) = fine
+        .step(&mut scheme, &field, &mut (), k, t, &mut q, 1.7e9 + 1.0)
+        .unwrap()
+    {
+        t = r.t;
+        k += 1;
+    }
+    assert_eq!(t, 1.7e9 + 1.0);
+    // Times there are rounded to 2.4e-7 s, a quarter of a thousandth of each step: the state
+    // follows the time to that (it moved by 1 + 7e-5).
+    assert!((q[0] - 1.0).abs() < 1e-3, "q = {}", q[0]);
 }

@@ -1,7 +1,7 @@
 //! The redo path of the linearized projection: a set whose margin misses a constraint the
-//! step crosses is caught by the check after the step, and the step is redone with doubled
-//! margins until the constraint is assembled (or fails, naming what was crossed, when the
-//! redo budget runs out).
+//! step crosses is caught by the check after the step, and the step is redone with wider
+//! margins (doubled, and at least twice as far as the step moved) until the constraint is
+//! assembled (or fails, naming what was crossed, when the redo budget runs out).
 
 use moreau_core::{BoxSet, ConstraintRows, ConstraintSet, FnField};
 use moreau_integrate::{
@@ -27,12 +27,16 @@ impl ConstraintSet for Shortsighted {
     }
 }
 
-/// One step of `q' = −1` from `q = 0.1` of size 0.5 (the prediction crosses `q ≥ 0` by 0.4).
-fn step(max_redo: usize) -> (Result<moreau_core::StepReport, IntegrateError>, f64) {
+/// One step of `q' = −1` from `q = 0.1` of size 0.5 (the prediction crosses `q ≥ 0` by 0.4)
+/// with the set's `margin`.
+fn step_with(
+    max_redo: usize,
+    margin: f64,
+) -> (Result<moreau_core::StepReport, IntegrateError>, f64) {
     let field = FnField::new(1, |_t, _q: &[f64], out: &mut [f64]| out[0] = -1.0);
     let mut set = Shortsighted {
         set: BoxSet::new(vec![0.0], vec![10.0]).unwrap(),
-        margin: 1e-3,
+        margin,
     };
     let correction = LinearizedProjection::new(
         InteriorPoint::new(Default::default()).unwrap(),
@@ -48,12 +52,17 @@ fn step(max_redo: usize) -> (Result<moreau_core::StepReport, IntegrateError>, f6
     (r, q[0])
 }
 
+fn step(max_redo: usize) -> (Result<moreau_core::StepReport, IntegrateError>, f64) {
+    step_with(max_redo, 1e-3)
+}
+
 #[test]
 fn a_constraint_the_margin_missed_is_caught_and_the_step_redone() {
     let (report, q) = step(8);
     let report = report.unwrap();
-    // Margins 0.001, 0.002, …: the face at distance 0.1 is assembled at 0.128, the 8th try.
-    assert_eq!(report.redone, 7);
+    // Margins 0.001, then 1 (twice the 0.5 the step moved; doubling alone reached the face
+    // at distance 0.1 at 0.128, the 8th try): assembled at the 2nd.
+    assert_eq!(report.redone, 1);
     assert_eq!(report.assembled, 1);
     // On the face, to the certified accuracy: |q − 0|² ≤ ε (and never beyond it).
     assert!(
@@ -65,11 +74,39 @@ fn a_constraint_the_margin_missed_is_caught_and_the_step_redone() {
 
 #[test]
 fn a_step_that_runs_out_of_redos_fails_naming_what_was_crossed() {
-    let (report, _) = step(3);
+    let (report, _) = step(0);
     match report {
         Err(IntegrateError::CrossedOutside {
             crossed, redone, ..
-        }) => assert_eq!((crossed, redone), (1, 3)),
+        }) => assert_eq!((crossed, redone), (1, 0)),
         other => panic!("expected CrossedOutside, got {other:?}"),
     }
+}
+
+#[test]
+fn a_margin_of_zero_stayed_zero_through_every_redo() {
+    // A set whose margin is the speed times the step is 0 at rest, and doubling 0 left it 0:
+    // eight identical redos, then CrossedOutside. The margin now grows to twice the distance
+    // the step moved, and the face is found at the first redo.
+    let (report, q) = step_with(8, 0.0);
+    let report = report.unwrap();
+    assert_eq!((report.redone, report.assembled), (1, 1));
+    assert!(q >= -1e-9 && q <= report.eps.sqrt(), "q = {q}");
+}
+
+#[test]
+fn a_nan_or_negative_margin_switched_the_constraints_off() {
+    // NaN (or −∞) assembled no row and skipped the check after the step: q' = −1 crossed the
+    // half-line to −0.4 as a certified step. Refused, naming the margin.
+    for margin in [f64::NAN, f64::NEG_INFINITY, -0.5] {
+        let (report, _) = step_with(8, margin);
+        match report {
+            Err(IntegrateError::InvalidSetting { field, .. }) => assert_eq!(field, "margin"),
+            other => panic!("margin {margin}: expected InvalidSetting, got {other:?}"),
+        }
+    }
+    // +∞ assembles everything, as the default margin does.
+    let (report, q) = step_with(8, f64::INFINITY);
+    assert_eq!(report.unwrap().redone, 0);
+    assert!(q >= -1e-9, "q = {q}");
 }
