@@ -385,13 +385,14 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     if !args.quiet {
         println!(
-            "{}: {} people, {} steps in {wall:.2} s ({:.2} ms/step); {} passed an exit; \
+            "{}: {} people, {} steps in {:.2} s ({:.2} ms/step); {} passed an exit; \
              {:.0} solver iterations/step; max certified ε {:.2e} m², max violation {:.2e} m{}",
             summary.scene,
             // Everyone in the run, those from sources too (the count at the start said 0 for
             // a scene of sources only, where the summary said 6).
             summary.people,
             stats.steps,
+            summary.wall_seconds,
             summary.ms_per_step,
             summary.passed_exit,
             summary.iterations_per_step,

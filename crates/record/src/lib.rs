@@ -100,7 +100,8 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// The summary of `sim` after a run that `record` observed, `wall` seconds long.
+    /// The summary of `sim` after a run that `record` observed, `wall` seconds long (a resumed
+    /// run's earlier parts, saved with its state, are added: its steps are the whole run's).
     pub fn new(
         sim: &Simulation,
         record: &Record<'_>,
@@ -110,6 +111,7 @@ impl Summary {
         wall: f64,
     ) -> Self {
         let (stats, people) = (&record.stats, sim.total_people());
+        let wall = wall + record.wall_before;
         Summary {
             scene,
             output,
@@ -251,6 +253,11 @@ pub struct Record<'a> {
     stopped: bool,
     pressure: Vec<f64>,
     moving: Vec<[f64; 4]>,
+    /// Wall-clock seconds of the run before this record began (a resumed run's earlier
+    /// parts, as saved with its state).
+    wall_before: f64,
+    /// When this record began.
+    started: std::time::Instant,
 }
 
 impl std::fmt::Debug for Record<'_> {
@@ -276,7 +283,15 @@ impl<'a> Record<'a> {
             stopped: false,
             pressure: Vec::new(),
             moving: Vec::new(),
+            wall_before: 0.0,
+            started: std::time::Instant::now(),
         }
+    }
+
+    /// Wall-clock seconds of the whole run so far: those saved with the state a resumed run
+    /// goes on from, and this record's.
+    pub fn wall_seconds(&self) -> f64 {
+        self.wall_before + self.started.elapsed().as_secs_f64()
     }
 
     /// Saves a state's bytes ([`SimState::to_bytes`](moreau_crowd::SimState::to_bytes)) into
@@ -324,6 +339,9 @@ struct Totals {
     frames: usize,
     exits: usize,
     people: usize,
+    /// Wall-clock seconds so far (absent in files written before 2026-11-28: 0).
+    #[serde(default)]
+    wall_seconds: f64,
 }
 
 impl Totals {
@@ -351,6 +369,7 @@ impl Totals {
             frames: r.frames,
             exits: r.exits,
             people: r.people,
+            wall_seconds: r.wall_seconds(),
         }
     }
 
@@ -394,6 +413,7 @@ impl Totals {
                 .collect(),
         };
         (r.frames, r.exits, r.people) = (self.frames, self.exits, self.people);
+        r.wall_before = self.wall_seconds;
     }
 }
 

@@ -172,6 +172,15 @@ fn a_resumed_runs_summary_counted_only_the_steps_after_the_resume() {
     assert_eq!((a.max_eps, a.max_violation), (b.max_eps, b.max_violation));
     assert_eq!(a.solvers, b.solvers);
     assert_eq!((rec.frames, rec.exits), (straight.frames, straight.exits));
+    // Its wall time is the whole run's too: the summary's ms a step and steps a second divided
+    // the whole run's steps by the resumed part's seconds (2× too fast, resumed half way).
+    let note: serde_json::Value = serde_json::from_str(&r.note).unwrap();
+    let before = note["wall_seconds"].as_f64().unwrap();
+    assert!(before > 0.0, "{note}");
+    assert!(rec.wall_seconds() >= before);
+    let summary = moreau_record::Summary::new(&sim, &rec, "s".into(), None, "complete".into(), 0.5);
+    assert_eq!(summary.wall_seconds, 0.5 + before);
+    assert_eq!(summary.ms_per_step, 1e3 * (0.5 + before) / b.steps as f64);
     // A note that is no totals (files before) leaves them at zero.
     let fresh = Record::new(None, 3).resuming("");
     assert_eq!((fresh.stats.steps, fresh.frames), (0, 0));
