@@ -74,7 +74,9 @@ def load(path, *, locking: bool | None = None) -> Run:
 
 def walls_of(scene: dict) -> np.ndarray:
     """The walls `(n, 4)` (x0, y0, x1, y1) of a scene's area given as rings (`outer`,
-    `holes`): every edge, as the run file's `/walls` has them; empty for an area in WKT."""
+    `holes`): every edge of every ring, in the ring's order; empty for an area in WKT. The
+    run file's `/walls` holds the same segments, a hole's in another order and direction:
+    look a contact's wall (`b`) up there, not here."""
     area = scene.get("area", {})
     rings = [area.get("outer", [])] + list(area.get("holes", [])) if isinstance(area, dict) else []
     edges = [(*ring[i], *ring[(i + 1) % len(ring)]) for ring in rings for i in range(len(ring))]

@@ -118,6 +118,13 @@ def flow(ax, run, counts):
     ax.legend(loc="upper left", fontsize=8)
 
 
+def frames_on_grid(time, fps) -> int:
+    """The frames PedPy has (`/trajectory`'s): those at a whole number of 1/fps; a last frame
+    at a horizon off that grid is in the run file only, and counted it biased the mean."""
+    grid = np.asarray(time, dtype=float) * fps
+    return int(np.sum(np.abs(grid - np.rint(grid)) <= 1e-6))
+
+
 def density(ax, traj, walkable, frames, cell=0.5):
     """Mean classic density on a grid (PedPy density profile) over the run's `frames` frames,
     those with nobody in counting as zero. (PedPy has a profile for each frame someone is in,
@@ -406,7 +413,7 @@ def main(argv=None) -> int:
     panels = {
         "evacuation": lambda ax: evacuation(ax, run, counts),
         "flow": lambda ax: flow(ax, run, counts),
-        "density": lambda ax: density(ax, traj, walkable, len(run.time)),
+        "density": lambda ax: density(ax, traj, walkable, frames_on_grid(run.time, traj.frame_rate)),
         "speed": lambda ax: speed(ax, run),
         "solver": lambda ax: solver(ax, run),
     }

@@ -175,11 +175,14 @@ fn inspect(path: &std::path::Path) -> Result<()> {
         let contacts = f.contacts()?;
         let walls = contacts
             .iter()
-            .filter(|c| c.kind == moreau_io::ContactRow::PERSON_WALL)
+            .filter(|c| {
+                c.kind == moreau_io::ContactRow::PERSON_WALL
+                    || c.kind == moreau_io::ContactRow::PERSON_MOVING_WALL
+            })
             .count();
         match contacts.iter().max_by(|a, b| a.lambda.total_cmp(&b.lambda)) {
             Some(top) => println!(
-                "  contacts: {} over {} frames ({walls} with walls); largest λ {:.3e} m/s \
+                "  contacts: {} over {} frames ({walls} with walls or moving bodies); largest λ {:.3e} m/s \
                  (person {}, frame {}); pressure per person in /frames/pressure",
                 contacts.len(),
                 times.len(),
