@@ -836,9 +836,28 @@ impl InteriorPoint {
         }
         mean_abs /= m as f64;
         let scale = if mean_abs > 0.0 { mean_abs } else { 1.0 };
+        // The previous multipliers' scale, but no more than what any multiplier can need
+        // here: the pushes of `w` all passed on to one contact, or each row's own violation
+        // stopped by it alone. Where the answer's multipliers are not unique (a pair of
+        // opposite rows, an equality written as two inequalities: `J_Aᵀ` has a null space)
+        // the answer keeps its start along that null space, and starting at 3 × the last
+        // answer's mean multiplied it step after step (×3 a step on a bead held to a line,
+        // until the 22nd step ended in NumericalError at λ ~ 10²⁹⁸).
+        let warm = if warm_mean > 0.0 {
+            let pushes: f64 = p.w.iter().map(|x| x.abs()).sum();
+            let stops: f64 = (0..m)
+                .map(|i| {
+                    let n2 = j.row_norm_sq(i);
+                    if n2 > 0.0 { self.s[i].abs() / n2 } else { 0.0 }
+                })
+                .sum();
+            warm_mean.min(pushes + stops)
+        } else {
+            warm_mean
+        };
         let shift = (-1.5 * min_s).max(0.0);
         self.s.iter_mut().for_each(|s| *s += shift);
-        let lam0 = scale.max(self.settings.warm_scale * warm_mean);
+        let lam0 = scale.max(self.settings.warm_scale * warm);
         lam.iter_mut().for_each(|l| *l = lam0);
         let sl: f64 = self.s.iter().zip(lam.iter()).map(|(s, l)| s * l).sum();
         let (sum_s, sum_l): (f64, f64) = (self.s.iter().sum(), lam.iter().sum());
