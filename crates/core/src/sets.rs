@@ -43,6 +43,17 @@ impl BoxSet {
                 reason: "empty box",
             });
         }
+        // A lower bound of +∞ or an upper bound of −∞ holds no real number either: the box
+        // [∞, ∞] projected everything to ∞, a state the next step refused as not finite.
+        if let Some(i) =
+            (0..lo.len()).find(|&i| lo[i] == f64::INFINITY || hi[i] == f64::NEG_INFINITY)
+        {
+            return Err(CoreError::InvalidParameter {
+                field: "box bounds",
+                value: format!("lo[{i}] = {}, hi[{i}] = {}", lo[i], hi[i]),
+                reason: "empty box (a lower bound of +∞ or an upper bound of −∞)",
+            });
+        }
         Ok(Self { lo, hi })
     }
 
@@ -98,10 +109,25 @@ pub struct HalfSpace {
 }
 
 impl HalfSpace {
-    /// `{x : aᵀx ≤ β}`, checked: `a ≠ 0`, no NaN.
+    /// `{x : aᵀx ≤ β}`, checked: `a` finite and `≠ 0`, `β` a number and not `−∞` (the empty
+    /// set, whose projection was `−∞`).
     pub fn new(a: Vec<f64>, beta: f64) -> Result<Self, CoreError> {
         check_finite("half-space normal", &a)?;
         check_finite("half-space offset", &[beta])?;
+        if let Some(x) = a.iter().find(|x| x.is_infinite()) {
+            return Err(CoreError::InvalidParameter {
+                field: "half-space normal",
+                value: Num(*x).to_string(),
+                reason: "not finite",
+            });
+        }
+        if beta == f64::NEG_INFINITY {
+            return Err(CoreError::InvalidParameter {
+                field: "half-space offset",
+                value: Num(beta).to_string(),
+                reason: "−∞: the empty set",
+            });
+        }
         if a.iter().all(|&x| x == 0.0) {
             return Err(CoreError::InvalidParameter {
                 field: "half-space normal",
@@ -164,7 +190,9 @@ impl ConstraintSet for HalfSpaces {
     fn assemble(&mut self, _t: f64, q: &[f64], margin: f64, rows: &mut ConstraintRows) {
         for (j, f) in self.faces.iter().enumerate() {
             let g = -f.excess(q);
-            if g <= margin {
+            // A face at β = +∞ is the whole space: no row (as a box's infinite bound), not a
+            // row of value ∞ under the default infinite margin.
+            if g <= margin && f.beta != f64::INFINITY {
                 rows.push(
                     j as u64,
                     g,
@@ -324,6 +352,25 @@ mod tests {
         );
         assert!(HalfSpace::new(vec![0.0, 0.0], 1.0).is_err());
         assert!(SeparableAbs::new(vec![f64::NAN]).is_err());
+    }
+
+    #[test]
+    fn empty_sets_of_infinite_bounds_were_taken_and_projected_to_infinity() {
+        // `aᵀx ≤ −∞` and the box `[∞, ∞]` hold no point: taken, they projected every state to
+        // ±∞, which the next step refused as a non-finite state.
+        let e = HalfSpace::new(vec![1.0], f64::NEG_INFINITY).unwrap_err();
+        assert!(e.to_string().contains("half-space offset"), "{e}");
+        assert!(HalfSpace::new(vec![f64::INFINITY], 1.0).is_err());
+        let e = BoxSet::new(vec![f64::INFINITY], vec![f64::INFINITY]).unwrap_err();
+        assert!(e.to_string().contains("empty box"), "{e}");
+        assert!(BoxSet::new(vec![f64::NEG_INFINITY], vec![f64::NEG_INFINITY]).is_err());
+        // Infinite bounds on the right side are fine: a half-line, the whole space.
+        BoxSet::new(vec![0.0, f64::NEG_INFINITY], vec![f64::INFINITY, 1.0]).unwrap();
+        let whole = HalfSpace::new(vec![1.0], f64::INFINITY).unwrap();
+        let mut faces = HalfSpaces::new(vec![whole]).unwrap();
+        let mut rows = ConstraintRows::new(1);
+        faces.assemble(0.0, &[3.0], f64::INFINITY, &mut rows);
+        assert_eq!(rows.len(), 0, "the whole space is no row");
     }
 
     #[test]

@@ -314,7 +314,7 @@ mod tests {
             let alone = kind.build_alone(Parallelism::SEQUENTIAL).unwrap();
             assert_eq!(alone.name(), solver.name());
         }
-        // Refused, although `[solver.gauss_seidel]` is how its settings table is spelt.
+        // Accepted: `[solver.gauss_seidel]` is how its settings table is spelt (it was refused).
         assert_eq!(
             "gauss_seidel".parse::<SolverKind>(),
             Ok(SolverKind::GaussSeidel)

@@ -32,7 +32,7 @@
 //! scene, but its 85 and 31 pairs of triangular solves a step (Newton directions and dual
 //! conjugate gradients) remain: still 2.9× and 1.8× the interior point's time there.
 
-use moreau_core::{ConstraintRows, Parallelism, SolveStatus};
+use moreau_core::{ConstraintRows, Num, Parallelism, SolveStatus};
 
 use crate::certificate::certify;
 use crate::error::SolveError;
@@ -115,24 +115,32 @@ impl NewtonSettings {
             return invalid("max_solves", "0".into(), "must be ≥ 1");
         }
         if !(self.rho > 0.0 && self.rho.is_finite()) {
-            return invalid("rho", self.rho.to_string(), "must be positive and finite");
+            return invalid(
+                "rho",
+                Num(self.rho).to_string(),
+                "must be positive and finite",
+            );
         }
         if !(self.rho_max >= self.rho && self.rho_max.is_finite()) {
             return invalid(
                 "rho_max",
-                self.rho_max.to_string(),
+                Num(self.rho_max).to_string(),
                 "must be finite and ≥ rho",
             );
         }
         if !(self.rho_increase > 1.0 && self.rho_increase.is_finite()) {
             return invalid(
                 "rho_increase",
-                self.rho_increase.to_string(),
+                Num(self.rho_increase).to_string(),
                 "must be finite and > 1",
             );
         }
         if !(self.rho_theta > 0.0 && self.rho_theta < 1.0) {
-            return invalid("rho_theta", self.rho_theta.to_string(), "must be in (0, 1)");
+            return invalid(
+                "rho_theta",
+                Num(self.rho_theta).to_string(),
+                "must be in (0, 1)",
+            );
         }
         Ok(())
     }
