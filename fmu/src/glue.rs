@@ -680,6 +680,15 @@ mod tests {
         let c = ptr(&mut comp);
         assert_eq!(with(c, "fmi2DoStep", |_| Ok(())), ERROR);
         assert_eq!(with(c, "fmi3SetFloat64", |_| Ok(())), ERROR);
+        assert!(lines.borrow().last().unwrap().contains("Configuration"));
+        // FMI 2 has no Configuration mode: its refusals named it.
+        assert_eq!(with(c, "fmi2SetReal", |_| Ok(())), ERROR);
+        let line = lines.borrow().last().unwrap().clone();
+        assert!(
+            line.starts_with("fmi2SetReal is not allowed in state Terminated (only in")
+                && !line.contains("Configuration"),
+            "{line}"
+        );
         assert_eq!(with(c, "fmi2GetReal", |_| Ok(())), OK);
 
         // After a failed call: reset, status and going back to a saved state only.
@@ -937,6 +946,26 @@ mod tests {
         let e = three.instance.do_step(0.5, 0.5).unwrap_err().to_string();
         assert!(e.contains("after stopTime = 0.75 s"), "{e}");
         assert!(three.instance.do_step(0.5, 0.25).is_ok());
+    }
+
+    #[test]
+    fn time_was_an_unknown_value_reference_though_fmi3_declares_it() {
+        // FMI 3's model description declares `time` (value reference 0, independent): getting
+        // and setting it said "unknown value reference 0".
+        let (mut comp, _) = component(None);
+        comp.instance.set_start_time(2.0);
+        assert_eq!(comp.instance.get_real(vr::TIME).unwrap(), 2.0);
+        comp.instance.enter_initialization().unwrap();
+        comp.instance.exit_initialization().unwrap();
+        steps(&mut comp, 2.0, 3, 0.5);
+        assert_eq!(comp.instance.get_real(vr::TIME).unwrap(), 3.5);
+        let e = comp
+            .instance
+            .set_real(vr::TIME, 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("independent variable"), "{e}");
+        assert_eq!(comp.instance.time(), Some(3.5));
     }
 
     #[test]

@@ -25,7 +25,10 @@ use runtime::State;
 #[derive(Debug, thiserror::Error)]
 pub enum FmuError {
     /// A function called in a state that does not allow it.
-    #[error("{function} is not allowed in state {state:?} (only in {})", states(.allowed))]
+    #[error(
+        "{function} is not allowed in state {state:?} (only in {})",
+        states(function, .allowed)
+    )]
     State {
         /// The FMI function.
         function: String,
@@ -60,8 +63,14 @@ pub enum FmuError {
 }
 
 /// `A, B or C`.
-fn states(list: &[State]) -> String {
-    let names: Vec<String> = list.iter().map(|s| format!("{s:?}")).collect();
+/// The states in `list` as words; FMI 2 has no Configuration mode, so an `fmi2` function's
+/// list leaves it out (its refusals named a state FMI 2 does not have).
+fn states(function: &str, list: &[State]) -> String {
+    let names: Vec<String> = list
+        .iter()
+        .filter(|s| !(function.starts_with("fmi2") && **s == State::Configuration))
+        .map(|s| format!("{s:?}"))
+        .collect();
     match names.split_last() {
         None => "no state".into(),
         Some((last, [])) => last.clone(),

@@ -55,6 +55,8 @@ pub struct Variable {
 
 /// Value references.
 pub mod vr {
+    /// `time`, the independent variable (FMI 3 declares it): read, never set.
+    pub const TIME: u32 = 0;
     /// The scene file (empty: the room shipped in `resources/`).
     pub const SCENE: u32 = 1;
     /// People in the scene: the first dimension of the FMI 3 arrays (a structural parameter).

@@ -296,6 +296,13 @@ impl Instance {
 
     /// Sets a Real.
     pub fn set_real(&mut self, vr: u32, value: f64) -> Result<(), FmuError> {
+        if vr == vr::TIME {
+            return Err(FmuError::Setting(
+                "time (value reference 0) is the independent variable: DoStep advances it, it \
+                 cannot be set"
+                    .into(),
+            ));
+        }
         let v = self.settable(vr, Kind::Real)?;
         if let Some(SceneVariable::Body(b)) = v.of {
             return self.set_moving(b, &v.name, value);
@@ -435,6 +442,13 @@ impl Instance {
 
     /// Gets a Real.
     pub fn get_real(&mut self, vr: u32) -> Result<f64, FmuError> {
+        if vr == vr::TIME {
+            // The communication point reached (the start time before the first step).
+            return Ok(match self.model.as_ref() {
+                Some(m) if !self.stale => m.time(),
+                _ => self.settings.start_time,
+            });
+        }
         if let Some(SceneVariable::Body(b)) = self.readable(vr, Kind::Real)?.of {
             return self.get_moving(b);
         }
