@@ -31,6 +31,13 @@ class Run:
     exits: np.ndarray  # structured (id, exit, t), one row per exit passage (exit: the scene's [[exits]] index)
     trajectory: np.ndarray  # structured (id, frame, x, y)
     entry_time: np.ndarray | None = None  # (N,) when each entered (0: at the start); None in files before 2026-11-28
+    group: np.ndarray | None = None  # (N,) each one's group: the scene's [[groups]] by index, then one per [[sources]]; -1 unknown; None in files before 2026-11-28
+
+    def group_name(self, g: int) -> str:
+        """The name of group index `g` (a `[[groups]]` entry's, or a `[[sources]]` entry's)."""
+        names = [x["name"] for x in self.scene.get("groups", [])]
+        names += [x["name"] for x in self.scene.get("sources", [])]
+        return names[g]
 
     @property
     def status(self) -> str:
@@ -69,6 +76,7 @@ def load(path, *, locking: bool | None = None) -> Run:
             exits=f["exits"][:],
             trajectory=f["trajectory"][:],
             entry_time=f["people/entry_time"][:] if "people/entry_time" in f else None,
+            group=f["people/group"][:] if "people/group" in f else None,
         )
 
 

@@ -15,7 +15,7 @@ import pytest
 import shapely
 
 import moreau_run
-from conftest import moreau
+from conftest import ROOT, moreau
 
 
 class StepAxes:
@@ -678,3 +678,35 @@ def test_upstream_area_raised_key_error_groups_on_a_scene_of_sources_only():
     assert square(moreau_run.upstream_area(scene(8.0))) == [(5, 0), (5, 2), (7, 0), (7, 2)]
     with pytest.raises(ValueError, match="no group or source"):
         moreau_run.upstream_area({"exits": scene(1.0)["exits"]})
+
+
+def test_the_run_file_said_nobody_s_group(tmp_path):
+    """The file stored no group: people are numbered along a space-filling curve, not by
+    `[[groups]]`, so a per-group analysis (the wave released at 12 s, a source's people)
+    could not be made from it. `/people/group` holds each one's: checked against where each
+    stood at the start (inside its group's spawn region) and against who entered later."""
+    waves = tmp_path / "waves.toml"
+    waves.write_text((ROOT / "data" / "scenes" / "room-waves.toml").read_text()
+                     .replace("horizon = 40.0", "horizon = 1.0"))
+    out = tmp_path / "waves.h5"
+    moreau("run", waves, "-q", "-o", out)
+    run = moreau_run.load(out)
+    assert run.group is not None and len(run.group) == len(run.radius)
+    start = run.positions[0]
+    for g, spec in enumerate(run.scene["groups"]):
+        mine = np.flatnonzero(run.group == g)
+        assert len(mine) == spec["count"], (g, len(mine))
+        region = shapely.Polygon(spec["spawn"])
+        assert all(region.covers(shapely.Point(*start[i])) for i in mine), run.group_name(g)
+        assert run.group_name(g) == spec["name"]
+    # The people of a source: the group after the scene's groups, from their entry on.
+    gate = tmp_path / "gate.toml"
+    gate.write_text((ROOT / "data" / "scenes" / "gate-inflow.toml").read_text()
+                    .replace("horizon = 30.0", "horizon = 3.0"))
+    out = tmp_path / "gate.h5"
+    moreau("run", gate, "-q", "-o", out)
+    run = moreau_run.load(out)
+    entered = run.entry_time > 0
+    assert entered.sum() > 0 and (~entered).sum() == 20
+    assert (run.group[~entered] == 0).all() and (run.group[entered] == 1).all()
+    assert run.group_name(1) == "gate"

@@ -82,6 +82,8 @@ pub struct EntryRecord {
     pub t: f64,
     /// Their radius (m).
     pub radius: f64,
+    /// Their group: the scene's groups by index, then one per source (this one's).
+    pub group: u32,
 }
 
 /// How far a source kept to its schedule: the people due by now and those who entered. A
@@ -532,6 +534,7 @@ impl Events {
                     source: s as u32,
                     t,
                     radius: r,
+                    group: self.sources[s].group,
                 });
             }
         }

@@ -20,9 +20,9 @@ pub trait RunSink: Send {
     fn step(&mut self, report: &StepReport);
     /// Records that person `id` passed exit `exit` (its index in the scene) at time `t`.
     fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError>;
-    /// Records that person `id` of radius `radius` entered at time `t` (ids in order, each
-    /// the next).
-    fn enter(&mut self, id: u32, radius: f64, t: f64) -> Result<(), IoError>;
+    /// Records that person `id` of radius `radius` and group `group` (the scene's groups, then
+    /// one per source) entered at time `t` (ids in order, each the next).
+    fn enter(&mut self, id: u32, radius: f64, t: f64, group: u32) -> Result<(), IoError>;
     /// Whether the file records contact forces.
     fn records_contacts(&self) -> bool;
     /// The contact forces of the next frame and the pressure by id.
@@ -51,8 +51,8 @@ impl RunSink for RunWriter {
     fn exit(&mut self, id: u32, exit: u32, t: f64) -> Result<(), IoError> {
         RunWriter::exit(self, id, exit, t)
     }
-    fn enter(&mut self, id: u32, radius: f64, t: f64) -> Result<(), IoError> {
-        RunWriter::enter(self, id, radius, t)
+    fn enter(&mut self, id: u32, radius: f64, t: f64, group: u32) -> Result<(), IoError> {
+        RunWriter::enter(self, id, radius, t, group)
     }
     fn records_contacts(&self) -> bool {
         RunWriter::records_contacts(self)
@@ -80,7 +80,7 @@ impl RunSink for RunWriter {
 struct Batch {
     steps: Vec<StepRow>,
     /// Who entered, with their radii and times, in order.
-    entries: Vec<(u32, f64, f64)>,
+    entries: Vec<(u32, f64, f64, u32)>,
     exits: Vec<(u32, u32, f64)>,
     contacts: Option<(Vec<ContactRow>, Vec<f64>)>,
     moving: Option<Vec<[f64; 4]>>,
@@ -94,7 +94,7 @@ enum Message {
     State(Vec<u8>, String),
     Finish {
         steps: Vec<StepRow>,
-        entries: Vec<(u32, f64, f64)>,
+        entries: Vec<(u32, f64, f64, u32)>,
         exits: Vec<(u32, u32, f64)>,
         status: String,
         summary: String,
@@ -241,8 +241,8 @@ fn work(
                 for s in steps {
                     writer.step_row(s);
                 }
-                for (id, radius, t) in entries {
-                    let _ = writer.enter(id, radius, t);
+                for (id, radius, t, group) in entries {
+                    let _ = writer.enter(id, radius, t, group);
                 }
                 for (id, exit, t) in exits {
                     let _ = writer.exit(id, exit, t);
@@ -261,8 +261,8 @@ fn write_batch(writer: &mut RunWriter, batch: Batch) -> Result<(), IoError> {
         writer.step_row(s);
     }
     // Everyone who entered before anyone's exit: a newcomer may leave in the same batch.
-    for (id, radius, t) in batch.entries {
-        writer.enter(id, radius, t)?;
+    for (id, radius, t, group) in batch.entries {
+        writer.enter(id, radius, t, group)?;
     }
     for (id, exit, t) in batch.exits {
         writer.exit(id, exit, t)?;
@@ -293,7 +293,7 @@ impl RunSink for BackgroundWriter {
         self.pending.exits.push((id, exit, t));
         Ok(())
     }
-    fn enter(&mut self, id: u32, radius: f64, t: f64) -> Result<(), IoError> {
+    fn enter(&mut self, id: u32, radius: f64, t: f64, group: u32) -> Result<(), IoError> {
         if id as usize != self.people {
             return Err(IoError::Layout {
                 path: self.path.clone(),
@@ -304,7 +304,7 @@ impl RunSink for BackgroundWriter {
             });
         }
         self.people += 1;
-        self.pending.entries.push((id, radius, t));
+        self.pending.entries.push((id, radius, t, group));
         Ok(())
     }
     fn records_contacts(&self) -> bool {

@@ -164,6 +164,7 @@ impl RunFile {
             wkt_geometry: self.text("wkt_geometry")?,
             fps,
             radii: self.read(PEOPLE_RADIUS)?,
+            groups: self.groups()?.unwrap_or_default(),
             walls: self.walls()?,
             contacts: self.has_contacts(),
             moving_names: if self.file.dataset(MOVING_NAME).is_ok() {
@@ -246,6 +247,16 @@ impl RunFile {
             .into_iter()
             .map(StepRow::from)
             .collect())
+    }
+
+    /// Each person's group, by id: the scene's `[[groups]]` by index, then one per
+    /// `[[sources]]` (−1 for those of a file written before 2026-11-28 that a run resumed);
+    /// `None` for a file written before, which did not store them.
+    pub fn groups(&self) -> Result<Option<Vec<i64>>, IoError> {
+        if self.file.dataset(PEOPLE_GROUP).is_err() {
+            return Ok(None);
+        }
+        self.read(PEOPLE_GROUP).map(Some)
     }
 
     /// When each person entered the run, by id (0 for those there at the start; NaN for

@@ -248,6 +248,14 @@ impl StateSlots {
     }
 }
 
+/// A person who entered since the last frame: their `people/*` rows to come.
+#[derive(Debug, Clone, Copy)]
+struct Newcomer {
+    radius: f64,
+    t: f64,
+    group: i64,
+}
+
 /// Writes one run file. Rows given between two frames are held in memory and written with
 /// the next frame, then the file is flushed: on disk the file is always a whole number of
 /// frames, whatever moment the process dies, and a frame whose writing fails (a full disk) is
@@ -264,6 +272,7 @@ pub struct RunWriter {
     people_id: Dataset,
     people_radius: Dataset,
     people_entry: Dataset,
+    people_group: Dataset,
     trajectory: Dataset,
     frame_time: Dataset,
     frame_count: Dataset,
@@ -280,10 +289,8 @@ pub struct RunWriter {
     state: StateSlots,
     /// People in the whole frames written (ids `0..people`).
     people: usize,
-    /// The radii of the people who entered since the last frame (ids `people..`).
-    pending_people: Vec<f64>,
-    /// Their entry times.
-    pending_entry: Vec<f64>,
+    /// The people who entered since the last frame (ids `people..`).
+    pending_people: Vec<Newcomer>,
     frames: usize,
     /// `trajectory.fps`: a frame's row in `/trajectory` is numbered `t × fps`.
     fps: f64,
@@ -648,6 +655,13 @@ impl RunWriter {
         let people_entry = table::<f64>(&file, PEOPLE_ENTRY_TIME, ROWS_PER_CHUNK)
             .and_then(|ds| append(&ds, &mut 0, &vec![0.0; n]).map(|()| ds))
             .at(path, at("writing 'people/entry_time'"))?;
+        let groups = match header.groups.len() == n {
+            true => header.groups.clone(),
+            false => vec![-1; n],
+        };
+        let people_group = table::<i64>(&file, PEOPLE_GROUP, ROWS_PER_CHUNK)
+            .and_then(|ds| append(&ds, &mut 0, &groups).map(|()| ds))
+            .at(path, at("writing 'people/group'"))?;
         let state = StateSlots::create(&file).at(path, at("creating 'state'"))?;
         file.flush().at(path, at("flushing"))?;
         Ok(Self {
@@ -660,6 +674,7 @@ impl RunWriter {
             people_id,
             people_radius,
             people_entry,
+            people_group,
             trajectory,
             frame_time,
             frame_count,
@@ -672,7 +687,6 @@ impl RunWriter {
             state,
             people: n,
             pending_people: Vec::new(),
-            pending_entry: Vec::new(),
             frames: 0,
             fps: header.fps,
             trajectory_rows: 0,
@@ -715,17 +729,21 @@ impl RunWriter {
         self.people + self.pending_people.len()
     }
 
-    /// Records that person `id` of radius `radius` entered the run at time `t` (written with
-    /// the next frame, or when the run ends): ids come in order, each the next one.
-    pub fn enter(&mut self, id: u32, radius: f64, t: f64) -> Result<(), IoError> {
+    /// Records that person `id` of radius `radius` and group `group` entered the run at time
+    /// `t` (written with the next frame, or when the run ends): ids come in order, each the
+    /// next one.
+    pub fn enter(&mut self, id: u32, radius: f64, t: f64, group: u32) -> Result<(), IoError> {
         let next = self.people();
         if id as usize != next {
             return Err(self.layout_error(format!(
                 "person {id} entered, but the next id is {next} (people enter in order of id)"
             )));
         }
-        self.pending_people.push(radius);
-        self.pending_entry.push(t);
+        self.pending_people.push(Newcomer {
+            radius,
+            t,
+            group: i64::from(group),
+        });
         self.exit_times.push(f64::NAN);
         Ok(())
     }
@@ -922,6 +940,17 @@ impl RunWriter {
                 .and_then(|ds| append(&ds, &mut 0, &vec![f64::NAN; people_id.size()]).map(|()| ds))
                 .at(&partial, || "creating 'people/entry_time'".into())?,
         };
+        // Groups, in files written since 2026-11-28; an older file's people get −1 (unknown).
+        let people_group = match file.dataset(PEOPLE_GROUP) {
+            Ok(ds) => ds,
+            Err(_) => file
+                .new_dataset::<i64>()
+                .chunk(ROWS_PER_CHUNK)
+                .shape(0..)
+                .create(PEOPLE_GROUP)
+                .and_then(|ds| append(&ds, &mut 0, &vec![-1i64; people_id.size()]).map(|()| ds))
+                .at(&partial, || "creating 'people/group'".into())?,
+        };
         let (trajectory, frame_time, frame_count, positions, exits, steps) = (
             open(TRAJECTORY)?,
             open(FRAME_TIME)?,
@@ -988,6 +1017,7 @@ impl RunWriter {
             });
         }
         header.radii.truncate(n);
+        header.groups.truncate(n);
         let exit_rows: Vec<ExitRow> = exits
             .read_slice_1d(0..marks.exits)
             .map(|a| a.to_vec())
@@ -1008,6 +1038,7 @@ impl RunWriter {
             people_id,
             people_radius,
             people_entry,
+            people_group,
             trajectory,
             frame_time,
             frame_count,
@@ -1020,7 +1051,6 @@ impl RunWriter {
             state,
             people: n,
             pending_people: Vec::new(),
-            pending_entry: Vec::new(),
             frames: marks.frames,
             fps: header.fps,
             trajectory_rows: marks.trajectory_rows,
@@ -1123,7 +1153,6 @@ impl RunWriter {
         self.pending_steps.clear();
         self.pending_exits.clear();
         self.pending_people.clear();
-        self.pending_entry.clear();
         self.people = people;
         self.frames += 1;
         Ok(())
@@ -1147,22 +1176,7 @@ impl RunWriter {
         named(PEOPLE_ID, self.injected(frame, PEOPLE_ID))?;
         named(PEOPLE_ID, self.append_people_ids())?;
         named(PEOPLE_RADIUS, self.injected(frame, PEOPLE_RADIUS))?;
-        named(
-            PEOPLE_RADIUS,
-            append(
-                &self.people_radius,
-                &mut { self.people },
-                &self.pending_people,
-            ),
-        )?;
-        named(
-            PEOPLE_ENTRY_TIME,
-            append(
-                &self.people_entry,
-                &mut { self.people },
-                &self.pending_entry,
-            ),
-        )?;
+        named(PEOPLE_RADIUS, self.append_newcomers())?;
         let mut trajectory_rows = self.trajectory_rows;
         named(TRAJECTORY, self.injected(frame, TRAJECTORY))?;
         named(
@@ -1247,6 +1261,7 @@ impl RunWriter {
         keep(self.people_id.resize(self.people));
         keep(self.people_radius.resize(self.people));
         keep(self.people_entry.resize(self.people));
+        keep(self.people_group.resize(self.people));
         keep(self.trajectory.resize(self.trajectory_rows));
         keep(self.positions.resize((frames, self.people, 2)));
         keep(self.frame_time.resize(frames));
@@ -1261,6 +1276,21 @@ impl RunWriter {
         keep(self.steps.resize(self.step_rows));
         keep(self.exits.resize(self.exit_rows));
         first
+    }
+
+    /// Appends the radii, entry times and groups of the people who entered since the last
+    /// frame to `people/radius`, `people/entry_time` and `people/group`.
+    fn append_newcomers(&self) -> hdf5::Result<()> {
+        let column =
+            |f: fn(&Newcomer) -> f64| -> Vec<f64> { self.pending_people.iter().map(f).collect() };
+        let groups: Vec<i64> = self.pending_people.iter().map(|p| p.group).collect();
+        append(
+            &self.people_radius,
+            &mut { self.people },
+            &column(|p| p.radius),
+        )?;
+        append(&self.people_entry, &mut { self.people }, &column(|p| p.t))?;
+        append(&self.people_group, &mut { self.people }, &groups)
     }
 
     /// Appends the ids of the people who entered since the last frame to `people/id`.
@@ -1278,20 +1308,7 @@ impl RunWriter {
         let written = append(&self.steps, &mut steps, &self.pending_steps)
             .and_then(|_| append(&self.exits, &mut exits, &self.pending_exits))
             .and_then(|_| self.append_people_ids())
-            .and_then(|_| {
-                append(
-                    &self.people_radius,
-                    &mut { self.people },
-                    &self.pending_people,
-                )
-            })
-            .and_then(|_| {
-                append(
-                    &self.people_entry,
-                    &mut { self.people },
-                    &self.pending_entry,
-                )
-            })
+            .and_then(|_| self.append_newcomers())
             .and_then(|_| self.positions.resize((self.frames, people, 2)))
             .and_then(|_| match &self.contacts {
                 Some((_, pressure)) => pressure.resize((self.frames, people)),
@@ -1303,7 +1320,6 @@ impl RunWriter {
                 self.pending_steps.clear();
                 self.pending_exits.clear();
                 self.pending_people.clear();
-                self.pending_entry.clear();
                 self.people = people;
                 Ok(())
             }
@@ -1365,6 +1381,7 @@ impl RunWriter {
             people_id,
             people_radius,
             people_entry,
+            people_group,
             trajectory,
             frame_time,
             frame_count,
@@ -1379,6 +1396,7 @@ impl RunWriter {
             people_id,
             people_radius,
             people_entry,
+            people_group,
             trajectory,
             frame_time,
             frame_count,

@@ -30,6 +30,7 @@ fn header(n: usize, contacts: bool) -> RunHeader {
         wkt_geometry: "POLYGON ((0 0, 9 0, 9 9, 0 9, 0 0))".into(),
         fps: 10.0,
         radii: vec![0.2; n],
+        groups: vec![0; n],
         walls: vec![[0.0, 0.0, 9.0, 0.0]],
         contacts,
         moving_names: Vec::new(),
@@ -133,7 +134,7 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
                 write_frame(&mut w, k, n).unwrap();
             }
             // Somebody enters with frame 3: the per-person datasets grow with it.
-            w.enter(n as u32, 0.3, 0.0).unwrap();
+            w.enter(n as u32, 0.3, 0.0, 0).unwrap();
             let err = write_frame(&mut w, 3, n).unwrap_err().to_string();
             assert!(
                 err.contains("No space left on device")
@@ -489,7 +490,7 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
     let write = |w: &mut RunWriter, k: usize| -> Result<(), IoError> {
         if k > 0 {
             w.step(&report(k - 1));
-            w.enter((k + 1) as u32, k as f64 / 10.0, 0.1 * k as f64)?;
+            w.enter((k + 1) as u32, k as f64 / 10.0, 0.1 * k as f64, k as u32)?;
         }
         let ids: Vec<u32> = (0..2 + k as u32).collect();
         let q: Vec<f64> = (0..2 * ids.len()).map(|i| 1.0 + i as f64).collect();
@@ -503,7 +504,7 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
             w.save_state(format!("after {k}").as_bytes()).unwrap();
         }
         // People who entered since the last frame: not a state to save.
-        w.enter(4, 0.5, 0.3).unwrap();
+        w.enter(4, 0.5, 0.3, 1).unwrap();
         let err = w.save_state(b"between").unwrap_err().to_string();
         assert!(err.contains("1 people not yet written"), "{err}");
         w.step(&report(3));

@@ -29,6 +29,7 @@ fn header(n: usize) -> RunHeader {
         wkt_geometry: "POLYGON ((0 0, 1 0, 1 1, 0 1, 0 0))".into(),
         fps: 10.0,
         radii: (0..n).map(|i| 0.1 + 0.01 * i as f64).collect(),
+        groups: (0..n).map(|i| (i % 2) as i64).collect(),
         walls: vec![[0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 1.0, 1.0]],
         contacts: false,
         moving_names: Vec::new(),
@@ -226,9 +227,9 @@ fn people_who_enter_during_the_run_extend_the_file() {
     assert_eq!(w.people(), 2);
     w.frame(0.0, &[0, 1], &[0.1, 0.2, 0.3, 0.4]).unwrap();
     w.step(&report(0, 0.05));
-    w.enter(2, 0.3, 0.05).unwrap();
+    w.enter(2, 0.3, 0.05, 2).unwrap();
     // Ids come in order: the next is 3, not 5.
-    let err = w.enter(5, 0.3, 0.05).unwrap_err().to_string();
+    let err = w.enter(5, 0.3, 0.05, 2).unwrap_err().to_string();
     assert!(
         err.contains("person 5") && err.contains("next id is 3"),
         "{err}"
@@ -236,14 +237,14 @@ fn people_who_enter_during_the_run_extend_the_file() {
     w.frame(0.1, &[0, 1, 2], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
         .unwrap();
     // Person 3 enters and leaves between two frames: in the file all the same.
-    w.enter(3, 0.35, 0.1).unwrap();
+    w.enter(3, 0.35, 0.1, 3).unwrap();
     w.exit(3, 0, 0.15).unwrap();
-    w.enter(4, 0.4, 0.15).unwrap();
+    w.enter(4, 0.4, 0.15, 2).unwrap();
     assert_eq!(w.people(), 5);
     w.frame(0.2, &[0, 2, 4], &[0.11, 0.21, 0.51, 0.61, 0.7, 0.8])
         .unwrap();
     // Person 5 enters after the last frame: the end of the run writes them.
-    w.enter(5, 0.45, 0.25).unwrap();
+    w.enter(5, 0.45, 0.25, 3).unwrap();
     w.finish("complete", "{}").unwrap();
 
     let f = RunFile::open(&path).unwrap();
@@ -273,6 +274,10 @@ fn people_who_enter_during_the_run_extend_the_file() {
         f.entry_times().unwrap(),
         Some(vec![0.0, 0.0, 0.05, 0.1, 0.15, 0.25])
     );
+    // Each one's group, those at the start from the header, newcomers their source's (the
+    // file said nobody's: per-group analyses could not be made from it).
+    assert_eq!(f.groups().unwrap(), Some(vec![0, 1, 2, 3, 2, 3]));
+    assert_eq!(read.groups, [0, 1, 2, 3, 2, 3]);
 }
 
 /// Files of format `moreau-run/3` (before `/exits` said which exit) still read: their rows

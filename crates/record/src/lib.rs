@@ -36,6 +36,12 @@ pub fn header(sim: &Simulation, command: String) -> RunHeader {
         wkt_geometry: sim.scene().wkt(),
         fps: 1.0 / sim.scene().time.output_interval,
         radii: frame.radii.to_vec(),
+        groups: sim
+            .people()
+            .groups()
+            .iter()
+            .map(|&g| i64::from(g))
+            .collect(),
         walls: sim
             .walls()
             .segments()
@@ -457,7 +463,7 @@ impl Observer for Record<'_> {
     fn enter(&mut self, record: &EntryRecord) -> Result<(), ObserverError> {
         self.people += 1;
         if let Some(w) = self.writer.as_deref_mut() {
-            w.enter(record.id, record.radius, record.t)?;
+            w.enter(record.id, record.radius, record.t, record.group)?;
         }
         Ok(())
     }
