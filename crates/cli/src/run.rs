@@ -47,8 +47,9 @@ pub struct RunArgs {
     summary_json: Option<PathBuf>,
     /// Adaptive steps: the local error allowed per step (m). It sets the step sizes (between
     /// 1e-6 s and min(0.5 s, output interval, horizon), starting from the scene's step) and
-    /// the projection accuracy ε_k = (θ·tol)² (μ_k/μ_max)³ with θ = 0.1. Without it, the
-    /// scene's fixed step.
+    /// the projection accuracy ε_k = max((θ·tol)² (μ_k/μ_max)³, 2·10⁻⁷ μ_k²) with θ = 0.1
+    /// (the floor: what the solvers certify in double precision). Without it, the scene's
+    /// fixed step.
     #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
     tol: Option<f64>,
     /// The error estimate of the adaptive steps (velocity: cheaper at equal error on the

@@ -89,6 +89,9 @@ impl<'de> Deserialize<'de> for Quantity {
         match Written::deserialize(d) {
             Ok(Written::Fixed(x)) => Ok(Quantity::Fixed(x)),
             Ok(Written::Uniform(Range { min, max })) => Ok(Quantity::Uniform { min, max }),
+            // A key left out is said as such (it was "expected a number…" at the group's
+            // header, the key never named).
+            Err(e) if e.to_string().starts_with("missing field") => Err(e),
             Err(_) => Err(serde::de::Error::custom(
                 "expected a number, or a range `{ min = …, max = … }` with no other key",
             )),

@@ -23,6 +23,11 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ),
         ("nan-speed.toml", &["groups[0].speed", "NaN"]),
         (
+            // Regression: "expected a number, or a range" at `[[groups]]`, `speed` never named.
+            "missing-speed.toml",
+            &["line 14", "missing field `speed`"],
+        ),
+        (
             // Regression: taken, `mean` ignored.
             "radius-range-extra-key.toml",
             &[
