@@ -31,12 +31,17 @@ class Run:
     exits: np.ndarray  # structured (id, exit, t), one row per exit passage (exit: the scene's [[exits]] index)
     trajectory: np.ndarray  # structured (id, frame, x, y)
     entry_time: np.ndarray | None = None  # (N,) when each entered (0: at the start); None in files before 2026-11-28
-    group: np.ndarray | None = None  # (N,) each one's group: the scene's [[groups]] by index, then one per [[sources]]; -1 unknown; None in files before 2026-11-28
+    group: np.ndarray | None = None  # (N,) each one's group: the scene's [[groups]] by index, then one per [[sources]]; -1 unknown; None in files written before it was added (2026-11-28, evening)
 
     def group_name(self, g: int) -> str:
-        """The name of group index `g` (a `[[groups]]` entry's, or a `[[sources]]` entry's)."""
+        """The name of group index `g` (a `[[groups]]` entry's, or a `[[sources]]` entry's);
+        a ValueError for −1 (not stored: a file a run resumed from before groups were) and any
+        index the scene has no entry for."""
         names = [x["name"] for x in self.scene.get("groups", [])]
         names += [x["name"] for x in self.scene.get("sources", [])]
+        if not 0 <= g < len(names):
+            raise ValueError(f"group {g}: the scene has {len(names)} groups and sources"
+                             + (" (−1: not stored in this file)" if g == -1 else ""))
         return names[g]
 
     @property

@@ -21,9 +21,6 @@ pub const MODEL_DESCRIPTION: &str = include_str!("../fmi3/modelDescription.xml")
 pub static TOKEN: LazyLock<&'static str> =
     LazyLock::new(|| crate::xml_attribute(MODEL_DESCRIPTION, "instantiationToken"));
 
-/// The value reference of the independent variable `time`.
-const TIME: u32 = 0;
-
 type LogMessage = Option<unsafe extern "C" fn(*mut c_void, Status, *const c_char, *const c_char)>;
 
 fn instantiate(
@@ -279,7 +276,6 @@ pub unsafe extern "C" fn fmi3GetFloat64(
                 ))
             })?;
             match (r, variable(r).map(|v| v.kind)) {
-                (TIME, _) => slot[0] = inst.time().unwrap_or(inst.settings.start_time),
                 (_, Some(Kind::RealArray)) => inst.get_array(r, slot)?,
                 _ => slot[0] = inst.get_real(r)?,
             }

@@ -710,3 +710,6 @@ def test_the_run_file_said_nobody_s_group(tmp_path):
     assert entered.sum() > 0 and (~entered).sum() == 20
     assert (run.group[~entered] == 0).all() and (run.group[entered] == 1).all()
     assert run.group_name(1) == "gate"
+    # −1 (not stored) is no group: it named the last one (Python's negative index).
+    with pytest.raises(ValueError, match="not stored"):
+        run.group_name(-1)

@@ -263,6 +263,9 @@ def test_a_bad_dict_was_named_by_lines_of_toml_nobody_wrote():
     assert (field, value) == ("moving[0].keyframes[1].angle", '"x"')
     field, value, _ = error(lambda d: d["solver"].__setitem__("kind", "fast"))
     assert (field, value) == ("solver.kind", '"fast"')
+    # A key missing from the scene itself names no field (it named the first line's, `name`).
+    field, value, reason = error(lambda d: d.pop("seed"))
+    assert (field, value) == (None, None) and "missing field `seed`" in reason
 
 
 def test_solver_settings_from_a_dict_are_written_whole_and_bad_ones_are_named(tmp_path):

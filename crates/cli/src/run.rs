@@ -322,6 +322,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
 
     let start = Instant::now();
     let mut unmet = moreau_crowd::ToleranceWarning::new(&sim.scene().time);
+    // The steps counted before this process's first (a resumed run's totals): the rate is
+    // this process's steps over its time.
+    let mut steps_before: Option<usize> = None;
     let mut progress = |report: &moreau_core::StepReport, stats: &moreau_core::RunStats, left| {
         // SIGINT or SIGTERM: stop after this step (the file is finished as interrupted).
         if let Some(signal) = signals.caught() {
@@ -334,7 +337,8 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         }
         if !bar.is_hidden() {
             bar.set_position((report.t * 1e3).round() as u64);
-            let rate = stats.steps as f64 / bar.elapsed().as_secs_f64().max(1e-9);
+            let before = *steps_before.get_or_insert(stats.steps.saturating_sub(1));
+            let rate = (stats.steps - before) as f64 / bar.elapsed().as_secs_f64().max(1e-9);
             bar.set_message(format!(
                 "t = {:7.2} s  {:>8.1} steps/s  {left:>7} people left",
                 report.t, rate,

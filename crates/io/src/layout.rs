@@ -24,6 +24,7 @@ pub(crate) const PEOPLE_RADIUS: &str = "people/radius";
 /// When each person entered the run (s): 0 for those there at the start (files written
 /// before 2026-11-28 lack it).
 pub(crate) const PEOPLE_ENTRY_TIME: &str = "people/entry_time";
+/// Each person's group (int64; files written before the evening of 2026-11-28 lack it).
 pub(crate) const PEOPLE_GROUP: &str = "people/group";
 pub(crate) const PEOPLE_EXIT_TIME: &str = "people/exit_time";
 pub(crate) const EXITS: &str = "exits";
@@ -274,8 +275,8 @@ pub struct RunHeader {
     /// the start; read back: everyone the file holds, those who entered later too).
     pub radii: Vec<f64>,
     /// `people/group`: the group of person `id` (the scene's `[[groups]]` by index, then one
-    /// per `[[sources]]`), as `radii` (empty, or −1 for a person: not stored, files before
-    /// 2026-11-28).
+    /// per `[[sources]]`), as `radii` (empty: not stored, −1 for everyone written; −1 for a
+    /// person: not stored, in files written before the evening of 2026-11-28).
     pub groups: Vec<i64>,
     /// `walls`: the wall segments `[x0, y0, x1, y1]` at the start (contacts name them by row).
     pub walls: Vec<[f64; 4]>,

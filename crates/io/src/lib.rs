@@ -10,7 +10,7 @@
 //! | `/frames/positions` | float64 `[frames, people, 2]`, indexed by person id, NaN when absent (before a person entered, after they left) |
 //! | `/people/id`, `/people/radius` | everyone in the run, by id: the people at the start, then those who entered (from inflow sources), appended with the frame after they entered |
 //! | `/people/entry_time` | time each person entered: 0 for those at the start, the step's end for those from sources (written with `/people/radius`; absent before 2026-11-28, NaN for the people of such a file a run resumed) |
-//! | `/people/group` | int64: each person's group, the scene's `[[groups]]` by index, then one per `[[sources]]` (the number of groups plus the source's index); written with `/people/radius` (absent before 2026-11-28, −1 for the people of such a file a run resumed) |
+//! | `/people/group` | int64: each person's group, the scene's `[[groups]]` by index, then one per `[[sources]]` (the number of groups plus the source's index); written with `/people/radius` (absent in files written before it was added, the evening of 2026-11-28; −1 for the people of such a file a run resumed) |
 //! | `/people/exit_time` | time each person passed an exit, NaN if never (written when the run ends) |
 //! | `/exits` | compound rows `id`, `exit` (int64, the exit's index in the scene's `[[exits]]`), `t`, appended as people pass exits (complete up to the last frame); attribute `names`, the exits' names in that order |
 //! | `/steps` | one compound row per step: time, `μ`, certified `ε` and its target, violation, iterations, constraints, status, solver, stage timings (s) |

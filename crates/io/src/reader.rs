@@ -250,8 +250,9 @@ impl RunFile {
     }
 
     /// Each person's group, by id: the scene's `[[groups]]` by index, then one per
-    /// `[[sources]]` (−1 for those of a file written before 2026-11-28 that a run resumed);
-    /// `None` for a file written before, which did not store them.
+    /// `[[sources]]` (−1 for those of a file written before it was added, the evening of
+    /// 2026-11-28, that a run resumed); `None` for a file written before, which did not store
+    /// them.
     pub fn groups(&self) -> Result<Option<Vec<i64>>, IoError> {
         if self.file.dataset(PEOPLE_GROUP).is_err() {
             return Ok(None);

@@ -520,6 +520,17 @@ impl RunWriter {
             let what = what.to_string();
             move || what
         };
+        // A group for everyone at the start, or none given (−1: not known).
+        let groups = match header.groups.len() {
+            0 => vec![-1; n],
+            g if g == n => header.groups.clone(),
+            g => {
+                return Err(IoError::Layout {
+                    path: path.to_path_buf(),
+                    what: format!("{g} groups for {n} radii (one each, or none)"),
+                });
+            }
+        };
         let root: &hdf5::Location = &file;
         for (name, value) in [
             ("wkt_geometry", header.wkt_geometry.as_str()),
@@ -655,11 +666,12 @@ impl RunWriter {
         let people_entry = table::<f64>(&file, PEOPLE_ENTRY_TIME, ROWS_PER_CHUNK)
             .and_then(|ds| append(&ds, &mut 0, &vec![0.0; n]).map(|()| ds))
             .at(path, at("writing 'people/entry_time'"))?;
-        let groups = match header.groups.len() == n {
-            true => header.groups.clone(),
-            false => vec![-1; n],
-        };
-        let people_group = table::<i64>(&file, PEOPLE_GROUP, ROWS_PER_CHUNK)
+        let people_group = file
+            .new_dataset::<i64>()
+            .chunk(ROWS_PER_CHUNK)
+            .shape(0..)
+            .fill_value(-1i64)
+            .create(PEOPLE_GROUP)
             .and_then(|ds| append(&ds, &mut 0, &groups).map(|()| ds))
             .at(path, at("writing 'people/group'"))?;
         let state = StateSlots::create(&file).at(path, at("creating 'state'"))?;
@@ -940,13 +952,15 @@ impl RunWriter {
                 .and_then(|ds| append(&ds, &mut 0, &vec![f64::NAN; people_id.size()]).map(|()| ds))
                 .at(&partial, || "creating 'people/entry_time'".into())?,
         };
-        // Groups, in files written since 2026-11-28; an older file's people get −1 (unknown).
+        // Groups, in files written since /people/group was added (2026-11-28, evening); an
+        // older file's people get −1 (unknown).
         let people_group = match file.dataset(PEOPLE_GROUP) {
             Ok(ds) => ds,
             Err(_) => file
                 .new_dataset::<i64>()
                 .chunk(ROWS_PER_CHUNK)
                 .shape(0..)
+                .fill_value(-1i64)
                 .create(PEOPLE_GROUP)
                 .and_then(|ds| append(&ds, &mut 0, &vec![-1i64; people_id.size()]).map(|()| ds))
                 .at(&partial, || "creating 'people/group'".into())?,
@@ -974,6 +988,14 @@ impl RunWriter {
         // dataset's rows is a damaged file, refused before anything is cut back.
         let mut beyond = vec![
             ("people", marks.people, PEOPLE_ID, people_id.size()),
+            ("people", marks.people, PEOPLE_RADIUS, people_radius.size()),
+            (
+                "people",
+                marks.people,
+                PEOPLE_ENTRY_TIME,
+                people_entry.size(),
+            ),
+            ("people", marks.people, PEOPLE_GROUP, people_group.size()),
             ("frames", marks.frames, FRAME_TIME, frame_time.size()),
             ("frames", marks.frames, FRAME_COUNT, frame_count.size()),
             (

@@ -134,7 +134,7 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
                 write_frame(&mut w, k, n).unwrap();
             }
             // Somebody enters with frame 3: the per-person datasets grow with it.
-            w.enter(n as u32, 0.3, 0.0, 0).unwrap();
+            w.enter(n as u32, 0.3, 0.0, 7).unwrap();
             let err = write_frame(&mut w, 3, n).unwrap_err().to_string();
             assert!(
                 err.contains("No space left on device")
@@ -154,6 +154,10 @@ fn a_full_disk_in_the_middle_of_a_frame_left_phantom_rows() {
             assert_eq!(rows("people/id"), n + 1, "{dataset}");
             assert_eq!(rows("people/radius"), n + 1, "{dataset}");
             assert_eq!(rows("people/exit_time"), n + 1, "{dataset}");
+            assert_eq!(rows("people/entry_time"), n + 1, "{dataset}");
+            let groups: Vec<i64> = f.dataset("people/group").unwrap().read_raw().unwrap();
+            assert_eq!(groups.len(), n + 1, "{dataset}");
+            assert_eq!(groups[n], 7, "{dataset}");
             assert_eq!(
                 f.dataset("frames/positions").unwrap().shape(),
                 [3, n + 1, 2]
@@ -524,6 +528,7 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
     let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
     assert_eq!(r.state, b"after 2");
     assert_eq!(r.header.radii, [0.2, 0.2, 0.1, 0.2]);
+    assert_eq!(r.header.groups, [0, 0, 1, 2]);
     let mut w = r.writer;
     assert_eq!((w.frames(), w.people()), (3, 4));
     for k in 3..5 {
@@ -532,10 +537,44 @@ fn a_killed_run_with_people_entering_resumes_with_the_people_of_its_saved_state(
     w.finish("complete", "{}").unwrap();
     let f = RunFile::open(&path).unwrap();
     assert_eq!(f.header().unwrap().radii, [0.2, 0.2, 0.1, 0.2, 0.3, 0.4]);
+    assert_eq!(f.groups().unwrap(), Some(vec![0, 0, 1, 2, 3, 4]));
     assert_eq!(f.frame_counts().unwrap(), vec![2, 3, 4, 5, 6]);
     assert_eq!(f.positions(4).unwrap().len(), 12);
     assert!(f.positions(0).unwrap()[4..].iter().all(|x| x.is_nan()));
     assert_eq!(f.trajectory().unwrap().len(), 2 + 3 + 4 + 5 + 6);
+}
+
+/// A file written before `/people/group` (killed, then resumed by this code): its people get
+/// −1 (not known), those who enter from the resume on their group, and every per-person
+/// dataset keeps one row a person.
+#[test]
+fn a_killed_file_without_groups_resumes_with_unknown_groups_for_its_people() {
+    let (n, path) = (2, scratch("resume-no-groups.h5"));
+    {
+        let mut w = RunWriter::create(&path, &header(n, false), Overwrite::Never).unwrap();
+        for k in 0..2 {
+            write_frame(&mut w, k, n).unwrap();
+            w.save_state(b"state").unwrap();
+        }
+        std::mem::forget(w); // killed: no finish
+    }
+    let _ = std::fs::remove_file(moreau_io::lock_path(&path));
+    {
+        let mut open = hdf5::File::with_options();
+        open.with_fapl(|p| p.file_locking(false));
+        let f = open.open_rw(partial_path(&path)).unwrap();
+        f.unlink("people/group").unwrap();
+    }
+    let r = RunWriter::resume(&path, Overwrite::Never).unwrap();
+    assert!(r.header.groups.is_empty(), "{:?}", r.header.groups);
+    let mut w = r.writer;
+    w.step(&report(2));
+    w.enter(n as u32, 0.3, 0.15, 5).unwrap();
+    w.frame(0.2, &[0, 1, 2], &[1.0; 6]).unwrap();
+    w.finish("complete", "{}").unwrap();
+    let f = RunFile::open(&path).unwrap();
+    assert_eq!(f.groups().unwrap(), Some(vec![-1, -1, 5]));
+    assert_eq!(f.header().unwrap().radii.len(), 3);
 }
 
 /// Regression: the saved state's marks (how many rows each dataset had when the state was

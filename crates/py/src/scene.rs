@@ -113,7 +113,10 @@ impl PyScene {
         // field is its table, and no value.)
         if let Err(e) = toml::from_str::<Scene>(&text) {
             let reason = e.message().trim().to_string();
-            let (field, value) = match e.span().and_then(|span| key_at(&text, span.start)) {
+            // The root table's span is empty at 0: a key missing there is the scene's, not
+            // the first line's (`seed` left out was blamed on `name`).
+            let span = e.span().filter(|span| !span.is_empty());
+            let (field, value) = match span.and_then(|span| key_at(&text, span.start)) {
                 Some((path, Some(value))) if !reason.starts_with("missing field") => {
                     (Some(path), Some(value))
                 }

@@ -345,7 +345,8 @@ struct Totals {
     frames: usize,
     exits: usize,
     people: usize,
-    /// Wall-clock seconds so far (absent in files written before 2026-11-28: 0).
+    /// Wall-clock seconds so far (absent in files written before the evening of 2026-11-28:
+    /// 0).
     #[serde(default)]
     wall_seconds: f64,
 }

@@ -836,9 +836,9 @@ impl InteriorPoint {
         }
         mean_abs /= m as f64;
         let scale = if mean_abs > 0.0 { mean_abs } else { 1.0 };
-        // The previous multipliers' scale, but no more than what any multiplier can need
-        // here: the pushes of `w` all passed on to one contact, or each row's own violation
-        // stopped by it alone. Where the answer's multipliers are not unique (a pair of
+        // The previous multipliers' scale, but no more than a rough bound of what a
+        // multiplier needs here (a heuristic: a wedge can need more): the pushes of `w` all
+        // passed on to one contact, plus each row's own violation stopped by it alone. Where the answer's multipliers are not unique (a pair of
         // opposite rows, an equality written as two inequalities: `J_Aᵀ` has a null space)
         // the answer keeps its start along that null space, and starting at 3 × the last
         // answer's mean multiplied it step after step (×3 a step on a bead held to a line,
