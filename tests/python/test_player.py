@@ -335,6 +335,22 @@ def test_the_python_stand_in_writes_the_moving_walls_of_moreau_view(source, edit
         assert x0 <= xs.min() and xs.max() <= x1 and y0 <= ys.min() and ys.max() <= y1, ours["bbox"]
 
 
+def test_a_file_without_its_moving_walls_played_without_them_and_said_nothing(tmp_path):
+    """Regression: a run file whose `/moving/body` lists segments but whose
+    `/frames/moving_walls` is gone gave a page with `"moving": ""`, drawing no moving body
+    and saying nothing. `moreau view` now refuses it, as the Python stand-in does."""
+    scene = tmp_path / "moving.toml"
+    scene.write_text((ROOT / "tests" / "fuzz-corpus" / "moving.toml").read_text())
+    run = tmp_path / "moving.h5"
+    moreau("run", scene, "-o", run, "--quiet")
+    with h5py.File(run, "r+") as f:
+        del f["frames/moving_walls"]
+    out = moreau("view", run, "-o", tmp_path / "page.html", check=False)
+    assert out.returncode != 0 and "moving wall segments" in out.stderr, out.stderr
+    with pytest.raises(ValueError, match="moving_walls"):
+        player_data.player_json(run)
+
+
 def test_decimation_keeps_100_frames_then_thins_people():
     assert player_data.strides(201, 150, 2, 10**6) == (1, 1)
     assert player_data.strides(201, 10_000, 2, 2_100_000) == (2, 1)  # 101 frames

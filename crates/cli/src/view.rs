@@ -178,10 +178,23 @@ fn player_data(f: &RunFile, max_values: usize) -> Result<PlayerData> {
     let mut moving = Vec::with_capacity(frames.len() * segments * 4);
     if segments > 0 {
         for &k in &frames {
-            moving.extend(f.moving_walls(k)?.iter().flatten().map(|&x| x as f32));
+            let walls = f.moving_walls(k)?;
+            // A file whose moving walls are missing (or of another count) drew nothing and
+            // said nothing (`"moving": ""`).
+            if walls.len() != segments {
+                bail!(
+                    "frame {k} holds {} moving wall segments, /moving/body lists {segments}: a \
+                     damaged run file",
+                    walls.len()
+                );
+            }
+            moving.extend(walls.iter().flatten().map(|&x| x as f32));
         }
     }
-    // Per frame: the last step that ended at or before it.
+    // Per frame: the last step that ended at or before it (steps in time order, whatever
+    // order the file holds them in).
+    let mut steps = steps;
+    steps.sort_by(|a, b| a.t.total_cmp(&b.t));
     let (mut eps, mut violation) = (Vec::new(), Vec::new());
     for &k in &frames {
         let t = times[k];

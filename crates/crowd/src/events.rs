@@ -161,6 +161,14 @@ pub(crate) fn validate(scene: &Scene) -> Result<(), CrowdError> {
                 "duplicate source name",
             ));
         }
+        if scene.groups.iter().any(|g| g.name == source.name) {
+            return Err(CrowdError::invalid(
+                format!("{f}.name"),
+                &source.name,
+                "a group has this name (the run file's /people/group tells groups and \
+                 sources apart by name)",
+            ));
+        }
         let area = check_polygon(&format!("{f}.area"), &source.area)?;
         if let Some(p) = area
             .vertices

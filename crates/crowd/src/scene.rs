@@ -1164,6 +1164,15 @@ impl Scene {
         }
         for (g, group) in self.groups.iter().enumerate() {
             let f = format!("groups[{g}]");
+            // The run file's `/people/group` and `moreau_run.Run.group_name` name each group
+            // by index; two of one name could not be told apart by name in an analysis.
+            if self.groups[..g].iter().any(|x| x.name == group.name) {
+                return Err(CrowdError::invalid(
+                    format!("{f}.name"),
+                    &group.name,
+                    "duplicate group name",
+                ));
+            }
             group.radius.check(&format!("{f}.radius"), true)?;
             group.speed.check(&format!("{f}.speed"), false)?;
             if !self.exits.iter().any(|e| e.name == group.destination) {

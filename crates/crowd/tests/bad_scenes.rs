@@ -23,6 +23,14 @@ fn bad_scenes_give_errors_that_name_the_field_and_value() {
         ),
         ("nan-speed.toml", &["groups[0].speed", "NaN"]),
         (
+            "duplicate-group-name.toml",
+            &["groups[1].name", "= g", "duplicate group name"],
+        ),
+        (
+            "source-named-like-a-group.toml",
+            &["sources[0].name", "waiting", "a group has this name"],
+        ),
+        (
             // Regression: "expected a number, or a range" at `[[groups]]`, `speed` never named.
             "missing-speed.toml",
             &["line 14", "missing field `speed`"],
