@@ -74,7 +74,8 @@ pub struct AdaptiveSettings {
 
 impl AdaptiveSettings {
     /// Defaults for tolerance `tol`: steps in `[1e-6, 0.5]`, first 0.01 (a `mu_max` set below
-    /// it needs `mu_first` lowered too: `validate` refuses `mu_first > mu_max`), safety 0.9, growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling, the floor
+    /// it needs `mu_first` lowered too: `validate` refuses `mu_first > mu_max`), safety 0.9,
+    /// growth ≤ 2, shrink ≥ 0.2, `θ = 0.1`, step doubling, the floor
     /// [`EpsPolicy::ADAPTIVE_FLOOR`].
     pub fn new(tol: f64) -> Self {
         Self {
