@@ -5,7 +5,7 @@
 //!
 //! | path | what |
 //! |---|---|
-//! | `/trajectory` | compound rows `id` (int64), `frame` (int64), `x`, `y` (float64); attribute `fps`: PedPy reads a row's time as `frame / fps`, so a frame off that grid (the horizon's, where no output time reaches it) is in `/frames` only |
+//! | `/trajectory` | compound rows `id` (int64), `frame` (int64), `x`, `y` (float64); attribute `fps`: PedPy reads a row's time as `frame / fps`, so a frame off that grid (the horizon's, where no output time reaches it or where an output time within 1 % of a step of it was merged into it) is in `/frames` only |
 //! | `/frames/time`, `/frames/count` | time and number of people present, per output frame |
 //! | `/frames/positions` | float64 `[frames, people, 2]`, indexed by person id, NaN when absent (before a person entered, after they left) |
 //! | `/people/id`, `/people/radius` | everyone in the run, by id: the people at the start, then those who entered (from inflow sources), appended with the frame after they entered |
