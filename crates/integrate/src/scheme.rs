@@ -312,15 +312,7 @@ impl<C: Correction> Scheme<C> {
                 }
                 // A step the time cannot resolve: t + h rounded back to t, and a run from
                 // t0 = 1.7e9 (a Unix time) with h = 1e-7 stepped forever at the same time.
-                let scale = t0.abs().max(t_end.abs());
-                if !(*h >= crate::stepping::RESOLVABLE * f64::EPSILON * scale) {
-                    return Err(IntegrateError::InvalidSetting {
-                        field: "h",
-                        value: format!("{} at times near {}", Num(*h), Num(scale)),
-                        reason: "below 100 rounding units of the time, which it would not \
-                                 advance exactly (measure times from the run's start)",
-                    });
-                }
+                crate::stepping::check_resolution("h", *h, t0, *t_end)?;
                 let steps = (t_end - t0) / h;
                 if !(steps <= crate::MAX_STEPS) {
                     return Err(IntegrateError::InvalidSetting {

@@ -76,7 +76,7 @@ pub enum SteppingState {
 
 /// The smallest step, in rounding units of the time, a run takes (`Scheme::run`,
 /// [`Stepping::step`] and the adaptive controller refuse shorter ones).
-pub(crate) const RESOLVABLE: f64 = 100.0;
+const RESOLVABLE: f64 = 100.0;
 
 /// Refuses a step `h` (the setting `field`) that times between `t` and `t_stop` cannot resolve:
 /// below [`RESOLVABLE`] rounding units of them.
